@@ -1,0 +1,79 @@
+# isoserve: build, test and benchmark. `make` builds build/isoserve; `make test` installs
+# what is missing (scripts/setup.sh), builds normal and sanitizer variants and runs every
+# test, ending with an "N passed, N failed" line.
+
+CC       ?= gcc
+CXX      ?= g++
+WARN     := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes \
+            -Wpointer-arith -Wcast-qual -Wvla
+CFLAGS   ?= -O2 -g
+CFLAGS   += -std=c11 -D_DEFAULT_SOURCE -D_POSIX_C_SOURCE=200809L $(WARN) -pthread -Icore -Iproto
+CXXFLAGS ?= -O2 -g
+CXXFLAGS += -std=c++17 -Wall -Wextra -Werror -Icore -Iproto $(shell pkg-config --cflags draco 2>/dev/null)
+LIBS     := $(shell pkg-config --libs libmicrohttpd jansson 2>/dev/null) \
+            -ldraco -lz -lm -pthread -lstdc++
+
+BUILD    ?= build
+SAN_BUILD := build/san
+SAN_FLAGS := -O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all
+
+CORE_SRC   := $(sort $(wildcard core/*.c))
+PROTO_SRC  := $(sort $(wildcard proto/*.c))
+PROTO_CXX  := $(sort $(wildcard proto/*.cc))
+SERVER_SRC := $(sort $(wildcard server/*.c))
+TEST_SRC   := $(sort $(wildcard tests/unit/test_*.c))
+TEST_SUPPORT := $(sort $(wildcard tests/support/*.c))
+
+LIB_OBJ    = $(CORE_SRC:%.c=$(BUILD)/%.o) $(PROTO_SRC:%.c=$(BUILD)/%.o) $(PROTO_CXX:%.cc=$(BUILD)/%.o)
+SERVER_OBJ = $(SERVER_SRC:%.c=$(BUILD)/%.o)
+SUPPORT_OBJ = $(TEST_SUPPORT:%.c=$(BUILD)/%.o)
+TEST_BIN   = $(TEST_SRC:tests/unit/%.c=$(BUILD)/tests/%)
+
+.PHONY: all setup test unit-tests bench run clean sanitize
+all: $(BUILD)/isoserve
+
+$(BUILD)/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) -MMD -MP -c $< -o $@
+
+$(BUILD)/%.o: %.cc
+	@mkdir -p $(dir $@)
+	$(CXX) $(CXXFLAGS) -MMD -MP -c $< -o $@
+
+$(BUILD)/libisoserve.a: $(LIB_OBJ)
+	@rm -f $@
+	ar rcs $@ $^
+
+$(BUILD)/isoserve: $(SERVER_OBJ) $(BUILD)/libisoserve.a
+	$(CC) $(CFLAGS) $^ $(LIBS) -o $@
+
+$(BUILD)/tests/%: tests/unit/%.c $(SUPPORT_OBJ) $(BUILD)/libisoserve.a
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) -Itests/support -MMD -MP $< $(SUPPORT_OBJ) $(BUILD)/libisoserve.a $(LIBS) -o $@
+
+unit-tests: $(TEST_BIN)
+
+setup:
+	bash scripts/setup.sh
+
+# The sanitizer variant is the same tree built into build/san with ASan and UBSan.
+sanitize:
+	$(MAKE) BUILD=$(SAN_BUILD) CFLAGS="$(SAN_FLAGS)" CXXFLAGS="$(SAN_FLAGS)" \
+	        LDFLAGS="-fsanitize=address,undefined" all unit-tests
+
+test: setup
+	$(MAKE) all unit-tests
+	$(MAKE) sanitize
+	bash tests/run.sh
+
+bench: setup all
+	bash tests/bench/run.sh
+
+# Until the server exists, the run command extracts the default volume and reports it.
+run: setup all
+	bash scripts/run.sh
+
+clean:
+	rm -rf build
+
+-include $(shell find build -name '*.d' 2>/dev/null)

@@ -1,0 +1,54 @@
+/* mesh.h: indexed triangle meshes, the output of extraction and the input of encoders.
+ *
+ * Positions are float x,y,z triples; triangles are uint32 index triples whose winding
+ * (counter-clockwise seen from the side the normal points to) makes normals point from
+ * higher values toward lower values. Normals, when present, are unit float triples per
+ * vertex. A mesh owns its arrays; iso_mesh_destroy frees them. */
+#ifndef ISO_MESH_H
+#define ISO_MESH_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "error.h"
+
+typedef struct iso_mesh {
+    float *positions;      /* 3 * vertex_count */
+    float *normals;        /* 3 * vertex_count, or NULL */
+    uint32_t *indices;     /* 3 * triangle_count */
+    size_t vertex_count, triangle_count;
+    size_t vertex_capacity, triangle_capacity;
+} iso_mesh;
+
+/* Initialises an empty mesh (no allocation). */
+void iso_mesh_init(iso_mesh *mesh);
+/* Frees the arrays and leaves an empty mesh; NULL is allowed. */
+void iso_mesh_free(iso_mesh *mesh);
+/* Makes room for at least the given totals. Returns 0 or ISO_E_NOMEM (mesh unchanged). */
+int iso_mesh_reserve(iso_mesh *mesh, size_t vertices, size_t triangles);
+/* Moves everything of `src` onto the end of `dst`, offsetting its indices; src is emptied
+ * but keeps no memory. Returns 0 or ISO_E_NOMEM (both unchanged). */
+int iso_mesh_append(iso_mesh *dst, iso_mesh *src);
+
+/* Merges vertices with bit-identical positions and drops triangles that become degenerate
+ * (two equal indices). Vertex order: first occurrence. O(V) expected, allocates a
+ * temporary hash table of ~2V entries. Returns 0 or ISO_E_NOMEM (mesh unchanged). */
+int iso_mesh_weld(iso_mesh *mesh);
+
+/* Sum of triangle areas, in the square of the position unit. O(T). */
+double iso_mesh_area(const iso_mesh *mesh);
+/* Signed enclosed volume (divergence theorem), positive when normals point outward of
+ * the enclosed region; meaningful for closed meshes. O(T). */
+double iso_mesh_enclosed_volume(const iso_mesh *mesh);
+
+/* Edge census after welding: edges used by one triangle, by three or more, and by exactly
+ * two triangles in opposite directions. Allocates a temporary table. */
+typedef struct iso_mesh_edges {
+    size_t edges, open, nonmanifold, misoriented;
+} iso_mesh_edges;
+int iso_mesh_count_edges(const iso_mesh *mesh, iso_mesh_edges *out);
+
+/* Axis-aligned bounds of the positions; min > max for an empty mesh. */
+void iso_mesh_bounds(const iso_mesh *mesh, float min[3], float max[3]);
+
+#endif

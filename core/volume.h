@@ -1,0 +1,84 @@
+/* volume.h: a scalar volume, the input of everything else.
+ *
+ * Samples p[i][j][k] sit on a W_x x W_y x W_z grid, stored x fastest, then y, then z, in
+ * their own voxel type and in host byte order (loaders swap on read). Index space has
+ * sample (i,j,k) at point (i,j,k); world millimetres are
+ *     world = origin + direction * (index * spacing)
+ * with direction a 3x3 rotation (columns are the world directions of the i, j, k axes;
+ * identity unless the file says otherwise). */
+#ifndef ISO_VOLUME_H
+#define ISO_VOLUME_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "error.h"
+
+typedef enum iso_voxel_type {
+    ISO_U8, ISO_I8, ISO_U16, ISO_I16, ISO_U32, ISO_I32, ISO_F32, ISO_F64
+} iso_voxel_type;
+
+typedef struct iso_volume {
+    size_t dims[3];          /* samples per axis, each >= 2 */
+    iso_voxel_type type;
+    void *data;              /* dims[0]*dims[1]*dims[2] samples, host byte order */
+    double spacing[3];       /* mm between samples along i, j, k (> 0) */
+    double origin[3];        /* world mm of sample (0,0,0) */
+    double direction[3][3];  /* direction[r][c]: row r of the matrix, column c is axis c */
+    double value_min, value_max, value_mean; /* over all samples, set by iso_vol_update_stats */
+    int has_nan;             /* float volumes: 1 if any sample is NaN (see iso_vol_update_stats) */
+} iso_volume;
+
+/* Default cap on the bytes of one volume's samples: 8 GiB. */
+#define ISO_VOL_DEFAULT_MAX_BYTES ((uint64_t)8 << 30)
+
+/* Bytes of one sample of `type` (1, 2, 4 or 8). */
+size_t iso_vol_type_size(iso_voxel_type type);
+/* "u8", "i16", "f32", ... Never NULL. */
+const char *iso_vol_type_name(iso_voxel_type type);
+/* Parses the names above; returns 0 and sets *type, or -1 for an unknown name. */
+int iso_vol_type_parse(const char *name, iso_voxel_type *type);
+/* 1 for ISO_F32 and ISO_F64. */
+int iso_vol_type_is_float(iso_voxel_type type);
+
+/* Checks dims (each >= 2) and that the sample bytes fit in max_bytes without overflow;
+ * on success stores the byte count in *bytes. Safe on untrusted sizes. */
+int iso_vol_check_size(const size_t dims[3], iso_voxel_type type, uint64_t max_bytes,
+                       uint64_t *bytes, iso_error *err);
+
+/* Allocates a zero-filled volume with unit spacing, zero origin, identity direction.
+ * Returns NULL (and fills err) if dims are invalid or exceed max_bytes (0 = default). */
+iso_volume *iso_vol_create(const size_t dims[3], iso_voxel_type type, uint64_t max_bytes,
+                           iso_error *err);
+/* Frees the volume and its samples; NULL is allowed. */
+void iso_vol_destroy(iso_volume *vol);
+
+static inline size_t iso_vol_count(const iso_volume *vol)
+{
+    return vol->dims[0] * vol->dims[1] * vol->dims[2];
+}
+static inline size_t iso_vol_index(const iso_volume *vol, size_t i, size_t j, size_t k)
+{
+    return (k * vol->dims[1] + j) * vol->dims[0] + i;
+}
+
+/* Sample (i,j,k) as a double. Asserts the indices are inside. O(1), a switch per call:
+ * for bulk access use iso_vol_read_box. */
+double iso_vol_get(const iso_volume *vol, size_t i, size_t j, size_t k);
+/* Stores value (converted to the voxel type, rounded and clamped for integers). */
+void iso_vol_set(iso_volume *vol, size_t i, size_t j, size_t k, double value);
+
+/* Copies the samples of the inclusive box lo..hi into out as doubles, x fastest.
+ * out holds (hi[0]-lo[0]+1)*(hi[1]-lo[1]+1)*(hi[2]-lo[2]+1) doubles. Asserts the box is
+ * inside the volume. */
+void iso_vol_read_box(const iso_volume *vol, const size_t lo[3], const size_t hi[3],
+                      double *out);
+
+/* Recomputes value_min, value_max, value_mean and has_nan. NaN samples are ignored by
+ * min/max/mean; they never count as above any level (see extract.h). O(N). */
+void iso_vol_update_stats(iso_volume *vol);
+
+/* Index space (i,j,k may be fractional) to world millimetres. */
+void iso_vol_index_to_world(const iso_volume *vol, const double index[3], double world[3]);
+
+#endif

@@ -1,0 +1,89 @@
+/* check.c: the unit-test harness (see check.h). */
+#include "check.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+static const char *current_name;
+static int current_failed, current_skipped, any_failed;
+static char skip_reason[256];
+static char temp_dir[256];
+
+void check_fail_at(const char *file, int line, const char *fmt, ...)
+{
+    va_list ap;
+    /* Only the first failure of a test is printed on the FAIL line; later ones add detail. */
+    printf("%s %s: %s:%d: ", current_failed ? "  also" : "FAIL", current_name, file, line);
+    va_start(ap, fmt);
+    vprintf(fmt, ap);
+    va_end(ap);
+    printf("\n");
+    fflush(stdout);
+    current_failed = 1;
+}
+
+void check_skip(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(skip_reason, sizeof skip_reason, fmt, ap);
+    va_end(ap);
+    current_skipped = 1;
+}
+
+int check_failed(void)
+{
+    return current_failed;
+}
+
+void check_run(const char *name, void (*fn)(void))
+{
+    current_name = name;
+    current_failed = current_skipped = 0;
+    fn();
+    if (current_failed)
+        any_failed = 1;
+    else if (current_skipped)
+        printf("SKIP %s: %s\n", name, skip_reason);
+    else
+        printf("PASS %s\n", name);
+    fflush(stdout);
+}
+
+const char *check_shared_volumes(void)
+{
+    const char *dir = getenv("ISO_SHARED_VOLUMES");
+    struct stat st;
+    if (!dir || !*dir)
+        dir = "../shared/volumes";
+    if (stat(dir, &st) != 0 || !S_ISDIR(st.st_mode))
+        return NULL;
+    return dir;
+}
+
+const char *check_temp_dir(void)
+{
+    if (!temp_dir[0]) {
+        snprintf(temp_dir, sizeof temp_dir, "/tmp/isoserve-test-XXXXXX");
+        if (!mkdtemp(temp_dir)) {
+            perror("mkdtemp");
+            exit(2);
+        }
+    }
+    return temp_dir;
+}
+
+int check_finish(void)
+{
+    if (temp_dir[0]) {
+        char cmd[300];
+        snprintf(cmd, sizeof cmd, "rm -rf '%s'", temp_dir);
+        if (system(cmd) != 0)
+            fprintf(stderr, "could not remove %s\n", temp_dir);
+    }
+    return any_failed ? 1 : 0;
+}
