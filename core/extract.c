@@ -1,0 +1,308 @@
+/* extract.c: iso-surface extraction over the hierarchy (Elber and Malzbender, with
+ * Wilhelms and Van Gelder's min/max pruning), and the full-scan marching cubes baseline.
+ *
+ * PASS 1 (descend): from the root, skip every node whose [min, max] cannot hold the level;
+ *   stop at the first node whose fit error is within the fit share of the tolerance and
+ *   whose trilinear polygonizes within the rest (tets.c); below stored bricks the same
+ *   rule runs on the brick's samples, read once into a scratch block; single cells are
+ *   marching cubes on the data itself. Every piece is appended to a triangle soup in
+ *   index space.
+ * PASS 2 (weld): vertices with bit-identical positions merge (mesh.c). Shared edges are
+ *   interpolated from the same end, so neighbours of equal size weld exactly.
+ * PASS 3 (place): index space to world millimetres, if asked. */
+#include "extract.h"
+
+#include <assert.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "mc.h"
+#include "trilinear.h"
+#include "tets.h"
+
+#define BRICK_SAMPLES ((ISO_TREE_BRICK + 1) * (ISO_TREE_BRICK + 1) * (ISO_TREE_BRICK + 1))
+
+typedef struct walk {
+    const iso_tree *tree;
+    const iso_volume *vol;
+    double level, tolerance, fit_limit;
+    int prune, exact;
+    iso_mesh *soup;
+    iso_extract_stats *stats;
+    /* The current brick's samples, x fastest, and where the brick starts. */
+    double brick[BRICK_SAMPLES];
+    uint32_t brick_lo[3], brick_n[3];
+} walk;
+
+static double now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
+}
+
+static int active(const walk *w, double min, double max)
+{
+    return !w->prune || (min <= w->level && w->level < max);
+}
+
+/* Emits box as one trilinear through its corners if it fits; 1 done, 0 not, <0 error. */
+static int try_trilinear(walk *w, const iso_box *box, const double c[8], double fit_error)
+{
+    double delta;
+    size_t sub_boxes = 0;
+    int rc = iso_tets_polygonize(c, box, w->level, w->tolerance - fit_error, w->soup, &delta,
+                                 &sub_boxes);
+    if (rc == 1) {
+        w->stats->nodes_polygonized++;
+        w->stats->cells_visited++;
+        if (fit_error + delta > w->stats->error_bound)
+            w->stats->error_bound = fit_error + delta;
+    }
+    return rc;
+}
+
+/* ---- below a brick: the samples come from the scratch block ---- */
+
+static double brick_at(const walk *w, uint32_t x, uint32_t y, uint32_t z)
+{
+    return w->brick[((size_t)(z - w->brick_lo[2]) * w->brick_n[1] + (y - w->brick_lo[1])) * w->brick_n[0] +
+                    (x - w->brick_lo[0])];
+}
+
+static void brick_corners(const walk *w, const iso_box *b, double c[8])
+{
+    for (int k = 0; k < 8; k++)
+        c[k] = brick_at(w, k & 1 ? b->hi[0] : b->lo[0], k & 2 ? b->hi[1] : b->lo[1],
+                        k & 4 ? b->hi[2] : b->lo[2]);
+}
+
+static int march_cell(walk *w, uint32_t x, uint32_t y, uint32_t z)
+{
+    double v[8], origin[3] = {x, y, z};
+    static const double unit[3] = {1, 1, 1};
+    for (int k = 0; k < 8; k++)
+        v[k] = brick_at(w, x + (k & 1), y + ((k >> 1) & 1), z + ((k >> 2) & 1));
+    w->stats->cells_visited++;
+    int rc = iso_mc_cell(v, w->level, origin, unit, w->soup);
+    return rc < 0 ? rc : 0;
+}
+
+static void scan_brick_box(const walk *w, const iso_box *b, const double c[8], double *mn,
+                           double *mx, double *er)
+{
+    double lo = INFINITY, hi = -INFINITY, worst = 0;
+    double n[3];
+    for (int d = 0; d < 3; d++)
+        n[d] = b->hi[d] - b->lo[d];
+    for (uint32_t z = b->lo[2]; z <= b->hi[2]; z++)
+        for (uint32_t y = b->lo[1]; y <= b->hi[1]; y++)
+            for (uint32_t x = b->lo[0]; x <= b->hi[0]; x++) {
+                double s = brick_at(w, x, y, z);
+                double t = iso_tri_eval(c, (x - b->lo[0]) / n[0], (y - b->lo[1]) / n[1],
+                                        (z - b->lo[2]) / n[2]);
+                double d = fabs(s - t);
+                if (s < lo) lo = s;
+                if (s > hi) hi = s;
+                if (d > worst || s != s) worst = s != s ? INFINITY : d;
+            }
+    *mn = lo;
+    *mx = hi;
+    *er = worst;
+}
+
+static int visit_sub(walk *w, const iso_box *box);
+
+static int visit_sub_children(walk *w, const iso_box *box)
+{
+    iso_box left, right;
+    if (iso_box_split(box, &left, &right) < 0)
+        return march_cell(w, box->lo[0], box->lo[1], box->lo[2]);
+    int rc = visit_sub(w, &left);
+    return rc ? rc : visit_sub(w, &right);
+}
+
+static int visit_sub(walk *w, const iso_box *box)
+{
+    w->stats->nodes_visited++;
+    if (iso_box_cells(box) == 1) {
+        double c[8], lo = INFINITY, hi = -INFINITY;
+        brick_corners(w, box, c);
+        for (int k = 0; k < 8; k++) {
+            if (c[k] < lo) lo = c[k];
+            if (c[k] > hi) hi = c[k];
+        }
+        return active(w, lo, hi) ? march_cell(w, box->lo[0], box->lo[1], box->lo[2]) : 0;
+    }
+    double c[8], mn, mx, er;
+    brick_corners(w, box, c);
+    scan_brick_box(w, box, c, &mn, &mx, &er);
+    if (!active(w, mn, mx))
+        return 0;
+    if (er <= w->fit_limit) {
+        int rc = try_trilinear(w, box, c, er);
+        if (rc)
+            return rc < 0 ? rc : 0;
+    }
+    return visit_sub_children(w, box);
+}
+
+static int visit_brick(walk *w, const iso_box *box)
+{
+    size_t lo[3], hi[3];
+    for (int d = 0; d < 3; d++) {
+        lo[d] = box->lo[d];
+        hi[d] = box->hi[d];
+        w->brick_lo[d] = box->lo[d];
+        w->brick_n[d] = box->hi[d] - box->lo[d] + 1;
+    }
+    iso_vol_read_box(w->vol, lo, hi, w->brick);
+    if (!w->exact)
+        return visit_sub_children(w, box);
+    /* Tolerance 0: no trilinear above a cell can be used, so march every cell. */
+    for (uint32_t z = box->lo[2]; z < box->hi[2]; z++)
+        for (uint32_t y = box->lo[1]; y < box->hi[1]; y++)
+            for (uint32_t x = box->lo[0]; x < box->hi[0]; x++) {
+                int rc = march_cell(w, x, y, z);
+                if (rc)
+                    return rc;
+            }
+    return 0;
+}
+
+/* ---- stored nodes ---- */
+
+static void volume_corners(const iso_volume *vol, const iso_box *b, double c[8])
+{
+    for (int k = 0; k < 8; k++)
+        c[k] = iso_vol_get(vol, k & 1 ? b->hi[0] : b->lo[0], k & 2 ? b->hi[1] : b->lo[1],
+                           k & 4 ? b->hi[2] : b->lo[2]);
+}
+
+static int visit_node(walk *w, uint32_t index, const iso_box *box)
+{
+    const iso_tree_node *node = &w->tree->nodes[index];
+    w->stats->nodes_visited++;
+    if (!active(w, node->min, node->max))
+        return 0;
+    if (!w->exact && node->err <= w->fit_limit) {
+        double c[8];
+        volume_corners(w->vol, box, c);
+        int rc = try_trilinear(w, box, c, node->err);
+        if (rc)
+            return rc < 0 ? rc : 0;
+    }
+    if (!node->first_child)
+        return visit_brick(w, box);
+    iso_box left, right;
+    iso_box_split(box, &left, &right);
+    int rc = visit_node(w, node->first_child, &left);
+    return rc ? rc : visit_node(w, node->first_child + 1, &right);
+}
+
+/* ---- the passes after descent ---- */
+
+static void to_world(const iso_volume *vol, iso_mesh *mesh)
+{
+    for (size_t v = 0; v < mesh->vertex_count; v++) {
+        float *p = mesh->positions + 3 * v;
+        double index[3] = {p[0], p[1], p[2]}, world[3];
+        iso_vol_index_to_world(vol, index, world);
+        for (int d = 0; d < 3; d++)
+            p[d] = (float)world[d];
+    }
+}
+
+static int finish(const iso_volume *vol, iso_space space, iso_mesh *mesh,
+                  iso_extract_stats *stats, double start, iso_error *err)
+{
+    if (iso_mesh_weld(mesh))
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory welding the mesh");
+    if (space == ISO_SPACE_WORLD)
+        to_world(vol, mesh);
+    stats->triangles = mesh->triangle_count;
+    stats->vertices = mesh->vertex_count;
+    stats->extract_ms = now_ms() - start;
+    return 0;
+}
+
+int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
+                iso_extract_stats *stats, iso_error *err)
+{
+    static walk zero_walk;
+    iso_extract_stats local;
+    double start = now_ms();
+    if (!stats)
+        stats = &local;
+    memset(stats, 0, sizeof *stats);
+    if (!isfinite(params->level))
+        return iso_error_set(err, ISO_E_ARGUMENT, "level must be a finite number");
+    if (!(params->tolerance >= 0) || !isfinite(params->tolerance))
+        return iso_error_set(err, ISO_E_ARGUMENT, "tolerance must be a finite number >= 0");
+    double share = params->fit_share == 0 ? 0.5 : params->fit_share;
+    if (!(share > 0 && share <= 1))
+        return iso_error_set(err, ISO_E_ARGUMENT, "fit share must be in (0, 1]");
+
+    walk *w = malloc(sizeof *w);
+    if (!w)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory");
+    *w = zero_walk;
+    w->tree = tree;
+    w->vol = tree->vol;
+    w->level = params->level;
+    w->tolerance = params->tolerance;
+    w->fit_limit = share * params->tolerance;
+    w->exact = params->tolerance == 0;
+    w->prune = !params->no_minmax;
+    w->soup = mesh;
+    w->stats = stats;
+    iso_mesh_free(mesh);
+    iso_box root = iso_box_root(tree->vol);
+    int rc = visit_node(w, 0, &root);
+    free(w);
+    if (rc) {
+        iso_mesh_free(mesh);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    }
+    return finish(tree->vol, params->space, mesh, stats, start, err);
+}
+
+int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,
+                          iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
+{
+    iso_extract_stats local;
+    double start = now_ms();
+    if (!stats)
+        stats = &local;
+    memset(stats, 0, sizeof *stats);
+    if (!isfinite(level))
+        return iso_error_set(err, ISO_E_ARGUMENT, "level must be a finite number");
+    size_t nx = vol->dims[0], ny = vol->dims[1], nz = vol->dims[2];
+    double *slab = malloc(2 * nx * ny * sizeof *slab);
+    if (!slab)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory");
+    iso_mesh_free(mesh);
+    static const double unit[3] = {1, 1, 1};
+    int rc = 0;
+    /* Two slices at a time, converted once; each cell reads its 8 corners from them. */
+    for (size_t z = 0; z + 1 < nz && rc >= 0; z++) {
+        size_t lo[3] = {0, 0, z}, hi[3] = {nx - 1, ny - 1, z + 1};
+        iso_vol_read_box(vol, lo, hi, slab);
+        for (size_t y = 0; y + 1 < ny && rc >= 0; y++)
+            for (size_t x = 0; x + 1 < nx && rc >= 0; x++) {
+                double v[8], origin[3] = {(double)x, (double)y, (double)z};
+                for (int k = 0; k < 8; k++)
+                    v[k] = slab[((size_t)((k >> 2) & 1) * ny + y + ((k >> 1) & 1)) * nx + x + (k & 1)];
+                rc = iso_mc_cell(v, level, origin, unit, mesh);
+            }
+    }
+    free(slab);
+    stats->cells_visited = (nx - 1) * (ny - 1) * (nz - 1);
+    if (rc < 0) {
+        iso_mesh_free(mesh);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    }
+    return finish(vol, space, mesh, stats, start, err);
+}

@@ -1,0 +1,250 @@
+/* mesh.c: indexed triangle meshes: growth, welding, measurements, edge census. */
+#include "mesh.h"
+
+#include <assert.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+void iso_mesh_init(iso_mesh *mesh)
+{
+    memset(mesh, 0, sizeof *mesh);
+}
+
+void iso_mesh_free(iso_mesh *mesh)
+{
+    if (!mesh)
+        return;
+    free(mesh->positions);
+    free(mesh->normals);
+    free(mesh->indices);
+    iso_mesh_init(mesh);
+}
+
+static size_t grown(size_t have, size_t want)
+{
+    size_t cap = have ? have : 256;
+    while (cap < want)
+        cap += cap / 2;
+    return cap;
+}
+
+int iso_mesh_reserve(iso_mesh *mesh, size_t vertices, size_t triangles)
+{
+    if (vertices > mesh->vertex_capacity) {
+        size_t cap = grown(mesh->vertex_capacity, vertices);
+        float *p = realloc(mesh->positions, cap * 3 * sizeof *p);
+        if (!p)
+            return ISO_E_NOMEM;
+        mesh->positions = p;
+        if (mesh->normals) {
+            float *n = realloc(mesh->normals, cap * 3 * sizeof *n);
+            if (!n)
+                return ISO_E_NOMEM;
+            mesh->normals = n;
+        }
+        mesh->vertex_capacity = cap;
+    }
+    if (triangles > mesh->triangle_capacity) {
+        size_t cap = grown(mesh->triangle_capacity, triangles);
+        uint32_t *t = realloc(mesh->indices, cap * 3 * sizeof *t);
+        if (!t)
+            return ISO_E_NOMEM;
+        mesh->indices = t;
+        mesh->triangle_capacity = cap;
+    }
+    return 0;
+}
+
+int iso_mesh_append(iso_mesh *dst, iso_mesh *src)
+{
+    size_t base = dst->vertex_count;
+    if (src->vertex_count == 0 && src->triangle_count == 0)
+        return 0;
+    if (dst->vertex_count == 0 && dst->triangle_count == 0) {
+        iso_mesh_free(dst);
+        *dst = *src;
+        iso_mesh_init(src);
+        return 0;
+    }
+    if (!dst->normals != !src->normals)
+        return ISO_E_ARGUMENT;
+    if (iso_mesh_reserve(dst, base + src->vertex_count, dst->triangle_count + src->triangle_count))
+        return ISO_E_NOMEM;
+    memcpy(dst->positions + 3 * base, src->positions, src->vertex_count * 3 * sizeof(float));
+    if (src->normals)
+        memcpy(dst->normals + 3 * base, src->normals, src->vertex_count * 3 * sizeof(float));
+    uint32_t *out = dst->indices + 3 * dst->triangle_count;
+    for (size_t i = 0; i < 3 * src->triangle_count; i++)
+        out[i] = src->indices[i] + (uint32_t)base;
+    dst->vertex_count += src->vertex_count;
+    dst->triangle_count += src->triangle_count;
+    iso_mesh_free(src);
+    return 0;
+}
+
+/* ---- welding: open addressing on the 96 bits of a position ---- */
+
+static uint64_t hash_position(const float *p)
+{
+    uint32_t b[3];
+    memcpy(b, p, sizeof b);
+    uint64_t h = (uint64_t)b[0] * 0x9E3779B97F4A7C15ull;
+    h ^= (uint64_t)b[1] * 0xC2B2AE3D27D4EB4Full + (h >> 29);
+    h ^= (uint64_t)b[2] * 0x165667B19E3779F9ull + (h >> 32);
+    return h ^ (h >> 31);
+}
+
+int iso_mesh_weld(iso_mesh *mesh)
+{
+    size_t n = mesh->vertex_count, cap = 16;
+    while (cap < 2 * n)
+        cap *= 2;
+    uint32_t *slots = malloc(cap * sizeof *slots);
+    uint32_t *remap = malloc((n ? n : 1) * sizeof *remap);
+    if (!slots || !remap) {
+        free(slots);
+        free(remap);
+        return ISO_E_NOMEM;
+    }
+    memset(slots, 0xff, cap * sizeof *slots);
+
+    /* PASS 1: give each distinct position the index of its first occurrence, compacting
+     * positions (and normals) in place; earlier slots are never overwritten before read. */
+    size_t kept = 0;
+    for (size_t v = 0; v < n; v++) {
+        const float *p = mesh->positions + 3 * v;
+        size_t s = (size_t)hash_position(p) & (cap - 1);
+        while (slots[s] != UINT32_MAX && memcmp(mesh->positions + 3 * (size_t)slots[s], p, 12) != 0)
+            s = (s + 1) & (cap - 1);
+        if (slots[s] == UINT32_MAX) {
+            if (kept != v) {
+                memcpy(mesh->positions + 3 * kept, p, 12);
+                if (mesh->normals)
+                    memcpy(mesh->normals + 3 * kept, mesh->normals + 3 * v, 12);
+            }
+            slots[s] = (uint32_t)kept++;
+        }
+        remap[v] = slots[s];
+    }
+
+    /* PASS 2: rewrite triangles, dropping those that collapsed onto an edge or a point. */
+    size_t t_out = 0;
+    for (size_t t = 0; t < mesh->triangle_count; t++) {
+        uint32_t a = remap[mesh->indices[3 * t]], b = remap[mesh->indices[3 * t + 1]],
+                 c = remap[mesh->indices[3 * t + 2]];
+        if (a == b || b == c || a == c)
+            continue;
+        mesh->indices[3 * t_out] = a;
+        mesh->indices[3 * t_out + 1] = b;
+        mesh->indices[3 * t_out + 2] = c;
+        t_out++;
+    }
+    mesh->vertex_count = kept;
+    mesh->triangle_count = t_out;
+    free(slots);
+    free(remap);
+    return 0;
+}
+
+/* ---- measurements ---- */
+
+static void triangle_vectors(const iso_mesh *m, size_t t, double a[3], double b[3], double c[3])
+{
+    for (int k = 0; k < 3; k++) {
+        a[k] = m->positions[3 * (size_t)m->indices[3 * t] + k];
+        b[k] = m->positions[3 * (size_t)m->indices[3 * t + 1] + k];
+        c[k] = m->positions[3 * (size_t)m->indices[3 * t + 2] + k];
+    }
+}
+
+double iso_mesh_area(const iso_mesh *mesh)
+{
+    double sum = 0;
+    for (size_t t = 0; t < mesh->triangle_count; t++) {
+        double a[3], b[3], c[3], u[3], v[3];
+        triangle_vectors(mesh, t, a, b, c);
+        for (int k = 0; k < 3; k++) {
+            u[k] = b[k] - a[k];
+            v[k] = c[k] - a[k];
+        }
+        double x = u[1] * v[2] - u[2] * v[1], y = u[2] * v[0] - u[0] * v[2],
+               z = u[0] * v[1] - u[1] * v[0];
+        sum += 0.5 * sqrt(x * x + y * y + z * z);
+    }
+    return sum;
+}
+
+double iso_mesh_enclosed_volume(const iso_mesh *mesh)
+{
+    double sum = 0;
+    for (size_t t = 0; t < mesh->triangle_count; t++) {
+        double a[3], b[3], c[3];
+        triangle_vectors(mesh, t, a, b, c);
+        sum += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+               a[2] * (b[0] * c[1] - b[1] * c[0]);
+    }
+    return sum / 6.0;
+}
+
+void iso_mesh_bounds(const iso_mesh *mesh, float min[3], float max[3])
+{
+    for (int k = 0; k < 3; k++) {
+        min[k] = INFINITY;
+        max[k] = -INFINITY;
+    }
+    for (size_t v = 0; v < mesh->vertex_count; v++)
+        for (int k = 0; k < 3; k++) {
+            float x = mesh->positions[3 * v + k];
+            if (x < min[k]) min[k] = x;
+            if (x > max[k]) max[k] = x;
+        }
+}
+
+/* ---- edge census: each directed edge (a,b) counted under the key (min,max) ---- */
+
+typedef struct edge_slot {
+    uint32_t lo, hi;
+    uint32_t forward, backward; /* uses as lo->hi and as hi->lo */
+} edge_slot;
+
+int iso_mesh_count_edges(const iso_mesh *mesh, iso_mesh_edges *out)
+{
+    size_t cap = 16;
+    while (cap < 4 * mesh->triangle_count)
+        cap *= 2;
+    edge_slot *slots = calloc(cap, sizeof *slots);
+    if (!slots)
+        return ISO_E_NOMEM;
+    memset(out, 0, sizeof *out);
+    for (size_t t = 0; t < mesh->triangle_count; t++)
+        for (int e = 0; e < 3; e++) {
+            uint32_t a = mesh->indices[3 * t + e], b = mesh->indices[3 * t + (e + 1) % 3];
+            uint32_t lo = a < b ? a : b, hi = a < b ? b : a;
+            uint64_t h = ((uint64_t)lo * 0x9E3779B97F4A7C15ull) ^ ((uint64_t)hi * 0xC2B2AE3D27D4EB4Full);
+            size_t s = (size_t)(h ^ (h >> 32)) & (cap - 1);
+            /* lo == hi never happens for welded meshes; slot (0,0) with no uses is empty. */
+            while ((slots[s].forward || slots[s].backward) && (slots[s].lo != lo || slots[s].hi != hi))
+                s = (s + 1) & (cap - 1);
+            slots[s].lo = lo;
+            slots[s].hi = hi;
+            if (a == lo)
+                slots[s].forward++;
+            else
+                slots[s].backward++;
+        }
+    for (size_t s = 0; s < cap; s++) {
+        uint32_t uses = slots[s].forward + slots[s].backward;
+        if (!uses)
+            continue;
+        out->edges++;
+        if (uses == 1)
+            out->open++;
+        else if (uses > 2)
+            out->nonmanifold++;
+        else if (slots[s].forward != 1)
+            out->misoriented++;
+    }
+    free(slots);
+    return 0;
+}

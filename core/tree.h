@@ -1,0 +1,90 @@
+/* tree.h: the a-priori hierarchy of trilinear fits (Elber and Malzbender, Algorithm 2 with
+ * Algorithm 1's min/max bounds; DESIGN.md section 1).
+ *
+ * An implicit binary kd-tree over the volume's samples. A node is an inclusive box of
+ * samples lo..hi; the root is the whole volume. A node splits its longest side in cells
+ * (ties: x before y before z) at mid = lo + cells/2, and both children keep the sample
+ * plane at mid. Boxes are never stored: they follow from the root and the path.
+ *
+ * Stored nodes go down to bricks: a node whose every side is at most ISO_TREE_BRICK cells
+ * is a stored leaf. Below a brick, extraction continues the same split rule on the fly,
+ * scanning the brick's samples (at most (ISO_TREE_BRICK+1)^3), so the tree costs
+ * ~2/400 nodes per voxel, 16 bytes each, instead of two per voxel.
+ *
+ * Each stored node keeps min and max of its samples and its fit error
+ *     err = max over samples s in the box of |p(s) - T(s)|,
+ * T the trilinear through the box's 8 corner samples. By Lemma 1 (all cells of the box are
+ * trilinear and so is T restricted to any cell, so their difference peaks at samples)
+ * err bounds |f - T| over the whole box, f the data's own trilinear interpolant.
+ * Floats are rounded outward (min down, max and err up), so pruning stays conservative. */
+#ifndef ISO_TREE_H
+#define ISO_TREE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "error.h"
+#include "volume.h"
+
+#define ISO_TREE_BRICK 8
+
+typedef struct iso_box {
+    uint32_t lo[3], hi[3]; /* inclusive sample indices; hi[a] - lo[a] cells along a */
+} iso_box;
+
+typedef struct iso_tree_node {
+    float min, max, err;
+    uint32_t first_child; /* children at first_child and first_child + 1; 0: brick leaf */
+} iso_tree_node;
+
+typedef struct iso_tree {
+    const iso_volume *vol;  /* not owned; must outlive the tree */
+    iso_tree_node *nodes;   /* node 0 is the root; breadth-first order */
+    size_t node_count;
+    uint32_t volume_crc;    /* CRC-32 of dims, type and samples: ties a file to its volume */
+    double build_ms;        /* time to build (or to load and verify the file) */
+    void *mapping;          /* file mapping when loaded with iso_tree_load, else NULL */
+    size_t mapping_bytes;
+} iso_tree;
+
+/* Called during long builds with the fraction done, 0..1. */
+typedef void (*iso_progress_fn)(void *context, double fraction);
+
+/* Builds the hierarchy of vol. O(N log(N / brick^3)) time (each level scans its samples
+ * once), O(N / brick^3) memory. progress may be NULL. */
+int iso_tree_build(const iso_volume *vol, iso_progress_fn progress, void *context,
+                   iso_tree **out, iso_error *err);
+/* Frees the tree (or unmaps its file). NULL is allowed. */
+void iso_tree_destroy(iso_tree *tree);
+/* Bytes the tree's nodes occupy. */
+size_t iso_tree_bytes(const iso_tree *tree);
+
+/* CRC-32 identifying the volume's dims, type and samples (the hierarchy file's key). O(N). */
+uint32_t iso_tree_volume_crc(const iso_volume *vol);
+
+/* Writes the tree to path atomically (temporary file in the same directory, fsync,
+ * rename): a reader never sees a partial file. */
+int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err);
+/* Maps a hierarchy file written by iso_tree_save for vol. Checks magic, version, sizes,
+ * the node checksum, node structure, and that it was built from this volume (dims, type,
+ * sample CRC): ISO_E_FORMAT/ISO_E_CORRUPT/ISO_E_STALE otherwise. Safe on untrusted files. */
+int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_error *err);
+
+/* The root box of vol. */
+iso_box iso_box_root(const iso_volume *vol);
+/* Cells in the box. */
+static inline uint64_t iso_box_cells(const iso_box *b)
+{
+    return (uint64_t)(b->hi[0] - b->lo[0]) * (b->hi[1] - b->lo[1]) * (b->hi[2] - b->lo[2]);
+}
+/* Splits box by the tree's rule into left (lower half) and right. Returns the split axis,
+ * or -1 for a single cell (which does not split). */
+int iso_box_split(const iso_box *box, iso_box *left, iso_box *right);
+/* 1 if the box is a stored leaf (every side <= ISO_TREE_BRICK cells). */
+int iso_box_is_brick(const iso_box *box);
+
+/* Min, max and Lemma 1 fit error of the box's samples, computed by scanning them. O(box). */
+void iso_tree_scan_box(const iso_volume *vol, const iso_box *box, double *min, double *max,
+                       double *err);
+
+#endif

@@ -1,0 +1,688 @@
+/* test_extract.c: the hierarchy and bounded extraction, on hand-built volumes with exact
+ * answers (the paper's D1, D2, D3, a sphere, a torus), brute-force checks of Lemma 1 and
+ * Lemma 2, and the guarantee on the paper's own CT head. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "check.h"
+#include "extract.h"
+#include "loader.h"
+#include "mc.h"
+#include "tets.h"
+#include "tree.h"
+#include "trilinear.h"
+
+/* ---- helpers ---- */
+
+static uint64_t rng_state = 0x2545F4914F6CDD1Dull;
+static double uniform(void) /* xorshift64*, fixed seed: failures reproduce */
+{
+    rng_state ^= rng_state >> 12;
+    rng_state ^= rng_state << 25;
+    rng_state ^= rng_state >> 27;
+    return (double)((rng_state * 0x2545F4914F6CDD1Dull) >> 11) / 9007199254740992.0;
+}
+
+static iso_volume *make_volume(size_t nx, size_t ny, size_t nz, iso_voxel_type type)
+{
+    size_t dims[3] = {nx, ny, nz};
+    iso_error err;
+    iso_volume *vol = iso_vol_create(dims, type, 0, &err);
+    CHECKF(vol != NULL, "iso_vol_create: %s", err.message);
+    return vol;
+}
+
+/* f(p): the data's own trilinear interpolant at index-space point p. */
+static double interpolate(const iso_volume *vol, const float p[3])
+{
+    size_t base[3];
+    double t[3];
+    for (int d = 0; d < 3; d++) {
+        double x = p[d];
+        if (x < 0) x = 0;
+        if (x > (double)(vol->dims[d] - 1)) x = (double)(vol->dims[d] - 1);
+        size_t b = (size_t)floor(x);
+        if (b >= vol->dims[d] - 1)
+            b = vol->dims[d] - 2;
+        base[d] = b;
+        t[d] = x - (double)b;
+    }
+    double c[8];
+    for (int k = 0; k < 8; k++)
+        c[k] = iso_vol_get(vol, base[0] + (k & 1), base[1] + ((k >> 1) & 1), base[2] + ((k >> 2) & 1));
+    return iso_tri_eval(c, t[0], t[1], t[2]);
+}
+
+/* Largest |f(v) - level| over the mesh's vertices (index space). */
+static double worst_vertex_error(const iso_volume *vol, const iso_mesh *m, double level)
+{
+    double worst = 0;
+    for (size_t v = 0; v < m->vertex_count; v++) {
+        double e = fabs(interpolate(vol, m->positions + 3 * v) - level);
+        if (e > worst)
+            worst = e;
+    }
+    return worst;
+}
+
+/* Float positions carry ~2^-17 relative rounding; through the steepest sample difference
+ * that is the slack a vertex may show beyond the bound. */
+static double rounding_slack(const iso_volume *vol)
+{
+    double extent = (double)(vol->dims[0] + vol->dims[1] + vol->dims[2]);
+    return 3.0 * extent * ldexp(1.0, -23) * (vol->value_max - vol->value_min) + 1e-9;
+}
+
+static iso_tree *build(const iso_volume *vol)
+{
+    iso_tree *tree = NULL;
+    iso_error err;
+    CHECK_OK(iso_tree_build(vol, NULL, NULL, &tree, &err), &err);
+    return tree;
+}
+
+static int extract(const iso_tree *tree, double level, double tolerance, iso_mesh *m,
+                   iso_extract_stats *st)
+{
+    iso_extract_params p = {.level = level, .tolerance = tolerance, .space = ISO_SPACE_INDEX};
+    iso_error err;
+    int rc = iso_extract(tree, &p, m, st, &err);
+    CHECKF(rc == 0, "iso_extract(%g, %g): %s", level, tolerance, err.message);
+    return rc;
+}
+
+/* Open edges that do not lie in the volume's outer faces (index space). */
+static size_t interior_open_edges(const iso_mesh *m, const iso_volume *vol);
+
+/* ---- the marching cubes table ---- */
+
+static void test_mc_table_shapes(void)
+{
+    const iso_mc_case *cs = iso_mc_cases();
+    CHECK_EQ(cs[0].triangle_count, 0);
+    CHECK_EQ(cs[255].triangle_count, 0);
+    /* One corner cut off: one triangle; a whole face: a quad; every case: at most 12 edges. */
+    for (int k = 0; k < 8; k++) {
+        CHECK_EQ(cs[1u << k].triangle_count, 1);
+        CHECK_EQ(cs[255u ^ (1u << k)].triangle_count, 1);
+    }
+    CHECK_EQ(cs[0x0F].triangle_count, 2); /* the z = 0 face inside */
+    CHECK_EQ(cs[0x55].triangle_count, 2); /* the x = 0 face inside */
+    for (int i = 0; i < 256; i++) {
+        CHECK(cs[i].triangle_count <= 12);
+        for (int t = 0; t < 3 * cs[i].triangle_count; t++)
+            CHECK(cs[i].edges[t] < 12);
+        /* Without an ambiguous face (two diagonal corners inside, two outside) a case and
+         * its complement are the same surface, so they have as many triangles. */
+        int ambiguous = 0;
+        static const int faces[6][4] = {{0, 2, 6, 4}, {1, 3, 7, 5}, {0, 1, 5, 4},
+                                        {2, 3, 7, 6}, {0, 1, 3, 2}, {4, 5, 7, 6}};
+        for (int f = 0; f < 6; f++) {
+            int a = (i >> faces[f][0]) & 1, b = (i >> faces[f][1]) & 1;
+            int c = (i >> faces[f][2]) & 1, d = (i >> faces[f][3]) & 1;
+            ambiguous |= a == c && b == d && a != b;
+        }
+        if (!ambiguous)
+            CHECKF(cs[i].triangle_count == cs[255 - i].triangle_count, "case %d", i);
+    }
+}
+
+static void test_mc_single_corner_winding(void)
+{
+    /* Corner 0 high: the triangle's normal must point away from it, toward (1,1,1). */
+    double v[8] = {1, 0, 0, 0, 0, 0, 0, 0}, origin[3] = {0, 0, 0}, size[3] = {1, 1, 1};
+    iso_mesh m;
+    iso_mesh_init(&m);
+    CHECK_EQ(iso_mc_cell(v, 0.5, origin, size, &m), 1);
+    float *a = m.positions, *b = m.positions + 3, *c = m.positions + 6;
+    double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    double n[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
+    CHECK(n[0] > 0 && n[1] > 0 && n[2] > 0);
+    for (int k = 0; k < 9; k++)
+        CHECK(m.positions[k] == 0.0f || m.positions[k] == 0.5f);
+    iso_mesh_free(&m);
+}
+
+/* Random fields: the welded full-scan surface is closed inside the volume, 2-manifold and
+ * consistently oriented, which a table with inconsistent face rules would break. */
+static void test_mc_random_fields_watertight(void)
+{
+    for (int trial = 0; trial < 40 && !check_failed(); trial++) {
+        size_t n[3] = {3 + (size_t)(uniform() * 9), 3 + (size_t)(uniform() * 9), 3 + (size_t)(uniform() * 9)};
+        iso_volume *vol = make_volume(n[0], n[1], n[2], ISO_F32);
+        for (size_t k = 0; k < n[2]; k++)
+            for (size_t j = 0; j < n[1]; j++)
+                for (size_t i = 0; i < n[0]; i++)
+                    iso_vol_set(vol, i, j, k, trial % 2 ? floor(uniform() * 4) : uniform());
+        iso_vol_update_stats(vol);
+        double level = trial % 2 ? 1.5 : 0.5;
+        iso_mesh m;
+        iso_mesh_init(&m);
+        iso_error err;
+        CHECK_OK(iso_extract_full_scan(vol, level, ISO_SPACE_INDEX, &m, NULL, &err), &err);
+        iso_mesh_edges e;
+        CHECK_OK(iso_mesh_count_edges(&m, &e), &err);
+        CHECK_EQ(e.nonmanifold, 0);
+        CHECK_EQ(e.misoriented, 0);
+        CHECK_EQ(interior_open_edges(&m, vol), 0);
+        CHECK(worst_vertex_error(vol, &m, level) <= rounding_slack(vol));
+        iso_mesh_free(&m);
+        iso_vol_destroy(vol);
+    }
+}
+
+/* ---- Lemma 1 and Lemma 2, brute force ---- */
+
+static void test_lemma2_corner_bound_brute_force(void)
+{
+    double worst_ratio = 0;
+    for (int trial = 0; trial < 2000; trial++) {
+        double c[8];
+        for (int k = 0; k < 8; k++)
+            c[k] = uniform() * 200 - 100;
+        if (trial % 4 == 0) /* one residual alone: the bound is tight there */
+            for (int k = 0; k < 8; k++)
+                c[k] = k == 3 + 2 * (trial / 4 % 3) - (trial / 4 % 3 == 2) ? 50 : 0;
+        double bound = iso_tri_lemma2_corner(c);
+        double dx = c[1] - c[0], dy = c[2] - c[0], dz = c[4] - c[0], seen = 0;
+        for (int s = 0; s < 4000; s++) {
+            double u = uniform(), v = uniform(), w = uniform();
+            if (u + v + w > 1)
+                continue;
+            double dev = fabs(iso_tri_eval(c, u, v, w) - (c[0] + dx * u + dy * v + dz * w));
+            CHECKF(dev <= bound + 1e-9, "deviation %g above Lemma 2's %g", dev, bound);
+            if (dev > seen)
+                seen = dev;
+        }
+        if (bound > 0 && seen / bound > worst_ratio)
+            worst_ratio = seen / bound;
+    }
+    CHECKF(worst_ratio > 0.95, "the bound should be nearly reached somewhere (best %g)", worst_ratio);
+}
+
+/* Largest |T - l| over tetrahedron `order`, on every barycentric point with weights in
+ * twelfths: that lattice holds the maximisers (1/2, 1/3, 2/3) the bound is made of. */
+static double kuhn_deviation(const double c[8], int order)
+{
+    int t[4];
+    double seen = 0;
+    iso_tri_kuhn_tet(order, t);
+    for (int a = 0; a <= 12; a++)
+        for (int b = 0; a + b <= 12; b++)
+            for (int cc = 0; a + b + cc <= 12; cc++) {
+                double w[4] = {a / 12.0, b / 12.0, cc / 12.0, (12 - a - b - cc) / 12.0};
+                double p[3] = {0, 0, 0}, l = 0;
+                for (int k = 0; k < 4; k++) {
+                    for (int d = 0; d < 3; d++)
+                        p[d] += w[k] * ((t[k] >> d) & 1);
+                    l += w[k] * c[t[k]];
+                }
+                double dev = fabs(iso_tri_eval(c, p[0], p[1], p[2]) - l);
+                if (dev > seen)
+                    seen = dev;
+            }
+    return seen;
+}
+
+static void test_kuhn_bound_brute_force(void)
+{
+    for (int trial = 0; trial < 1000; trial++) {
+        double c[8];
+        for (int k = 0; k < 8; k++)
+            c[k] = uniform() * 200 - 100;
+        for (int o = 0; o < 6; o++) {
+            double bound = iso_tri_kuhn_tet_bound(c, o), dev = kuhn_deviation(c, o);
+            CHECKF(dev <= bound + 1e-9, "tet %d: deviation %g above the bound %g", o, dev, bound);
+            CHECK(bound <= iso_tri_kuhn_bound(c));
+        }
+    }
+    /* One off-tetrahedron corner alone: the bound is exact (1/4 or 4/27 of its residual). */
+    for (int o = 0; o < 6; o++) {
+        int t[4];
+        iso_tri_kuhn_tet(o, t);
+        for (int q = 0; q < 8; q++) {
+            if (q == t[0] || q == t[1] || q == t[2] || q == t[3])
+                continue;
+            double c[8] = {0};
+            c[q] = 3;
+            double bound = iso_tri_kuhn_tet_bound(c, o);
+            CHECK(fabs(bound - 0.75) < 1e-12 || fabs(bound - 3 * 4.0 / 27.0) < 1e-12);
+            CHECK_NEAR(kuhn_deviation(c, o), bound, 1e-12);
+        }
+    }
+}
+
+static void test_lemma1_fit_error_brute_force(void)
+{
+    for (int trial = 0; trial < 50 && !check_failed(); trial++) {
+        iso_volume *vol = make_volume(2 + (size_t)(uniform() * 6), 2 + (size_t)(uniform() * 6),
+                                      2 + (size_t)(uniform() * 6), ISO_F64);
+        for (size_t k = 0; k < vol->dims[2]; k++)
+            for (size_t j = 0; j < vol->dims[1]; j++)
+                for (size_t i = 0; i < vol->dims[0]; i++)
+                    iso_vol_set(vol, i, j, k, uniform() * 10);
+        iso_box box = iso_box_root(vol);
+        double mn, mx, er, c[8];
+        iso_tree_scan_box(vol, &box, &mn, &mx, &er);
+        for (int k = 0; k < 8; k++)
+            c[k] = iso_vol_get(vol, k & 1 ? box.hi[0] : 0, k & 2 ? box.hi[1] : 0, k & 4 ? box.hi[2] : 0);
+        double seen = 0;
+        for (int s = 0; s < 3000; s++) {
+            float p[3];
+            for (int d = 0; d < 3; d++)
+                p[d] = (float)(uniform() * (double)box.hi[d]);
+            double t = iso_tri_eval(c, p[0] / box.hi[0], p[1] / box.hi[1], p[2] / box.hi[2]);
+            double dev = fabs(interpolate(vol, p) - t);
+            CHECKF(dev <= er + 1e-9, "|f - T| = %g above the fit error %g", dev, er);
+            if (dev > seen)
+                seen = dev;
+        }
+        /* The maximum is attained at a sample, so the bound is exact there. */
+        double at_samples = 0;
+        for (size_t k = 0; k < vol->dims[2]; k++)
+            for (size_t j = 0; j < vol->dims[1]; j++)
+                for (size_t i = 0; i < vol->dims[0]; i++) {
+                    double t = iso_tri_eval(c, (double)i / box.hi[0], (double)j / box.hi[1], (double)k / box.hi[2]);
+                    double d = fabs(iso_vol_get(vol, i, j, k) - t);
+                    if (d > at_samples) at_samples = d;
+                }
+        CHECK_NEAR(at_samples, er, 1e-12);
+        iso_vol_destroy(vol);
+    }
+}
+
+/* ---- tetrahedral polygonization of one node ---- */
+
+static void test_tets_respect_their_bound(void)
+{
+    for (int trial = 0; trial < 300 && !check_failed(); trial++) {
+        double c[8];
+        for (int k = 0; k < 8; k++)
+            c[k] = uniform() * 100;
+        iso_box box = {{0, 0, 0}, {1 + (uint32_t)(uniform() * 15), 1 + (uint32_t)(uniform() * 15), 1 + (uint32_t)(uniform() * 15)}};
+        double level = 20 + uniform() * 60, budget = 0.5 + uniform() * 10, delta = -1;
+        size_t subs = 0;
+        iso_mesh m;
+        iso_mesh_init(&m);
+        int rc = iso_tets_polygonize(c, &box, level, budget, &m, &delta, &subs);
+        CHECK(rc == 0 || rc == 1);
+        if (rc == 1) {
+            CHECK(delta <= budget);
+            for (size_t v = 0; v < m.vertex_count; v++) {
+                const float *p = m.positions + 3 * v;
+                double t = iso_tri_eval(c, p[0] / box.hi[0], p[1] / box.hi[1], p[2] / box.hi[2]);
+                CHECKF(fabs(t - level) <= delta + 1e-4, "vertex off by %g, bound %g", fabs(t - level), delta);
+            }
+            CHECK_OK(iso_mesh_weld(&m), &(iso_error){0});
+            iso_mesh_edges e;
+            CHECK(iso_mesh_count_edges(&m, &e) == 0);
+            CHECK_EQ(e.nonmanifold, 0);
+            CHECK_EQ(e.misoriented, 0);
+        } else {
+            CHECK_EQ(m.triangle_count, 0);
+        }
+        iso_mesh_free(&m);
+    }
+}
+
+/* ---- the paper's data sets ---- */
+
+static void test_d1_constant_is_one_node(void)
+{
+    iso_volume *vol = make_volume(33, 40, 27, ISO_U8);
+    for (size_t i = 0; i < iso_vol_count(vol); i++)
+        ((uint8_t *)vol->data)[i] = 1;
+    iso_vol_update_stats(vol);
+    iso_tree *tree = build(vol);
+    iso_mesh m;
+    iso_mesh_init(&m);
+    iso_extract_stats st;
+    for (int t = 0; t < 2; t++) {
+        extract(tree, 0.5, t ? 10 : 0, &m, &st);
+        CHECK_EQ(st.triangles, 0);
+        CHECK_EQ(st.nodes_visited, 1);
+        CHECK_EQ(st.cells_visited, 0);
+    }
+    iso_mesh_free(&m);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+static void test_d2_spike_takes_log_steps(void)
+{
+    for (size_t w = 16; w <= 128 && !check_failed(); w *= 2) {
+        iso_volume *vol = make_volume(w, w, w, ISO_F32);
+        for (size_t i = 0; i < iso_vol_count(vol); i++)
+            ((float *)vol->data)[i] = 1;
+        iso_vol_set(vol, 0, 0, 0, 0);
+        iso_vol_update_stats(vol);
+        iso_tree *tree = build(vol);
+        iso_mesh m;
+        iso_mesh_init(&m);
+        iso_extract_stats st;
+        extract(tree, 0.5, 0.01, &m, &st);
+        CHECK_EQ(st.triangles, 1);
+        CHECK_EQ(st.cells_visited, 1);
+        /* Each level visits the active child and its inactive sibling: 2 per halving. */
+        double halvings = 3 * log2((double)(w - 1));
+        CHECKF(st.nodes_visited <= 2 * (size_t)ceil(halvings) + 1, "%zu nodes visited for W=%zu",
+               st.nodes_visited, w);
+        CHECK(worst_vertex_error(vol, &m, 0.5) <= 1e-6);
+        iso_mesh_free(&m);
+        iso_tree_destroy(tree);
+        iso_vol_destroy(vol);
+    }
+}
+
+static void test_d3_ijk_is_one_trilinear(void)
+{
+    iso_volume *vol = make_volume(32, 32, 32, ISO_F32);
+    for (size_t k = 0; k < 32; k++)
+        for (size_t j = 0; j < 32; j++)
+            for (size_t i = 0; i < 32; i++)
+                iso_vol_set(vol, i, j, k, (double)(i * j * k));
+    iso_vol_update_stats(vol);
+    iso_tree *tree = build(vol);
+    CHECKF(tree->nodes[0].err <= 1e-9 * vol->value_max, "root err %g", tree->nodes[0].err);
+    iso_mesh m;
+    iso_mesh_init(&m);
+    iso_extract_stats st;
+    /* Its twist needs sub-boxes of a few cells to stay within 1000 of linear pieces. */
+    extract(tree, 3000, 1000, &m, &st);
+    CHECK_EQ(st.nodes_visited, 1);
+    CHECK_EQ(st.nodes_polygonized, 1);
+    CHECK(st.triangles > 0);
+    CHECK(st.error_bound <= 1000);
+    CHECKF(worst_vertex_error(vol, &m, 3000) <= st.error_bound + rounding_slack(vol),
+           "vertex error %g, bound %g", worst_vertex_error(vol, &m, 3000), st.error_bound);
+    /* Tolerance 0 is marching cubes: the same surface as the full scan. */
+    iso_mesh full;
+    iso_mesh_init(&full);
+    iso_extract_stats fs;
+    iso_error err;
+    extract(tree, 3000, 0, &m, &st);
+    CHECK_OK(iso_extract_full_scan(vol, 3000, ISO_SPACE_INDEX, &full, &fs, &err), &err);
+    CHECK_EQ(st.triangles, fs.triangles);
+    CHECK_EQ(st.vertices, fs.vertices);
+    iso_mesh_free(&full);
+    iso_mesh_free(&m);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+/* ---- analytic shapes ---- */
+
+static iso_volume *sphere_volume(size_t n, double *radius_at_zero)
+{
+    iso_volume *vol = make_volume(n, n + 3, n - 2, ISO_F32);
+    double c[3] = {(n - 1) / 2.0, (n + 2) / 2.0, (n - 3) / 2.0}, r0 = (n - 3) / 2.0;
+    for (size_t k = 0; k < vol->dims[2]; k++)
+        for (size_t j = 0; j < vol->dims[1]; j++)
+            for (size_t i = 0; i < vol->dims[0]; i++)
+                iso_vol_set(vol, i, j, k, r0 - sqrt((i - c[0]) * (i - c[0]) + (j - c[1]) * (j - c[1]) + (k - c[2]) * (k - c[2])));
+    iso_vol_update_stats(vol);
+    *radius_at_zero = r0;
+    return vol;
+}
+
+static void test_sphere_surface_is_bounded_and_closed(void)
+{
+    double r0;
+    iso_volume *vol = sphere_volume(48, &r0);
+    iso_tree *tree = build(vol);
+    double c[3] = {23.5, 25, 22.5}, level = 4; /* radius r0 - 4 = 18.5 */
+    const double tolerances[] = {0, 0.05, 0.2, 1};
+    size_t last_triangles = SIZE_MAX;
+    for (int t = 0; t < 4; t++) {
+        iso_mesh m;
+        iso_mesh_init(&m);
+        iso_extract_stats st;
+        extract(tree, level, tolerances[t], &m, &st);
+        double worst = 0;
+        for (size_t v = 0; v < m.vertex_count; v++) {
+            float *p = m.positions + 3 * v;
+            double r = sqrt((p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) + (p[2] - c[2]) * (p[2] - c[2]));
+            if (fabs(r - (r0 - level)) > worst)
+                worst = fabs(r - (r0 - level));
+        }
+        /* Linear interpolation of a distance field along a unit edge is off by at most
+         * 1/(8r); a vertex within tolerance t of the level is within t of the sphere. */
+        CHECKF(worst <= tolerances[t] + 1.0 / (8 * (r0 - level - 1)) + 1e-4, "t=%g: vertex %g off the sphere",
+               tolerances[t], worst);
+        CHECK(worst_vertex_error(vol, &m, level) <= st.error_bound + rounding_slack(vol));
+        CHECK(st.error_bound <= tolerances[t]);
+        CHECKF(st.triangles <= last_triangles, "t=%g: %zu triangles after %zu", tolerances[t],
+               st.triangles, last_triangles);
+        last_triangles = st.triangles;
+        if (tolerances[t] == 0) {
+            /* Exact surface: closed, oriented outward (higher values inside), volume right. */
+            iso_mesh_edges e;
+            CHECK(iso_mesh_count_edges(&m, &e) == 0);
+            CHECK_EQ(e.open, 0);
+            CHECK_EQ(e.nonmanifold, 0);
+            CHECK_EQ(e.misoriented, 0);
+            double r = r0 - level, exact = 4.0 / 3.0 * M_PI * r * r * r;
+            CHECKF(fabs(iso_mesh_enclosed_volume(&m) - exact) < 0.01 * exact, "volume %g vs %g",
+                   iso_mesh_enclosed_volume(&m), exact);
+            CHECK_NEAR(iso_mesh_area(&m), 4 * M_PI * r * r, 0.01 * 4 * M_PI * r * r);
+        }
+        iso_mesh_free(&m);
+    }
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+static void test_torus_surface_is_bounded(void)
+{
+    size_t n = 40;
+    iso_volume *vol = make_volume(n, n, n / 2, ISO_F64);
+    double cx = (n - 1) / 2.0, cy = (n - 1) / 2.0, cz = (n / 2 - 1) / 2.0, ring = 12, tube = 5;
+    for (size_t k = 0; k < vol->dims[2]; k++)
+        for (size_t j = 0; j < n; j++)
+            for (size_t i = 0; i < n; i++) {
+                double q = sqrt((i - cx) * (i - cx) + (j - cy) * (j - cy)) - ring;
+                iso_vol_set(vol, i, j, k, tube - sqrt(q * q + (k - cz) * (k - cz)));
+            }
+    iso_vol_update_stats(vol);
+    iso_tree *tree = build(vol);
+    for (double t = 0; t <= 0.5; t += 0.25) {
+        iso_mesh m;
+        iso_mesh_init(&m);
+        iso_extract_stats st;
+        extract(tree, 0, t, &m, &st);
+        CHECK(st.triangles > 100);
+        double worst = 0;
+        for (size_t v = 0; v < m.vertex_count; v++) {
+            float *p = m.positions + 3 * v;
+            double q = sqrt((p[0] - cx) * (p[0] - cx) + (p[1] - cy) * (p[1] - cy)) - ring;
+            double d = fabs(sqrt(q * q + (p[2] - cz) * (p[2] - cz)) - tube);
+            if (d > worst) worst = d;
+        }
+        CHECKF(worst <= t + 1.0 / (8 * (tube - 1)) + 1e-4, "t=%g: vertex %g off the torus", t, worst);
+        if (t == 0) {
+            iso_mesh_edges e;
+            CHECK(iso_mesh_count_edges(&m, &e) == 0);
+            CHECK_EQ(e.open + e.nonmanifold + e.misoriented, 0);
+        }
+        iso_mesh_free(&m);
+    }
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+/* ---- the hierarchy file ---- */
+
+static void test_tree_file_round_trip_and_refusals(void)
+{
+    double r0;
+    iso_volume *vol = sphere_volume(30, &r0);
+    iso_tree *tree = build(vol), *back = NULL;
+    char path[512];
+    snprintf(path, sizeof path, "%s/sphere.isotree", check_temp_dir());
+    iso_error err;
+    CHECK_OK(iso_tree_save(tree, path, &err), &err);
+    CHECK_OK(iso_tree_load(vol, path, &back, &err), &err);
+    if (back) {
+        CHECK_EQ(back->node_count, tree->node_count);
+        CHECK(memcmp(back->nodes, tree->nodes, iso_tree_bytes(tree)) == 0);
+        iso_tree_destroy(back);
+    }
+    FILE *f = fopen(path, "rb");
+    long size = 0;
+    char *bytes = NULL;
+    if (f && fseek(f, 0, SEEK_END) == 0 && (size = ftell(f)) > 0 && fseek(f, 0, SEEK_SET) == 0) {
+        bytes = malloc((size_t)size);
+        CHECK(fread(bytes, 1, (size_t)size, f) == (size_t)size);
+    }
+    if (f)
+        fclose(f);
+    CHECK(bytes != NULL && size > 64);
+    struct { const char *what; long offset; int flip; long keep; int code; } cases[] = {
+        {"flipped node byte", 64 + 5, 1, 0, ISO_E_CORRUPT},
+        {"flipped header byte", 20, 1, 0, ISO_E_CORRUPT},
+        {"bad magic", 0, 1, 0, ISO_E_FORMAT},
+        {"truncated nodes", 0, 0, 64 + 16 * 3, ISO_E_CORRUPT},
+        {"truncated header", 0, 0, 40, ISO_E_FORMAT},
+    };
+    char bad[560];
+    snprintf(bad, sizeof bad, "%s/bad.isotree", check_temp_dir());
+    for (size_t i = 0; bytes && i < sizeof cases / sizeof cases[0]; i++) {
+        f = fopen(bad, "wb");
+        long n = cases[i].keep ? cases[i].keep : size;
+        bytes[cases[i].offset] ^= (char)(cases[i].flip ? 0x40 : 0);
+        CHECK(f && fwrite(bytes, 1, (size_t)n, f) == (size_t)n);
+        bytes[cases[i].offset] ^= (char)(cases[i].flip ? 0x40 : 0);
+        if (f)
+            fclose(f);
+        back = NULL;
+        int rc = iso_tree_load(vol, bad, &back, &err);
+        CHECKF(rc == cases[i].code, "%s: got %d (%s)", cases[i].what, rc, rc ? err.message : "ok");
+        CHECKF(rc == 0 || strstr(err.message, "bad.isotree"), "%s: message names the file: %s", cases[i].what, err.message);
+        CHECK(back == NULL);
+        iso_tree_destroy(back);
+    }
+    /* The same file against a volume whose samples changed is stale. */
+    iso_vol_set(vol, 3, 4, 5, 99);
+    CHECK(iso_tree_load(vol, path, &back, &err) == ISO_E_STALE);
+    double r1;
+    iso_volume *other = sphere_volume(31, &r1);
+    CHECK(iso_tree_load(other, path, &back, &err) == ISO_E_STALE);
+    CHECK(iso_tree_load(vol, "/nonexistent/x.isotree", &back, &err) == ISO_E_IO);
+    free(bytes);
+    iso_vol_destroy(other);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+static void test_tree_is_small(void)
+{
+    double r0;
+    iso_volume *vol = sphere_volume(100, &r0);
+    iso_tree *tree = build(vol);
+    size_t volume_bytes = iso_vol_count(vol) * iso_vol_type_size(vol->type);
+    CHECKF(iso_tree_bytes(tree) * 10 < volume_bytes, "tree %zu bytes, volume %zu", iso_tree_bytes(tree), volume_bytes);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+/* ---- real data: the paper's 3dhead ---- */
+
+static void test_cthead_guarantee_and_trend(void)
+{
+    const char *dir = check_shared_volumes();
+    if (!dir) {
+        check_skip("needs ../shared/volumes (CThead)");
+        return;
+    }
+    char path[512];
+    snprintf(path, sizeof path, "%s/CThead_256x256x113_u16be.nhdr", dir);
+    iso_volume *vol = NULL;
+    iso_error err;
+    CHECK_OK(iso_load(path, NULL, &vol, &err), &err);
+    if (!vol)
+        return;
+    iso_tree *tree = build(vol);
+    const double levels[] = {700, 1500}, tolerances[] = {0, 10, 50, 200};
+    for (int l = 0; l < 2; l++) {
+        iso_mesh full, m;
+        iso_mesh_init(&full);
+        iso_mesh_init(&m);
+        iso_extract_stats fs, st;
+        CHECK_OK(iso_extract_full_scan(vol, levels[l], ISO_SPACE_INDEX, &full, &fs, &err), &err);
+        size_t last_tri = SIZE_MAX, last_cells = SIZE_MAX;
+        for (int t = 0; t < 4; t++) {
+            extract(tree, levels[l], tolerances[t], &m, &st);
+            double worst = worst_vertex_error(vol, &m, levels[l]);
+            CHECKF(worst <= tolerances[t] + rounding_slack(vol), "level %g tol %g: vertex off by %g",
+                   levels[l], tolerances[t], worst);
+            CHECK(st.error_bound <= tolerances[t]);
+            CHECKF(st.triangles <= last_tri && st.cells_visited <= last_cells,
+                   "level %g tol %g: %zu triangles, %zu cells after %zu, %zu", levels[l], tolerances[t],
+                   st.triangles, st.cells_visited, last_tri, last_cells);
+            if (t == 0) {
+                CHECK_EQ(st.triangles, fs.triangles);
+                CHECK_NEAR(iso_mesh_area(&m), iso_mesh_area(&full), 0.01 * iso_mesh_area(&full));
+                CHECK(st.cells_visited < fs.cells_visited / 4);
+            }
+            last_tri = st.triangles;
+            last_cells = st.cells_visited;
+        }
+        CHECKF(last_tri < fs.triangles * 0.9, "tolerance 200 should shed triangles: %zu of %zu", last_tri, fs.triangles);
+        iso_mesh_free(&full);
+        iso_mesh_free(&m);
+    }
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+/* ---- helper defined late: boundary test needs the volume's dims ---- */
+
+static size_t interior_open_edges(const iso_mesh *m, const iso_volume *vol)
+{
+    /* Count edges used once whose two ends do not share an outer face of the volume. */
+    iso_mesh copy = *m;
+    size_t open_interior = 0;
+    for (size_t t = 0; t < copy.triangle_count; t++)
+        for (int e = 0; e < 3; e++) {
+            uint32_t a = copy.indices[3 * t + e], b = copy.indices[3 * t + (e + 1) % 3];
+            size_t uses = 0;
+            for (size_t u = 0; u < copy.triangle_count && uses < 2; u++)
+                for (int f = 0; f < 3; f++) {
+                    uint32_t x = copy.indices[3 * u + f], y = copy.indices[3 * u + (f + 1) % 3];
+                    if ((x == a && y == b) || (x == b && y == a))
+                        uses++;
+                }
+            if (uses != 1)
+                continue;
+            const float *p = copy.positions + 3 * (size_t)a, *q = copy.positions + 3 * (size_t)b;
+            int on_border = 0;
+            for (int d = 0; d < 3; d++)
+                if ((p[d] == 0 && q[d] == 0) || (p[d] == (float)(vol->dims[d] - 1) && q[d] == (float)(vol->dims[d] - 1)))
+                    on_border = 1;
+            open_interior += !on_border;
+        }
+    return open_interior;
+}
+
+int main(void)
+{
+    CHECK_RUN(test_mc_table_shapes);
+    CHECK_RUN(test_mc_single_corner_winding);
+    CHECK_RUN(test_mc_random_fields_watertight);
+    CHECK_RUN(test_lemma2_corner_bound_brute_force);
+    CHECK_RUN(test_kuhn_bound_brute_force);
+    CHECK_RUN(test_lemma1_fit_error_brute_force);
+    CHECK_RUN(test_tets_respect_their_bound);
+    CHECK_RUN(test_d1_constant_is_one_node);
+    CHECK_RUN(test_d2_spike_takes_log_steps);
+    CHECK_RUN(test_d3_ijk_is_one_trilinear);
+    CHECK_RUN(test_sphere_surface_is_bounded_and_closed);
+    CHECK_RUN(test_torus_surface_is_bounded);
+    CHECK_RUN(test_tree_file_round_trip_and_refusals);
+    CHECK_RUN(test_tree_is_small);
+    CHECK_RUN(test_cthead_guarantee_and_trend);
+    return check_finish();
+}
