@@ -1,0 +1,112 @@
+/* cli.c: helpers shared by the subcommands (see cli.h). */
+#include "cli.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "loader.h"
+#include "resample.h"
+
+int srv_fail(const char *fmt, ...)
+{
+    va_list ap;
+    fputs("isoserve: ", stderr);
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fputc('\n', stderr);
+    return 1;
+}
+
+double srv_now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
+}
+
+void srv_progress(void *label, double fraction)
+{
+    static int tty = -1;
+    if (tty < 0)
+        tty = isatty(STDERR_FILENO);
+    if (!tty)
+        return;
+    fprintf(stderr, "\r%s: %3d%%", (const char *)label, (int)(fraction * 100 + 0.5));
+    if (fraction >= 1)
+        fputc('\n', stderr);
+    fflush(stderr);
+}
+
+int srv_parse_number(const char *text, double *out)
+{
+    char *end;
+    errno = 0;
+    double v = strtod(text, &end);
+    if (!*text || *end || errno == ERANGE || !isfinite(v))
+        return -1;
+    *out = v;
+    return 0;
+}
+
+int srv_parse_dims(const char *text, size_t dims[3])
+{
+    unsigned long long v[3];
+    int n = 0;
+    char tail;
+    if (sscanf(text, "%llux%llux%llu%c", &v[0], &v[1], &v[2], &tail) == 3)
+        n = 3;
+    else if (sscanf(text, "%llu%c", &v[0], &tail) == 1) {
+        v[1] = v[2] = v[0];
+        n = 3;
+    }
+    for (int d = 0; d < n; d++) {
+        if (v[d] < 2 || v[d] > 65536)
+            return -1;
+        dims[d] = (size_t)v[d];
+    }
+    return n == 3 ? 0 : -1;
+}
+
+int srv_open(const srv_open_options *opt, srv_subject *out)
+{
+    iso_error err;
+    double start = srv_now_ms();
+    memset(out, 0, sizeof *out);
+    out->name = opt->path;
+    if (iso_load(opt->path, NULL, &out->vol, &err))
+        return srv_fail("%s", err.message);
+    if (opt->resample) {
+        size_t dims[3];
+        if (srv_parse_dims(opt->resample, dims))
+            return srv_fail("--resample %s: expected WxHxD with each size 2..65536", opt->resample);
+        iso_volume *small = iso_resample(out->vol, dims, &err);
+        if (!small)
+            return srv_fail("%s: resampling: %s", opt->path, err.message);
+        iso_vol_destroy(out->vol);
+        out->vol = small;
+    }
+    out->load_ms = srv_now_ms() - start;
+    if (!opt->want_tree)
+        return 0;
+    int rc = opt->hierarchy ? iso_tree_load(out->vol, opt->hierarchy, &out->tree, &err)
+                            : iso_tree_build(out->vol, srv_progress, (void *)"building hierarchy", &out->tree, &err);
+    if (rc) {
+        srv_close(out);
+        return srv_fail("%s", err.message);
+    }
+    return 0;
+}
+
+void srv_close(srv_subject *s)
+{
+    iso_tree_destroy(s->tree);
+    iso_vol_destroy(s->vol);
+    memset(s, 0, sizeof *s);
+}

@@ -1,0 +1,52 @@
+/* cli.h: what the isoserve subcommands share: argument helpers, opening a volume with
+ * its hierarchy, progress on the terminal. */
+#ifndef SRV_CLI_H
+#define SRV_CLI_H
+
+#include <stddef.h>
+
+#include "extract.h"
+#include "tree.h"
+#include "volume.h"
+
+/* A volume opened for a command: the volume (resampled if asked) and its hierarchy (read
+ * from a file if asked, else built with progress on stderr). */
+typedef struct srv_subject {
+    iso_volume *vol;
+    iso_tree *tree;
+    const char *name;
+    double load_ms;
+} srv_subject;
+
+typedef struct srv_open_options {
+    const char *path;
+    const char *resample;  /* "WxHxD" or NULL */
+    const char *hierarchy; /* file written by `isoserve build`, or NULL */
+    int want_tree;
+} srv_open_options;
+
+/* Returns 0, or prints "isoserve: <what>" on stderr and returns 1. */
+int srv_open(const srv_open_options *opt, srv_subject *out);
+void srv_close(srv_subject *s);
+
+/* "WxHxD" or "N" into dims; 0 or -1. */
+int srv_parse_dims(const char *text, size_t dims[3]);
+/* A finite double, whole string; 0 or -1. */
+int srv_parse_number(const char *text, double *out);
+/* Prints "isoserve: ..." to stderr; returns 1 (the exit status of a failed command). */
+int srv_fail(const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 1, 2)))
+#endif
+    ;
+
+/* Progress for long steps: drawn on stderr only when it is a terminal. */
+void srv_progress(void *label, double fraction);
+double srv_now_ms(void);
+
+int srv_cmd_info(int argc, char **argv);
+int srv_cmd_build(int argc, char **argv);
+int srv_cmd_extract(int argc, char **argv);
+int srv_cmd_bench(int argc, char **argv);
+
+#endif

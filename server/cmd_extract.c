@@ -1,0 +1,124 @@
+/* cmd_extract.c: `isoserve extract`: one iso-surface to a file and/or a JSON report. */
+#include <jansson.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cli.h"
+#include "encode.h"
+
+static int ends_with(const char *s, const char *suffix)
+{
+    size_t n = strlen(s), m = strlen(suffix);
+    return n >= m && !strcmp(s + n - m, suffix);
+}
+
+/* Writes the encoded mesh to path through a temporary file and rename, so a reader never
+ * sees half a mesh. */
+static int write_mesh(const iso_mesh *mesh, const char *path)
+{
+    unsigned char *bytes = NULL;
+    size_t size = 0;
+    iso_error err;
+    int rc;
+    if (ends_with(path, ".ply"))
+        rc = proto_encode_ply(mesh, &bytes, &size, &err);
+    else if (ends_with(path, ".obj"))
+        rc = proto_encode_obj(mesh, &bytes, &size, &err);
+    else if (ends_with(path, ".drc"))
+        rc = proto_encode_draco(mesh, NULL, &bytes, &size, &err);
+    else if (ends_with(path, ".glb"))
+        rc = proto_encode_glb(mesh, NULL, &bytes, &size, &err);
+    else
+        return srv_fail("%s: unknown output format (use .ply, .obj, .drc or .glb)", path);
+    if (rc)
+        return srv_fail("%s: %s", path, err.message);
+    size_t len = strlen(path) + 8;
+    char *tmp = malloc(len);
+    FILE *f = tmp ? (snprintf(tmp, len, "%s.tmp", path), fopen(tmp, "wb")) : NULL;
+    int ok = f && fwrite(bytes, 1, size, f) == size;
+    ok = f && fclose(f) == 0 && ok;
+    ok = ok && rename(tmp, path) == 0;
+    if (!ok && tmp)
+        remove(tmp);
+    free(tmp);
+    free(bytes);
+    return ok ? 0 : srv_fail("%s: cannot write the mesh", path);
+}
+
+int srv_cmd_extract(int argc, char **argv)
+{
+    srv_open_options opt = {.want_tree = 1};
+    iso_extract_params params = {0};
+    const char *out = NULL;
+    int as_json = 0, have_level = 0, full_scan = 0;
+    for (int i = 0; i < argc; i++) {
+        const char *a = argv[i], *value = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--json"))
+            as_json = 1;
+        else if (!strcmp(a, "--index-space"))
+            params.space = ISO_SPACE_INDEX;
+        else if (!strcmp(a, "--full-scan"))
+            full_scan = 1;
+        else if (!strcmp(a, "--level") && value) {
+            if (srv_parse_number(value, &params.level))
+                return srv_fail("extract: --level '%s' is not a finite number", value);
+            have_level = 1;
+            i++;
+        } else if (!strcmp(a, "--tolerance") && value) {
+            if (srv_parse_number(value, &params.tolerance) || params.tolerance < 0)
+                return srv_fail("extract: --tolerance '%s' must be a finite number >= 0", value);
+            i++;
+        } else if (!strcmp(a, "-o") && value)
+            out = argv[++i];
+        else if (!strcmp(a, "--hierarchy") && value)
+            opt.hierarchy = argv[++i];
+        else if (!strcmp(a, "--resample") && value)
+            opt.resample = argv[++i];
+        else if (a[0] == '-' || opt.path)
+            return srv_fail("extract: unexpected argument '%s'", a);
+        else
+            opt.path = a;
+    }
+    if (!opt.path || !have_level)
+        return srv_fail("extract: usage: isoserve extract VOLUME --level L [--tolerance T] [-o OUT.ply] [--json]");
+    opt.want_tree = !full_scan;
+    srv_subject s;
+    if (srv_open(&opt, &s))
+        return 1;
+    iso_mesh mesh;
+    iso_mesh_init(&mesh);
+    iso_extract_stats st;
+    iso_error err;
+    int rc = full_scan ? iso_extract_full_scan(s.vol, params.level, params.space, &mesh, &st, &err)
+                       : iso_extract(s.tree, &params, &mesh, &st, &err);
+    if (rc) {
+        srv_close(&s);
+        return srv_fail("%s: %s", opt.path, err.message);
+    }
+    int status = out ? write_mesh(&mesh, out) : 0;
+    if (as_json && status == 0) {
+        size_t volume_bytes = iso_vol_count(s.vol) * iso_vol_type_size(s.vol->type);
+        json_t *doc = json_pack(
+            "{s:s, s:f, s:f, s:I, s:I, s:I, s:I, s:I, s:f, s:f, s:f, s:f, s:I, s:I, s:s}",
+            "volume", opt.path, "level", params.level, "tolerance", params.tolerance,
+            "triangles", (json_int_t)st.triangles, "vertices", (json_int_t)st.vertices,
+            "cells_visited", (json_int_t)st.cells_visited, "nodes_visited", (json_int_t)st.nodes_visited,
+            "nodes_polygonized", (json_int_t)st.nodes_polygonized, "extract_ms", st.extract_ms,
+            "build_ms", s.tree ? s.tree->build_ms : 0.0, "error_bound", st.error_bound,
+            "area", iso_mesh_area(&mesh), "hierarchy_bytes", (json_int_t)(s.tree ? iso_tree_bytes(s.tree) : 0),
+            "volume_bytes", (json_int_t)volume_bytes, "space",
+            params.space == ISO_SPACE_INDEX ? "index" : "world_mm");
+        char *text = doc ? json_dumps(doc, JSON_COMPACT | JSON_REAL_PRECISION(10)) : NULL;
+        if (text)
+            puts(text);
+        free(text);
+        json_decref(doc);
+    } else if (status == 0) {
+        printf("%zu triangles, %zu vertices, %zu cells visited, error bound %g, %.2f ms\n",
+               st.triangles, st.vertices, st.cells_visited, st.error_bound, st.extract_ms);
+    }
+    iso_mesh_free(&mesh);
+    srv_close(&s);
+    return status;
+}

@@ -1,0 +1,42 @@
+/* main.c: the isoserve binary: one entry point, a subcommand per task. */
+#include <stdio.h>
+#include <string.h>
+
+#include "cli.h"
+
+static const struct {
+    const char *name;
+    int (*run)(int argc, char **argv);
+    const char *usage;
+} commands[] = {
+    {"info", srv_cmd_info, "info VOLUME [--json] [--resample WxHxD]"},
+    {"build", srv_cmd_build, "build VOLUME -o FILE [--resample WxHxD]"},
+    {"extract", srv_cmd_extract,
+     "extract VOLUME --level L [--tolerance T] [-o OUT.ply|OUT.obj] [--json] [--hierarchy FILE]\n"
+     "                 [--resample WxHxD] [--index-space] [--full-scan]"},
+    {"bench", srv_cmd_bench,
+     "bench VOLUME --level L [--tolerances 0,6,10,...] [--json FILE] [--repeat N] [--resample WxHxD]"},
+};
+
+static int usage(FILE *to)
+{
+    fprintf(to, "isoserve: iso-surfaces of volumes with a proven error bound\n\nusage:\n");
+    for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
+        fprintf(to, "  isoserve %s\n", commands[i].usage);
+    fprintf(to, "\nVOLUME is a file (.nrrd, .nhdr) or field:NAME[:WxHxD] "
+                "(sphere, torus, ml, constant, spike, ijk).\n");
+    return to == stdout ? 0 : 2;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 2)
+        return usage(stderr);
+    if (!strcmp(argv[1], "-h") || !strcmp(argv[1], "--help") || !strcmp(argv[1], "help"))
+        return usage(stdout);
+    for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
+        if (!strcmp(argv[1], commands[i].name))
+            return commands[i].run(argc - 2, argv + 2);
+    fprintf(stderr, "isoserve: unknown command '%s'\n\n", argv[1]);
+    return usage(stderr);
+}

@@ -1,0 +1,76 @@
+#!/usr/bin/env bash
+# End-to-end tests of the isoserve command line: files written and read back, JSON reports,
+# hierarchy files, and clear failures on bad input. Prints PASS/FAIL/SKIP lines.
+set -uo pipefail
+cd "$(dirname "$0")/../.."
+bin=build/isoserve
+py=/usr/bin/python3
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+shared=${ISO_SHARED_VOLUMES:-../shared/volumes}
+
+pass() { echo "PASS cli.$1"; }
+fail() { echo "FAIL cli.$1: $2"; }
+json() { "$py" -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))" "$@"; }
+
+# info reports the volume's shape and range.
+if $bin info field:sphere:32x30x28 --json > "$tmp/info.json" &&
+   [ "$(json "$tmp/info.json" "d['dims']")" = "[32, 30, 28]" ] &&
+   [ "$(json "$tmp/info.json" "d['type']")" = "f32" ]; then pass info; else fail info "$(cat "$tmp/info.json")"; fi
+
+# extract writes a binary PLY whose counts and size match the JSON report.
+if $bin extract field:sphere:40 --level 4 --tolerance 0.05 -o "$tmp/s.ply" --json > "$tmp/s.json"; then
+    v=$(json "$tmp/s.json" "d['vertices']"); t=$(json "$tmp/s.json" "d['triangles']")
+    header=$(head -c 400 "$tmp/s.ply" | "$py" -c "import sys; h=sys.stdin.buffer.read().split(b'end_header\n')[0]; print(len(h)+11)")
+    hv=$(head -c 400 "$tmp/s.ply" | grep -a '^element vertex' | cut -d' ' -f3)
+    ht=$(head -c 400 "$tmp/s.ply" | grep -a '^element face' | cut -d' ' -f3)
+    size=$(stat -c %s "$tmp/s.ply")
+    if [ "$v" = "$hv" ] && [ "$t" = "$ht" ] && [ "$t" -gt 100 ] &&
+       [ "$size" -eq $((header + v * 12 + t * 13)) ] &&
+       [ "$("$py" -c "print($(json "$tmp/s.json" "d['error_bound']") <= 0.05)")" = True ]; then
+        pass extract_ply
+    else fail extract_ply "json $v/$t, header $hv/$ht, size $size"; fi
+else fail extract_ply "exit status $?"; fi
+
+# A hierarchy file gives the same surface as a fresh build; a damaged one is refused by name.
+if $bin build field:torus:48 -o "$tmp/t.isotree" > /dev/null &&
+   a=$($bin extract field:torus:48 --level 1 --tolerance 0.2 --json | "$py" -c "import json,sys; print(json.load(sys.stdin)['triangles'])") &&
+   b=$($bin extract field:torus:48 --level 1 --tolerance 0.2 --json --hierarchy "$tmp/t.isotree" | "$py" -c "import json,sys; print(json.load(sys.stdin)['triangles'])") &&
+   [ "$a" = "$b" ]; then pass hierarchy_file; else fail hierarchy_file "fresh ${a:-?} vs file ${b:-?}"; fi
+printf '\x55' | dd of="$tmp/t.isotree" bs=1 seek=100 conv=notrunc 2> /dev/null
+if ! $bin extract field:torus:48 --level 1 --hierarchy "$tmp/t.isotree" 2> "$tmp/err" > /dev/null &&
+   grep -q "t.isotree" "$tmp/err" && grep -qi "checksum" "$tmp/err"; then pass hierarchy_corrupt; else fail hierarchy_corrupt "$(cat "$tmp/err")"; fi
+if ! $bin extract field:torus:40 --level 1 --hierarchy "$tmp/t.isotree" 2> "$tmp/err" > /dev/null &&
+   grep -q "t.isotree" "$tmp/err"; then pass hierarchy_other_volume; else fail hierarchy_other_volume "$(cat "$tmp/err")"; fi
+
+# Bad input: a clear message and a non-zero status, never a crash.
+check_refusal() { # name, expected text, command...
+    local name=$1 want=$2; shift 2
+    "$@" > /dev/null 2> "$tmp/err"; local rc=$?
+    if [ $rc -ne 0 ] && [ $rc -lt 128 ] && grep -q -- "$want" "$tmp/err"; then pass "$name"; else fail "$name" "status $rc: $(cat "$tmp/err")"; fi
+}
+check_refusal missing_file "nosuch.nhdr" $bin extract "$tmp/nosuch.nhdr" --level 1
+check_refusal bad_level "--level" $bin extract field:sphere:16 --level abc
+check_refusal nan_level "--level" $bin extract field:sphere:16 --level nan
+check_refusal negative_tolerance "--tolerance" $bin extract field:sphere:16 --level 1 --tolerance -1
+check_refusal unknown_field "sphere" $bin info field:nosuchfield
+check_refusal unknown_format "unknown output format" $bin extract field:sphere:16 --level 1 -o "$tmp/x.stl"
+printf 'NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n\nshort' > "$tmp/short.nrrd"
+check_refusal truncated_nrrd "short.nrrd" $bin extract "$tmp/short.nrrd" --level 1
+
+# bench prints the paper's Table 1 columns and writes one JSON row per tolerance.
+if $bin bench field:ml:40 --level 0.5 --tolerances 0,0.01,0.1 --repeat 1 --json "$tmp/b.json" > "$tmp/b.txt" &&
+   grep -q "marching cubes" "$tmp/b.txt" && [ "$(json "$tmp/b.json" "len(d['rows'])")" = 3 ] &&
+   [ "$(json "$tmp/b.json" "d['rows'][0]['polygons'] == d['marching_cubes']['polygons']")" = True ]; then
+    pass bench_table
+else fail bench_table "$(cat "$tmp/b.txt")"; fi
+
+# The paper's data set: tolerance 0 through the hierarchy is the full-scan surface.
+if [ -d "$shared" ]; then
+    head=$shared/CThead_256x256x113_u16be.nhdr
+    a=$($bin extract "$head" --level 1500 --json | "$py" -c "import json,sys; d=json.load(sys.stdin); print(d['triangles'], d['vertices'])")
+    b=$($bin extract "$head" --level 1500 --json --full-scan | "$py" -c "import json,sys; d=json.load(sys.stdin); print(d['triangles'], d['vertices'])")
+    if [ -n "$a" ] && [ "$a" = "$b" ]; then pass cthead_tolerance0_is_full_scan; else fail cthead_tolerance0_is_full_scan "$a vs $b"; fi
+else
+    echo "SKIP cli.cthead_tolerance0_is_full_scan: needs $shared"
+fi
