@@ -6,10 +6,9 @@ CC       ?= gcc
 CXX      ?= g++
 WARN     := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes \
             -Wpointer-arith -Wcast-qual -Wvla
-CFLAGS   ?= -O2 -g
-CFLAGS   += -std=c11 -D_DEFAULT_SOURCE -D_POSIX_C_SOURCE=200809L $(WARN) -pthread -Icore -Iproto
-CXXFLAGS ?= -O2 -g
-CXXFLAGS += -std=c++17 -Wall -Wextra -Werror -Icore -Iproto $(shell pkg-config --cflags draco 2>/dev/null)
+OPT      ?= -O2 -g
+CFLAGS   := $(OPT) -std=c11 -D_DEFAULT_SOURCE -D_POSIX_C_SOURCE=200809L $(WARN) -pthread -Icore -Iproto
+CXXFLAGS := $(OPT) -std=c++17 -Wall -Wextra -Werror -Icore -Iproto $(shell pkg-config --cflags draco 2>/dev/null)
 LIBS     := $(shell pkg-config --libs libmicrohttpd jansson 2>/dev/null) \
             -ldraco -lz -lm -pthread -lstdc++
 
@@ -28,6 +27,9 @@ LIB_OBJ    = $(CORE_SRC:%.c=$(BUILD)/%.o) $(PROTO_SRC:%.c=$(BUILD)/%.o) $(PROTO_
 SERVER_OBJ = $(SERVER_SRC:%.c=$(BUILD)/%.o)
 SUPPORT_OBJ = $(TEST_SUPPORT:%.c=$(BUILD)/%.o)
 TEST_BIN   = $(TEST_SRC:tests/unit/%.c=$(BUILD)/tests/%)
+
+# Objects of the test support must survive between runs (they are not final targets).
+.SECONDARY:
 
 .PHONY: all setup test unit-tests bench run clean sanitize
 all: $(BUILD)/isoserve
@@ -58,8 +60,7 @@ setup:
 
 # The sanitizer variant is the same tree built into build/san with ASan and UBSan.
 sanitize:
-	$(MAKE) BUILD=$(SAN_BUILD) CFLAGS="$(SAN_FLAGS)" CXXFLAGS="$(SAN_FLAGS)" \
-	        LDFLAGS="-fsanitize=address,undefined" all unit-tests
+	$(MAKE) BUILD=$(SAN_BUILD) OPT="$(SAN_FLAGS)" all unit-tests
 
 test: setup
 	$(MAKE) all unit-tests
