@@ -1,0 +1,77 @@
+/* loader.c: the table of volume loaders behind iso_load (see loader.h). */
+#include "loader.h"
+
+#include <assert.h>
+#include <string.h>
+#include <strings.h>
+
+#include "field.h"
+#include "nrrd.h"
+
+typedef struct loader {
+    const char *name;
+    int (*recognises)(const char *path); /* by name only: no file is opened */
+    int (*load)(const char *path, const iso_load_options *opt, iso_volume **out,
+                iso_error *err);
+} loader;
+
+static int has_suffix(const char *path, const char *suffix)
+{
+    size_t n = strlen(path), m = strlen(suffix);
+    return n > m && strcasecmp(path + n - m, suffix) == 0;
+}
+
+static int is_field(const char *path)
+{
+    return strncmp(path, ISO_FIELD_PREFIX, sizeof ISO_FIELD_PREFIX - 1) == 0;
+}
+
+/* A detached header's data file (.raw, .raw.gz) is not matched: it is no volume alone. */
+static int is_nrrd(const char *path)
+{
+    return has_suffix(path, ".nrrd") || has_suffix(path, ".nhdr");
+}
+
+/* Tried in order, the first that recognises a path loads it. NIfTI (.nii, .nii.gz),
+ * MetaImage (.mhd, .mha), raw data with a sidecar and DICOM series slot in as more rows;
+ * prefixes such as "field:" come first so that they win over any suffix. */
+static const loader loaders[] = {
+    {"field", is_field, iso_field_load},
+    {"nrrd", is_nrrd, iso_nrrd_load},
+};
+
+#define LOADER_COUNT (sizeof loaders / sizeof loaders[0])
+
+static const loader *find_loader(const char *path)
+{
+    for (size_t l = 0; l < LOADER_COUNT; l++)
+        if (loaders[l].recognises(path))
+            return &loaders[l];
+    return NULL;
+}
+
+int iso_load(const char *path, const iso_load_options *opt, iso_volume **out, iso_error *err)
+{
+    const loader *l;
+    int rc;
+    assert(path && out);
+    *out = NULL;
+    l = find_loader(path);
+    if (!l)
+        return iso_error_set(err, ISO_E_UNSUPPORTED,
+                             "%s: not a volume format isoserve reads (.nrrd, .nhdr, field:NAME)",
+                             path);
+    rc = l->load(path, opt, out, err);
+    if (rc != ISO_OK) {
+        assert(*out == NULL);
+        return rc;
+    }
+    iso_vol_update_stats(*out);
+    return ISO_OK;
+}
+
+int iso_load_recognises(const char *path)
+{
+    assert(path);
+    return find_loader(path) != NULL;
+}
