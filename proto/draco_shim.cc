@@ -1,0 +1,297 @@
+// draco_shim.cc: the extern "C" bridge to libdraco 1.5.5 (C++): iso_mesh -> Draco bytes and
+// back. Every entry point catches all C++ exceptions, so none crosses into C.
+#include "draco_shim.h"
+
+#include <draco/attributes/attribute_quantization_transform.h>
+#include <draco/compression/decode.h>
+#include <draco/compression/encode.h>
+#include <draco/core/quantization_utils.h>
+#include <draco/mesh/mesh.h>
+
+#include <cassert>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <exception>
+#include <memory>
+#include <new>
+#include <vector>
+
+namespace {
+
+// Maps an escaped exception to a status: only an allocation failure has its own code.
+int exception_status(iso_error *err, const char *what, int code)
+{
+    try {
+        throw;
+    } catch (const std::bad_alloc &) {
+        return iso_error_set(err, ISO_E_NOMEM, "draco %s: out of memory", what);
+    } catch (const std::exception &e) {
+        return iso_error_set(err, code, "draco %s: %s", what, e.what());
+    } catch (...) {
+        return iso_error_set(err, code, "draco %s: unknown exception", what);
+    }
+}
+
+int copy_out(const draco::EncoderBuffer &buf, unsigned char **out, size_t *out_size,
+             iso_error *err)
+{
+    // malloc(0) may return NULL; a Draco stream is never empty, but stay safe.
+    unsigned char *bytes = static_cast<unsigned char *>(std::malloc(buf.size() ? buf.size() : 1));
+    if (!bytes)
+        return iso_error_set(err, ISO_E_NOMEM, "draco: no memory for %zu output bytes",
+                             buf.size());
+    std::memcpy(bytes, buf.data(), buf.size());
+    *out = bytes;
+    *out_size = buf.size();
+    return 0;
+}
+
+int add_float3(draco::Mesh &dm, draco::GeometryAttribute::Type type, size_t count)
+{
+    draco::GeometryAttribute ga;
+    ga.Init(type, nullptr, 3, draco::DT_FLOAT32, false, 3 * sizeof(float), 0);
+    return dm.AddAttribute(ga, true, static_cast<uint32_t>(count));
+}
+
+// Draco's mesh encoders refuse a mesh without triangles (edgebreaker: "All triangles are
+// degenerate"), 1.5.5 crashes quantizing an attribute with no values, and its sequential
+// decoder rejects points without faces. What does work is the sequential encoding of a
+// mesh with an unquantized POSITION attribute and no points: 22 bytes that every Draco
+// decoder turns into an empty mesh. That is what an empty mesh encodes to.
+int encode_empty(unsigned char **out, size_t *out_size, proto_draco_info *info, iso_error *err)
+{
+    draco::Mesh dm;
+    int pos = add_float3(dm, draco::GeometryAttribute::POSITION, 0);
+    if (pos < 0)
+        return iso_error_set(err, ISO_E_NOMEM, "draco encode: cannot add POSITION");
+    draco::Encoder enc;
+    enc.SetSpeedOptions(10, 10);
+    draco::EncoderBuffer buf;
+    draco::Status st = enc.EncodeMeshToBuffer(dm, &buf);
+    if (!st.ok())
+        return iso_error_set(err, ISO_E_UNSUPPORTED, "draco encode (empty mesh): %s",
+                             st.error_msg());
+    if (info) {
+        std::memset(info, 0, sizeof *info);
+        info->position_id = static_cast<int>(dm.attribute(pos)->unique_id());
+        info->normal_id = -1;
+    }
+    return copy_out(buf, out, out_size, err);
+}
+
+// The bounds a decoder will see: Draco quantizes on the grid ComputeParameters derives from
+// the attribute (origin = min, one range = the largest extent) with these same Quantizer and
+// Dequantizer classes, so running them here reproduces the decoded values bit for bit.
+bool decoded_bounds(const draco::PointAttribute &att, int bits, float min[3], float max[3])
+{
+    draco::AttributeQuantizationTransform aq;
+    if (!aq.ComputeParameters(att, bits))
+        return false;
+    const int32_t max_q = static_cast<int32_t>((1u << bits) - 1);
+    draco::Quantizer q;
+    draco::Dequantizer dq;
+    q.Init(aq.range(), max_q);
+    if (!dq.Init(aq.range(), max_q))
+        return false;
+    const float *v = reinterpret_cast<const float *>(att.buffer()->data());
+    for (size_t i = 0; i < att.size(); i++)
+        for (int c = 0; c < 3; c++) {
+            float m = aq.min_value(c);
+            float d = dq.DequantizeFloat(q.QuantizeFloat(v[3 * i + c] - m)) + m;
+            if (i == 0 || d < min[c])
+                min[c] = d;
+            if (i == 0 || d > max[c])
+                max[c] = d;
+        }
+    return true;
+}
+
+int encode(const iso_mesh *mesh, const proto_encode_options *opt, unsigned char **out,
+           size_t *out_size, proto_draco_info *info, iso_error *err)
+{
+    // PASS 1 (reads indices, writes remap): number the vertices that a non-degenerate
+    // triangle uses, in their original order. Draco gets only those, so its quantization
+    // grid, the decoded bounds and the point count do not depend on whether edgebreaker
+    // (which drops unused vertices) or the sequential coder (which keeps them) runs.
+    const size_t nv = mesh->vertex_count, nt = mesh->triangle_count;
+    const uint32_t unused = UINT32_MAX;
+    std::vector<uint32_t> remap(nv, unused);
+    uint32_t used = 0;
+    size_t faces = 0;
+    for (size_t t = 0; t < nt; t++) {
+        const uint32_t *f = mesh->indices + 3 * t;
+        if (f[0] == f[1] || f[1] == f[2] || f[2] == f[0])
+            continue;
+        faces++;
+        for (int k = 0; k < 3; k++)
+            remap[f[k]] = 0;
+    }
+    for (size_t v = 0; v < nv; v++)
+        if (remap[v] != unused)
+            remap[v] = used++;
+    if (faces == 0)
+        return encode_empty(out, out_size, info, err);
+
+    // PASS 2 (reads the mesh, writes the Draco mesh): used vertices and proper triangles.
+    draco::Mesh dm;
+    dm.set_num_points(used);
+    int pos = add_float3(dm, draco::GeometryAttribute::POSITION, used);
+    int nrm = mesh->normals ? add_float3(dm, draco::GeometryAttribute::NORMAL, used) : -1;
+    if (pos < 0 || (mesh->normals && nrm < 0))
+        return iso_error_set(err, ISO_E_NOMEM, "draco encode: cannot add attributes");
+    draco::DataBuffer *pbuf = dm.attribute(pos)->buffer();
+    draco::DataBuffer *nbuf = nrm >= 0 ? dm.attribute(nrm)->buffer() : nullptr;
+    for (size_t v = 0; v < nv; v++) {
+        if (remap[v] == unused)
+            continue;
+        const int64_t at = static_cast<int64_t>(remap[v]) * 3 * sizeof(float);
+        pbuf->Write(at, mesh->positions + 3 * v, 3 * sizeof(float));
+        if (nbuf)
+            nbuf->Write(at, mesh->normals + 3 * v, 3 * sizeof(float));
+    }
+    dm.SetNumFaces(faces);
+    draco::FaceIndex fi(0);
+    for (size_t t = 0; t < nt; t++) {
+        const uint32_t *f = mesh->indices + 3 * t;
+        if (f[0] == f[1] || f[1] == f[2] || f[2] == f[0])
+            continue;
+        draco::Mesh::Face face;
+        for (int k = 0; k < 3; k++)
+            face[k] = draco::PointIndex(remap[f[k]]);
+        dm.SetFace(fi, face);
+        ++fi;
+    }
+
+    // Quantization is explicit: without SetAttributeQuantization Draco stores raw floats.
+    draco::Encoder enc;
+    enc.SetTrackEncodedProperties(true);
+    enc.SetSpeedOptions(opt->speed, opt->speed);
+    enc.SetAttributeQuantization(draco::GeometryAttribute::POSITION, opt->position_bits);
+    if (nrm >= 0)
+        enc.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, opt->normal_bits);
+    draco::EncoderBuffer buf;
+    draco::Status st = enc.EncodeMeshToBuffer(dm, &buf);
+    if (!st.ok())
+        return iso_error_set(err, ISO_E_UNSUPPORTED, "draco encode: %s", st.error_msg());
+
+    if (info) {
+        std::memset(info, 0, sizeof *info);
+        info->points = enc.num_encoded_points();
+        info->faces = enc.num_encoded_faces();
+        info->position_id = static_cast<int>(dm.attribute(pos)->unique_id());
+        info->normal_id = nrm >= 0 ? static_cast<int>(dm.attribute(nrm)->unique_id()) : -1;
+        if (!decoded_bounds(*dm.attribute(pos), opt->position_bits, info->min, info->max))
+            return iso_error_set(err, ISO_E_UNSUPPORTED, "draco encode: no quantization grid");
+    }
+    return copy_out(buf, out, out_size, err);
+}
+
+// Reads a decoded 3-component attribute into floats, point by point.
+bool read_float3(const draco::PointAttribute &att, size_t points, float *dst)
+{
+    for (size_t i = 0; i < points; i++) {
+        draco::AttributeValueIndex avi = att.mapped_index(draco::PointIndex(static_cast<uint32_t>(i)));
+        if (avi.value() >= att.size() || !att.ConvertValue(avi, 3, dst + 3 * i))
+            return false;
+    }
+    return true;
+}
+
+int decode(const void *data, size_t size, iso_mesh *m, iso_error *err)
+{
+    draco::DecoderBuffer db;
+    db.Init(static_cast<const char *>(data), size);
+    draco::Decoder dec;
+    auto res = dec.DecodeMeshFromBuffer(&db);
+    if (!res.ok())
+        return iso_error_set(err, ISO_E_FORMAT, "draco decode: %s", res.status().error_msg());
+    const draco::Mesh &dm = *res.value();
+    const draco::PointAttribute *pa = dm.GetNamedAttribute(draco::GeometryAttribute::POSITION);
+    if (!pa || pa->num_components() != 3)
+        return iso_error_set(err, ISO_E_FORMAT, "draco decode: no 3-component POSITION");
+    const draco::PointAttribute *na = dm.GetNamedAttribute(draco::GeometryAttribute::NORMAL);
+    if (na && na->num_components() != 3)
+        na = nullptr; // not ours: dropped rather than refused, positions are what matter
+    const size_t np = dm.num_points(), nf = dm.num_faces();
+
+    int rc = iso_mesh_reserve(m, np, nf);
+    if (rc)
+        return iso_error_set(err, rc, "draco decode: no memory for %zu points, %zu faces", np, nf);
+    if (na && np) {
+        // iso_mesh_reserve grows normals only once they exist; size them like positions.
+        m->normals = static_cast<float *>(std::malloc(m->vertex_capacity * 3 * sizeof(float)));
+        if (!m->normals)
+            return iso_error_set(err, ISO_E_NOMEM, "draco decode: no memory for normals");
+    }
+    if (!read_float3(*pa, np, m->positions) || (m->normals && !read_float3(*na, np, m->normals)))
+        return iso_error_set(err, ISO_E_FORMAT, "draco decode: attribute value out of range");
+    for (size_t t = 0; t < nf; t++) {
+        const draco::Mesh::Face &f = dm.face(draco::FaceIndex(static_cast<uint32_t>(t)));
+        for (int k = 0; k < 3; k++) {
+            if (f[k].value() >= np)
+                return iso_error_set(err, ISO_E_FORMAT, "draco decode: face %zu index %u >= %zu",
+                                     t, f[k].value(), np);
+            m->indices[3 * t + k] = f[k].value();
+        }
+    }
+    m->vertex_count = np;
+    m->triangle_count = nf;
+    return 0;
+}
+
+} // namespace
+
+extern "C" int proto_draco_encode_info(const iso_mesh *mesh, const proto_encode_options *opt,
+                                       unsigned char **out, size_t *out_size,
+                                       proto_draco_info *info, iso_error *err)
+{
+    assert(mesh && out && out_size);
+    *out = nullptr;
+    *out_size = 0;
+    proto_encode_options defaults;
+    if (!opt) {
+        proto_encode_options_init(&defaults);
+        opt = &defaults;
+    }
+    if (opt->position_bits < PROTO_POSITION_BITS_MIN || opt->position_bits > PROTO_POSITION_BITS_MAX)
+        return iso_error_set(err, ISO_E_ARGUMENT, "position bits %d outside %d..%d",
+                             opt->position_bits, PROTO_POSITION_BITS_MIN, PROTO_POSITION_BITS_MAX);
+    if (opt->normal_bits < PROTO_NORMAL_BITS_MIN || opt->normal_bits > PROTO_NORMAL_BITS_MAX)
+        return iso_error_set(err, ISO_E_ARGUMENT, "normal bits %d outside %d..%d",
+                             opt->normal_bits, PROTO_NORMAL_BITS_MIN, PROTO_NORMAL_BITS_MAX);
+    if (opt->speed < PROTO_DRACO_SPEED_MIN || opt->speed > PROTO_DRACO_SPEED_MAX)
+        return iso_error_set(err, ISO_E_ARGUMENT, "draco speed %d outside %d..%d", opt->speed,
+                             PROTO_DRACO_SPEED_MIN, PROTO_DRACO_SPEED_MAX);
+    int rc = proto_mesh_check(mesh, 1, err);
+    if (rc)
+        return rc;
+    try {
+        return encode(mesh, opt, out, out_size, info, err);
+    } catch (...) {
+        return exception_status(err, "encode", ISO_E_UNSUPPORTED);
+    }
+}
+
+extern "C" int proto_encode_draco(const iso_mesh *mesh, const proto_encode_options *opt,
+                                  unsigned char **out, size_t *out_size, iso_error *err)
+{
+    return proto_draco_encode_info(mesh, opt, out, out_size, nullptr, err);
+}
+
+extern "C" int proto_draco_decode(const void *data, size_t size, iso_mesh *out, iso_error *err)
+{
+    assert(out && (data || size == 0));
+    iso_mesh_init(out);
+    if (size == 0)
+        return iso_error_set(err, ISO_E_FORMAT, "draco decode: no data");
+    int rc;
+    try {
+        rc = decode(data, size, out, err);
+    } catch (...) {
+        rc = exception_status(err, "decode", ISO_E_FORMAT);
+    }
+    if (rc)
+        iso_mesh_free(out);
+    return rc;
+}

@@ -1,0 +1,97 @@
+/* encode.h: mesh encoders for the wire (binary PLY, OBJ text, Draco, glTF binary with
+ * KHR_draco_mesh_compression) and the Draco decoder that tests and fuzzers check them with.
+ *
+ * Every encoder takes an iso_mesh (core/mesh.h) and returns a malloc'd byte buffer that the
+ * caller frees with free(). Functions return 0 or a negative ISO_E_* code (core/error.h) and
+ * fill `err` when it is not NULL; on error *out is NULL and *out_size 0. NULL mesh, out or
+ * out_size pointers are caller bugs (asserted). A mesh whose indices are out of range, whose
+ * counts do not fit uint32, or (for Draco and glb) whose positions are not finite is refused
+ * with ISO_E_ARGUMENT instead of producing a broken file. */
+#ifndef PROTO_ENCODE_H
+#define PROTO_ENCODE_H
+
+#include <stddef.h>
+
+/* core/'s headers have no C++ guards of their own; the Draco shim includes them through
+ * this header. */
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#include "error.h"
+#include "mesh.h"
+
+/* Ranges of the options, for request validation in callers. */
+enum {
+    PROTO_POSITION_BITS_MIN = 8,
+    PROTO_POSITION_BITS_MAX = 24,
+    PROTO_POSITION_BITS_DEFAULT = 14,
+    PROTO_NORMAL_BITS_MIN = 6,
+    PROTO_NORMAL_BITS_MAX = 16,
+    PROTO_NORMAL_BITS_DEFAULT = 10,
+    PROTO_DRACO_SPEED_MIN = 0,
+    PROTO_DRACO_SPEED_MAX = 10,
+    PROTO_DRACO_SPEED_DEFAULT = 5
+};
+
+/* Draco options (PLY and OBJ are lossless and take none). */
+typedef struct proto_encode_options {
+    /* Position quantization bits: the mesh's bounding cube (its largest extent) is cut into
+     * 2^bits - 1 steps, so a position moves by at most half a step per axis. */
+    int position_bits;
+    /* Normal quantization bits (octahedral), used only when the mesh has normals. */
+    int normal_bits;
+    /* Draco encoding and decoding speed, 0 (smallest) .. 10 (fastest); Draco's compression
+     * level is 10 - speed. Below 10 Draco uses edgebreaker, which reorders vertices and
+     * triangles; 10 keeps their order but is several times larger. */
+    int speed;
+} proto_encode_options;
+
+/* Fills the defaults: 14 position bits, 10 normal bits, speed 5. */
+void proto_encode_options_init(proto_encode_options *opt);
+
+/* Checks that a mesh can be encoded: counts fit uint32 (PLY and glTF indices), every index
+ * is below vertex_count and, when `finite` is set, every position is finite (Draco's
+ * quantization grid and glTF's min/max need that). O(V + T). Returns 0 or ISO_E_ARGUMENT /
+ * ISO_E_LIMIT. Safe on any mesh whose arrays hold their counts. */
+int proto_mesh_check(const iso_mesh *mesh, int finite, iso_error *err);
+
+/* Binary little-endian PLY: `element vertex N` with float x, y, z (and nx, ny, nz when the
+ * mesh has normals), `element face T` with `property list uchar uint vertex_indices`.
+ * Lossless, keeps order. Size: header + N * (12 or 24) + T * 13 bytes. */
+int proto_encode_ply(const iso_mesh *mesh, unsigned char **out, size_t *out_size,
+                     iso_error *err);
+
+/* Wavefront OBJ text: `v` lines (floats printed with 9 significant digits, which round-trip
+ * float32), `vn` lines when the mesh has normals, `f` lines with 1-based indices
+ * (`f a//a b//b c//c` with normals). Lossless, keeps order. */
+int proto_encode_obj(const iso_mesh *mesh, unsigned char **out, size_t *out_size,
+                     iso_error *err);
+
+/* A Draco mesh bitstream (libdraco 1.5.5, readable by draco3d 1.5.x). opt NULL means the
+ * defaults. Vertices no triangle uses are dropped, non-manifold vertices may be split and
+ * order changes below speed 10 (see proto_encode_options). A mesh with no triangles, which
+ * Draco's mesh encoders refuse, becomes a valid stream of an empty mesh with a POSITION
+ * attribute and no points (see draco_shim.cc). */
+int proto_encode_draco(const iso_mesh *mesh, const proto_encode_options *opt,
+                       unsigned char **out, size_t *out_size, iso_error *err);
+
+/* glTF 2.0 binary: one scene, one node, one mesh with one triangle primitive compressed with
+ * KHR_draco_mesh_compression (required), POSITION accessor with the decoded min/max, NORMAL
+ * when the mesh has normals. A mesh with no triangles gives a valid glb whose scene has no
+ * nodes (glTF forbids accessors with count 0) and no BIN chunk. */
+int proto_encode_glb(const iso_mesh *mesh, const proto_encode_options *opt,
+                     unsigned char **out, size_t *out_size, iso_error *err);
+
+/* Decodes a Draco mesh bitstream into `out`, which is initialised by the call: on success it
+ * owns the positions, the normals when the stream has a 3-component NORMAL attribute, and
+ * the triangles (free with iso_mesh_free); on error it is left empty. Safe on untrusted
+ * input: garbage and truncated data give ISO_E_FORMAT, never a crash (as far as libdraco
+ * itself is safe). Cost: Draco's decode plus one pass over the points and faces. */
+int proto_draco_decode(const void *data, size_t size, iso_mesh *out, iso_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

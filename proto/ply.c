@@ -1,0 +1,125 @@
+/* ply.c: the binary little-endian PLY encoder, and the option defaults and mesh checks that
+ * every encoder of encode.h shares. */
+#include "encode.h"
+
+#include <assert.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+void proto_encode_options_init(proto_encode_options *opt)
+{
+    assert(opt);
+    opt->position_bits = PROTO_POSITION_BITS_DEFAULT;
+    opt->normal_bits = PROTO_NORMAL_BITS_DEFAULT;
+    opt->speed = PROTO_DRACO_SPEED_DEFAULT;
+}
+
+static int all_finite(const float *v, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(v[i]))
+            return 0;
+    return 1;
+}
+
+int proto_mesh_check(const iso_mesh *mesh, int finite, iso_error *err)
+{
+    assert(mesh);
+    assert(mesh->vertex_count == 0 || mesh->positions);
+    assert(mesh->triangle_count == 0 || mesh->indices);
+    /* Draco numbers corners (3 per triangle) with uint32, PLY and glTF indices are uint32. */
+    if (mesh->vertex_count > UINT32_MAX || mesh->triangle_count > UINT32_MAX / 3)
+        return iso_error_set(err, ISO_E_LIMIT, "mesh of %zu vertices, %zu triangles: too large"
+                             " to encode", mesh->vertex_count, mesh->triangle_count);
+    for (size_t i = 0; i < 3 * mesh->triangle_count; i++)
+        if (mesh->indices[i] >= mesh->vertex_count)
+            return iso_error_set(err, ISO_E_ARGUMENT, "triangle %zu: index %u >= %zu vertices",
+                                 i / 3, mesh->indices[i], mesh->vertex_count);
+    if (finite && !all_finite(mesh->positions, 3 * mesh->vertex_count))
+        return iso_error_set(err, ISO_E_ARGUMENT, "mesh has a non-finite position");
+    if (finite && mesh->normals && !all_finite(mesh->normals, 3 * mesh->vertex_count))
+        return iso_error_set(err, ISO_E_ARGUMENT, "mesh has a non-finite normal");
+    return 0;
+}
+
+/* Byte by byte, so the output is little endian whatever the host. */
+static unsigned char *put_u32(unsigned char *p, uint32_t v)
+{
+    p[0] = (unsigned char)v;
+    p[1] = (unsigned char)(v >> 8);
+    p[2] = (unsigned char)(v >> 16);
+    p[3] = (unsigned char)(v >> 24);
+    return p + 4;
+}
+
+static unsigned char *put_f32(unsigned char *p, float f)
+{
+    uint32_t v;
+    memcpy(&v, &f, sizeof v);
+    return put_u32(p, v);
+}
+
+int proto_encode_ply(const iso_mesh *mesh, unsigned char **out, size_t *out_size,
+                     iso_error *err)
+{
+    assert(mesh && out && out_size);
+    *out = NULL;
+    *out_size = 0;
+    int rc = proto_mesh_check(mesh, 0, err);
+    if (rc)
+        return rc;
+
+    const int has_normals = mesh->normals != NULL;
+    char header[512];
+    int hlen = snprintf(header, sizeof header,
+                        "ply\n"
+                        "format binary_little_endian 1.0\n"
+                        "element vertex %zu\n"
+                        "property float x\n"
+                        "property float y\n"
+                        "property float z\n"
+                        "%s"
+                        "element face %zu\n"
+                        "property list uchar uint vertex_indices\n"
+                        "end_header\n",
+                        mesh->vertex_count,
+                        has_normals ? "property float nx\n"
+                                      "property float ny\n"
+                                      "property float nz\n" : "",
+                        mesh->triangle_count);
+    assert(hlen > 0 && (size_t)hlen < sizeof header);
+
+    /* Counts fit uint32 (checked above), so only a 32-bit size_t can overflow here. */
+    const size_t vbytes = has_normals ? 24 : 12, fbytes = 1 + 12;
+    if (mesh->vertex_count > (SIZE_MAX - (size_t)hlen) / 2 / vbytes ||
+        mesh->triangle_count > (SIZE_MAX - (size_t)hlen) / 2 / fbytes)
+        return iso_error_set(err, ISO_E_LIMIT, "PLY of %zu vertices, %zu triangles: too large",
+                             mesh->vertex_count, mesh->triangle_count);
+    size_t size = (size_t)hlen + mesh->vertex_count * vbytes + mesh->triangle_count * fbytes;
+    unsigned char *buf = malloc(size);
+    if (!buf)
+        return iso_error_set(err, ISO_E_NOMEM, "no memory for a PLY of %zu bytes", size);
+
+    unsigned char *p = buf;
+    memcpy(p, header, (size_t)hlen);
+    p += hlen;
+    for (size_t v = 0; v < mesh->vertex_count; v++) {
+        for (int c = 0; c < 3; c++)
+            p = put_f32(p, mesh->positions[3 * v + c]);
+        if (has_normals)
+            for (int c = 0; c < 3; c++)
+                p = put_f32(p, mesh->normals[3 * v + c]);
+    }
+    for (size_t t = 0; t < mesh->triangle_count; t++) {
+        *p++ = 3;
+        for (int c = 0; c < 3; c++)
+            p = put_u32(p, mesh->indices[3 * t + c]);
+    }
+    assert((size_t)(p - buf) == size);
+    *out = buf;
+    *out_size = size;
+    return 0;
+}

@@ -1,0 +1,1047 @@
+/* test_proto_encode.c: the mesh encoders (PLY, OBJ, Draco, glb) on hand-built meshes with
+ * exact expected bytes, Draco round trips through our decoder and Debian's draco_decoder,
+ * the glb container read back, garbage and truncated Draco input, and empty meshes. */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "check.h"
+#include "draco_shim.h"
+#include "encode.h"
+
+/* ---- helpers ---- */
+
+static uint64_t rng_state = 0x9E3779B97F4A7C15ull;
+static uint32_t rng(void) /* xorshift64*, fixed seed: failures reproduce */
+{
+    rng_state ^= rng_state >> 12;
+    rng_state ^= rng_state << 25;
+    rng_state ^= rng_state >> 27;
+    return (uint32_t)((rng_state * 0x2545F4914F6CDD1Dull) >> 32);
+}
+
+/* A mesh owning copies of the given arrays (normals may be NULL). */
+static void make_mesh(iso_mesh *m, const float *pos, const float *nrm, size_t nv,
+                      const uint32_t *idx, size_t nt)
+{
+    iso_mesh_init(m);
+    int rc = iso_mesh_reserve(m, nv, nt);
+    CHECKF(rc == 0, "iso_mesh_reserve: %d", rc);
+    if (rc)
+        return;
+    if (nrm) {
+        m->normals = malloc((m->vertex_capacity ? m->vertex_capacity : 1) * 3 * sizeof(float));
+        CHECK(m->normals != NULL);
+        if (m->normals && nv)
+            memcpy(m->normals, nrm, nv * 3 * sizeof(float));
+    }
+    if (nv)
+        memcpy(m->positions, pos, nv * 3 * sizeof(float));
+    if (nt)
+        memcpy(m->indices, idx, nt * 3 * sizeof(uint32_t));
+    m->vertex_count = nv;
+    m->triangle_count = nt;
+}
+
+static const float tri_pos[] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+static const uint32_t tri_idx[] = {0, 1, 2};
+
+static const float tet_pos[] = {0, 0, 0, 2, 0, 0, 0, 3, 0, 0, 0, 4};
+static const uint32_t tet_idx[] = {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3};
+
+/* Unit octahedron: normals equal positions. */
+static const float oct_pos[] = {1, 0, 0, -1, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 1, 0, 0, -1};
+static const uint32_t oct_idx[] = {0, 2, 4, 2, 1, 4, 1, 3, 4, 3, 0, 4,
+                                   2, 0, 5, 1, 2, 5, 3, 1, 5, 0, 3, 5};
+
+/* Torus of nu x nv quads, 2 * nu * nv triangles (250 x 200: 100,000), radii 30 and 10 mm,
+ * normals outward: a closed surface like the iso-surfaces the service sends. */
+static void make_torus(iso_mesh *m, size_t nu, size_t nv, int normals)
+{
+    const double R = 30, r = 10, pi = 3.14159265358979323846;
+    size_t n = nu * nv;
+    float *pos = malloc(n * 3 * sizeof *pos), *nrm = malloc(n * 3 * sizeof *nrm);
+    uint32_t *idx = malloc(2 * n * 3 * sizeof *idx);
+    CHECK(pos && nrm && idx);
+    if (!pos || !nrm || !idx) {
+        free(pos), free(nrm), free(idx);
+        iso_mesh_init(m);
+        return;
+    }
+    for (size_t i = 0; i < nu; i++)
+        for (size_t j = 0; j < nv; j++) {
+            double u = 2 * pi * (double)i / (double)nu, v = 2 * pi * (double)j / (double)nv;
+            size_t k = 3 * (i * nv + j);
+            pos[k] = (float)((R + r * cos(v)) * cos(u));
+            pos[k + 1] = (float)((R + r * cos(v)) * sin(u));
+            pos[k + 2] = (float)(r * sin(v));
+            nrm[k] = (float)(cos(v) * cos(u));
+            nrm[k + 1] = (float)(cos(v) * sin(u));
+            nrm[k + 2] = (float)sin(v);
+        }
+    uint32_t *t = idx;
+    for (size_t i = 0; i < nu; i++)
+        for (size_t j = 0; j < nv; j++) {
+            uint32_t a = (uint32_t)(i * nv + j), b = (uint32_t)(((i + 1) % nu) * nv + j),
+                     c = (uint32_t)(((i + 1) % nu) * nv + (j + 1) % nv),
+                     d = (uint32_t)(i * nv + (j + 1) % nv);
+            *t++ = a, *t++ = b, *t++ = c;
+            *t++ = a, *t++ = c, *t++ = d;
+        }
+    make_mesh(m, pos, normals ? nrm : NULL, n, idx, 2 * n);
+    free(pos), free(nrm), free(idx);
+}
+
+static uint32_t get_u32(const unsigned char *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+static float get_f32(const unsigned char *p)
+{
+    uint32_t v = get_u32(p);
+    float f;
+    memcpy(&f, &v, sizeof f);
+    return f;
+}
+
+static double now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
+}
+
+/* ---- PLY ---- */
+
+static void test_ply_triangle_exact(void)
+{
+    iso_mesh m;
+    iso_error err;
+    unsigned char *buf;
+    size_t size;
+    make_mesh(&m, tri_pos, NULL, 3, tri_idx, 1);
+    CHECK_OK(proto_encode_ply(&m, &buf, &size, &err), &err);
+    if (check_failed()) {
+        iso_mesh_free(&m);
+        return;
+    }
+    static const char header[] = "ply\n"
+                                 "format binary_little_endian 1.0\n"
+                                 "element vertex 3\n"
+                                 "property float x\n"
+                                 "property float y\n"
+                                 "property float z\n"
+                                 "element face 1\n"
+                                 "property list uchar uint vertex_indices\n"
+                                 "end_header\n";
+    const size_t hlen = sizeof header - 1;
+    CHECK_EQ(size, hlen + 3 * 12 + 13);
+    CHECK(size >= hlen && memcmp(buf, header, hlen) == 0);
+    if (!check_failed()) {
+        const unsigned char *p = buf + hlen;
+        for (int i = 0; i < 9; i++)
+            CHECK(get_f32(p + 4 * i) == tri_pos[i]);
+        p += 36;
+        CHECK_EQ(p[0], 3);
+        for (int i = 0; i < 3; i++)
+            CHECK_EQ(get_u32(p + 1 + 4 * i), tri_idx[i]);
+    }
+    free(buf);
+    iso_mesh_free(&m);
+}
+
+/* Reads a PLY from proto_encode_ply back, checking every value against the mesh. */
+static void check_ply_payload(const iso_mesh *m, const unsigned char *buf, size_t size)
+{
+    const char *end = "end_header\n";
+    const unsigned char *h = NULL;
+    for (size_t i = 0; i + strlen(end) <= size && i < 1024; i++)
+        if (memcmp(buf + i, end, strlen(end)) == 0) {
+            h = buf + i + strlen(end);
+            break;
+        }
+    CHECK(h != NULL);
+    if (!h)
+        return;
+    const size_t stride = m->normals ? 24 : 12;
+    CHECK_EQ(size, (size_t)(h - buf) + m->vertex_count * stride + m->triangle_count * 13);
+    if (check_failed())
+        return;
+    size_t bad = 0;
+    for (size_t v = 0; v < m->vertex_count; v++)
+        for (int c = 0; c < 3; c++) {
+            bad += get_f32(h + v * stride + 4 * c) != m->positions[3 * v + c];
+            if (m->normals)
+                bad += get_f32(h + v * stride + 12 + 4 * c) != m->normals[3 * v + c];
+        }
+    const unsigned char *f = h + m->vertex_count * stride;
+    for (size_t t = 0; t < m->triangle_count; t++, f += 13) {
+        bad += f[0] != 3;
+        for (int c = 0; c < 3; c++)
+            bad += get_u32(f + 1 + 4 * c) != m->indices[3 * t + c];
+    }
+    CHECK_EQ(bad, 0);
+}
+
+static void test_ply_normals_header_and_payload(void)
+{
+    iso_mesh m;
+    iso_error err;
+    unsigned char *buf;
+    size_t size;
+    make_mesh(&m, oct_pos, oct_pos, 6, oct_idx, 8);
+    CHECK_OK(proto_encode_ply(&m, &buf, &size, &err), &err);
+    if (check_failed()) {
+        iso_mesh_free(&m);
+        return;
+    }
+    static const char header[] = "ply\n"
+                                 "format binary_little_endian 1.0\n"
+                                 "element vertex 6\n"
+                                 "property float x\n"
+                                 "property float y\n"
+                                 "property float z\n"
+                                 "property float nx\n"
+                                 "property float ny\n"
+                                 "property float nz\n"
+                                 "element face 8\n"
+                                 "property list uchar uint vertex_indices\n"
+                                 "end_header\n";
+    CHECK(size >= sizeof header - 1 && memcmp(buf, header, sizeof header - 1) == 0);
+    check_ply_payload(&m, buf, size);
+    free(buf);
+    iso_mesh_free(&m);
+}
+
+static void test_ply_100k_triangles_read_back(void)
+{
+    iso_mesh m;
+    iso_error err;
+    unsigned char *buf;
+    size_t size;
+    make_torus(&m, 250, 200, 0);
+    CHECK_EQ(m.triangle_count, 100000);
+    CHECK_OK(proto_encode_ply(&m, &buf, &size, &err), &err);
+    if (!check_failed()) {
+        check_ply_payload(&m, buf, size);
+        free(buf);
+    }
+    iso_mesh_free(&m);
+}
+
+/* ---- OBJ ---- */
+
+static void test_obj_triangle_exact(void)
+{
+    iso_mesh m;
+    iso_error err;
+    unsigned char *buf;
+    size_t size;
+    const float pos[] = {0, 0, 0, 1.5f, -0.25f, 0, 0, 1e-3f, 123456.789f};
+    make_mesh(&m, pos, NULL, 3, tri_idx, 1);
+    CHECK_OK(proto_encode_obj(&m, &buf, &size, &err), &err);
+    if (check_failed()) {
+        iso_mesh_free(&m);
+        return;
+    }
+    static const char want[] = "# isoserve: 3 vertices, 1 triangles\n"
+                               "v 0 0 0\n"
+                               "v 1.5 -0.25 0\n"
+                               "v 0 0.00100000005 123456.789\n"
+                               "f 1 2 3\n";
+    CHECKF(size == sizeof want - 1 && memcmp(buf, want, size) == 0, "got \"%.*s\"", (int)size,
+           (const char *)buf);
+    free(buf);
+    iso_mesh_free(&m);
+}
+
+/* Normals give `vn` lines and `f a//a` faces; every printed float reads back bit-exact. */
+static void test_obj_normals_round_trip(void)
+{
+    iso_mesh m;
+    iso_error err;
+    unsigned char *buf;
+    size_t size;
+    make_torus(&m, 12, 8, 1);
+    CHECK_OK(proto_encode_obj(&m, &buf, &size, &err), &err);
+    if (check_failed()) {
+        iso_mesh_free(&m);
+        return;
+    }
+    char *text = malloc(size + 1);
+    CHECK(text != NULL);
+    if (text) {
+        memcpy(text, buf, size);
+        text[size] = 0;
+        size_t v = 0, n = 0, f = 0, bad = 0;
+        for (char *line = strtok(text, "\n"); line; line = strtok(NULL, "\n")) {
+            float a[3];
+            unsigned long i[6];
+            if (sscanf(line, "v %f %f %f", &a[0], &a[1], &a[2]) == 3 && line[1] == ' ') {
+                for (int c = 0; c < 3; c++)
+                    bad += v < m.vertex_count && a[c] != m.positions[3 * v + c];
+                v++;
+            } else if (sscanf(line, "vn %f %f %f", &a[0], &a[1], &a[2]) == 3) {
+                for (int c = 0; c < 3; c++)
+                    bad += n < m.vertex_count && a[c] != m.normals[3 * n + c];
+                n++;
+            } else if (sscanf(line, "f %lu//%lu %lu//%lu %lu//%lu", &i[0], &i[1], &i[2], &i[3],
+                              &i[4], &i[5]) == 6) {
+                for (int c = 0; c < 3; c++)
+                    bad += f < m.triangle_count && (i[2 * c] != i[2 * c + 1] ||
+                                                    i[2 * c] != m.indices[3 * f + c] + 1ul);
+                f++;
+            } else {
+                CHECKF(line[0] == '#', "unexpected line \"%s\"", line);
+            }
+        }
+        CHECK_EQ(v, m.vertex_count);
+        CHECK_EQ(n, m.vertex_count);
+        CHECK_EQ(f, m.triangle_count);
+        CHECK_EQ(bad, 0);
+        free(text);
+    }
+    free(buf);
+    iso_mesh_free(&m);
+}
+
+/* ---- Draco ---- */
+
+/* Draco's quantization step: the grid is a cube with the largest extent of the bounding
+ * box cut into 2^bits - 1 steps; a decoded position is within half a step of its original
+ * per axis (plus float rounding, which dominates from about 20 bits on). */
+static double quantization_step(const iso_mesh *m, int bits)
+{
+    float lo[3], hi[3];
+    double range = 0;
+    iso_mesh_bounds(m, lo, hi);
+    for (int c = 0; c < 3; c++)
+        if (hi[c] - lo[c] > range)
+            range = hi[c] - lo[c];
+    return range / (double)((1u << bits) - 1);
+}
+
+/* Original vertices bucketed on a coarse grid (cells no smaller than the tolerance, much
+ * smaller than the meshes' edges), so a decoded vertex finds its original among the 27
+ * cells around it. */
+typedef struct cell {
+    long long q[3];
+    uint32_t id;
+} cell;
+
+typedef struct finder {
+    cell *cells;
+    size_t n;
+    double min[3], size;
+} finder;
+
+static int cell_cmp(const void *a, const void *b)
+{
+    const cell *x = a, *y = b;
+    for (int c = 0; c < 3; c++)
+        if (x->q[c] != y->q[c])
+            return x->q[c] < y->q[c] ? -1 : 1;
+    return 0;
+}
+
+static void cell_key(const finder *f, const float *p, long long q[3])
+{
+    for (int c = 0; c < 3; c++)
+        q[c] = (long long)floor(((double)p[c] - f->min[c]) / f->size);
+}
+
+static int finder_init(finder *f, const iso_mesh *m, double min_size)
+{
+    float lo[3], hi[3];
+    iso_mesh_bounds(m, lo, hi);
+    double range = 0;
+    for (int c = 0; c < 3; c++) {
+        f->min[c] = lo[c];
+        if (hi[c] - lo[c] > range)
+            range = hi[c] - lo[c];
+    }
+    f->size = fmax(range > 0 ? range / 1024 : 1, min_size);
+    f->n = m->vertex_count;
+    f->cells = malloc((f->n ? f->n : 1) * sizeof *f->cells);
+    if (!f->cells)
+        return -1;
+    for (size_t v = 0; v < f->n; v++) {
+        cell_key(f, m->positions + 3 * v, f->cells[v].q);
+        f->cells[v].id = (uint32_t)v;
+    }
+    qsort(f->cells, f->n, sizeof *f->cells, cell_cmp);
+    return 0;
+}
+
+/* The original vertex nearest to p (max-norm), or -1 if none is within the 27 cells. */
+static long finder_nearest(const finder *f, const iso_mesh *m, const float *p, double *dist)
+{
+    long best = -1;
+    long long q[3];
+    cell_key(f, p, q);
+    *dist = INFINITY;
+    for (int d = 0; d < 27; d++) {
+        cell key = {{q[0] + d % 3 - 1, q[1] + d / 3 % 3 - 1, q[2] + d / 9 - 1}, 0};
+        const cell *hit = bsearch(&key, f->cells, f->n, sizeof *f->cells, cell_cmp);
+        if (!hit)
+            continue;
+        while (hit > f->cells && cell_cmp(hit - 1, &key) == 0)
+            hit--;
+        for (; hit < f->cells + f->n && cell_cmp(hit, &key) == 0; hit++) {
+            const float *o = m->positions + 3 * hit->id;
+            double e = 0;
+            for (int c = 0; c < 3; c++)
+                e = fmax(e, fabs((double)p[c] - (double)o[c]));
+            if (e < *dist)
+                *dist = e, best = (long)hit->id;
+        }
+    }
+    return best;
+}
+
+/* Triangles as sorted triples of original vertex ids, each rotated to start at its
+ * smallest id so that winding still counts. */
+static int tri_cmp(const void *a, const void *b)
+{
+    const uint32_t *x = a, *y = b;
+    for (int c = 0; c < 3; c++)
+        if (x[c] != y[c])
+            return x[c] < y[c] ? -1 : 1;
+    return 0;
+}
+
+static void canonical_triangles(uint32_t *t, size_t n)
+{
+    for (size_t i = 0; i < n; i++) {
+        uint32_t *f = t + 3 * i;
+        while (f[0] > f[1] || f[0] > f[2]) {
+            uint32_t s = f[0];
+            f[0] = f[1], f[1] = f[2], f[2] = s;
+        }
+    }
+    qsort(t, n, 3 * sizeof *t, tri_cmp);
+}
+
+/* Checks that `dec` is `orig` after Draco: the same counts, every decoded position within
+ * half a quantization step of its original (matched by position, since edgebreaker
+ * reorders; each original matched once), normals within `normal_dot` of the original's,
+ * and the same triangles with the same winding. */
+static void check_draco_match(const iso_mesh *orig, const iso_mesh *dec, int bits,
+                              double normal_dot)
+{
+    CHECK_EQ(dec->vertex_count, orig->vertex_count);
+    CHECK_EQ(dec->triangle_count, orig->triangle_count);
+    CHECK_EQ(dec->normals != NULL, orig->normals != NULL);
+    if (check_failed())
+        return;
+    const size_t nv = orig->vertex_count, nt = orig->triangle_count;
+    const double step = quantization_step(orig, bits);
+    /* Half a step, plus float rounding of coordinates up to the mesh's size. */
+    const double tol = step / 2 * (1 + 1e-6) + 1e-6 * step * (double)(1u << bits);
+    finder f = {0};
+    uint32_t *match = malloc((nv ? nv : 1) * sizeof *match);
+    unsigned char *seen = calloc(nv ? nv : 1, 1);
+    uint32_t *ta = malloc((nt ? nt : 1) * 3 * sizeof *ta);
+    uint32_t *tb = malloc((nt ? nt : 1) * 3 * sizeof *tb);
+    CHECK(match && seen && ta && tb && finder_init(&f, orig, tol) == 0);
+    if (check_failed())
+        goto done;
+    size_t unmatched = 0, twice = 0, far = 0, bent = 0;
+    double worst = 0;
+    for (size_t v = 0; v < nv; v++) {
+        double e;
+        long id = finder_nearest(&f, orig, dec->positions + 3 * v, &e);
+        if (id < 0) {
+            unmatched++;
+            match[v] = 0;
+            continue;
+        }
+        match[v] = (uint32_t)id;
+        twice += seen[id]++ != 0;
+        worst = fmax(worst, e);
+        far += e > tol;
+        if (orig->normals) {
+            const float *a = orig->normals + 3 * id, *b = dec->normals + 3 * v;
+            bent += a[0] * b[0] + a[1] * b[1] + a[2] * b[2] < normal_dot;
+        }
+    }
+    CHECKF(unmatched == 0, "%zu decoded vertices near no original", unmatched);
+    CHECKF(twice == 0, "%zu originals matched twice", twice);
+    CHECKF(far == 0, "%zu vertices beyond half a step (%g): worst %g", far, step / 2, worst);
+    CHECKF(bent == 0, "%zu normals off by more than acos(%g)", bent, normal_dot);
+    if (check_failed())
+        goto done;
+    memcpy(ta, orig->indices, nt * 3 * sizeof *ta);
+    for (size_t i = 0; i < 3 * nt; i++)
+        tb[i] = match[dec->indices[i]];
+    canonical_triangles(ta, nt);
+    canonical_triangles(tb, nt);
+    CHECK(memcmp(ta, tb, nt * 3 * sizeof *ta) == 0);
+done:
+    free(f.cells), free(match), free(seen), free(ta), free(tb);
+}
+
+static void draco_round_trip(const iso_mesh *m, const proto_encode_options *opt,
+                             double normal_dot)
+{
+    iso_error err;
+    unsigned char *buf;
+    size_t size;
+    iso_mesh dec;
+    CHECK_OK(proto_encode_draco(m, opt, &buf, &size, &err), &err);
+    if (check_failed())
+        return;
+    CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
+    if (!check_failed())
+        check_draco_match(m, &dec, opt ? opt->position_bits : PROTO_POSITION_BITS_DEFAULT,
+                          normal_dot);
+    iso_mesh_free(&dec);
+    free(buf);
+}
+
+static void test_draco_round_trip_small_meshes(void)
+{
+    iso_mesh m;
+    make_mesh(&m, tri_pos, NULL, 3, tri_idx, 1);
+    draco_round_trip(&m, NULL, 0);
+    iso_mesh_free(&m);
+    make_mesh(&m, tet_pos, NULL, 4, tet_idx, 4);
+    draco_round_trip(&m, NULL, 0);
+    iso_mesh_free(&m);
+    make_mesh(&m, oct_pos, oct_pos, 6, oct_idx, 8);
+    draco_round_trip(&m, NULL, 0.9999);
+    iso_mesh_free(&m);
+}
+
+/* Every position width and speed: edgebreaker (0..9) and the sequential coder (10). */
+static void test_draco_round_trip_bits_and_speeds(void)
+{
+    iso_mesh m;
+    make_torus(&m, 40, 30, 1);
+    proto_encode_options opt;
+    proto_encode_options_init(&opt);
+    for (opt.position_bits = PROTO_POSITION_BITS_MIN;
+         opt.position_bits <= PROTO_POSITION_BITS_MAX && !check_failed(); opt.position_bits += 4)
+        draco_round_trip(&m, &opt, 0.999);
+    proto_encode_options_init(&opt);
+    for (opt.speed = PROTO_DRACO_SPEED_MIN; opt.speed <= PROTO_DRACO_SPEED_MAX && !check_failed();
+         opt.speed++)
+        draco_round_trip(&m, &opt, 0.9999);
+    iso_mesh_free(&m);
+}
+
+/* Speed 10 keeps vertex and triangle order, so index i decodes near vertex i. */
+static void test_draco_speed_10_keeps_order(void)
+{
+    iso_mesh m, dec;
+    iso_error err;
+    unsigned char *buf;
+    size_t size;
+    proto_encode_options opt;
+    proto_encode_options_init(&opt);
+    opt.speed = 10;
+    make_mesh(&m, tet_pos, NULL, 4, tet_idx, 4);
+    CHECK_OK(proto_encode_draco(&m, &opt, &buf, &size, &err), &err);
+    if (check_failed()) {
+        iso_mesh_free(&m);
+        return;
+    }
+    CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
+    if (!check_failed()) {
+        double step = quantization_step(&m, opt.position_bits);
+        CHECK_EQ(dec.vertex_count, 4);
+        CHECK_EQ(dec.triangle_count, 4);
+        for (size_t i = 0; i < 12 && !check_failed(); i++) {
+            CHECK_NEAR(dec.positions[i], m.positions[i], step / 2 * 1.0001);
+            CHECK_EQ(dec.indices[i], m.indices[i]);
+        }
+    }
+    iso_mesh_free(&dec);
+    free(buf);
+    iso_mesh_free(&m);
+}
+
+/* The 100k-triangle torus: round trip, size against raw float32 + uint32 and encode time. */
+static void test_draco_100k_triangles(void)
+{
+    iso_mesh m;
+    iso_error err;
+    unsigned char *buf;
+    size_t size;
+    make_torus(&m, 250, 200, 0);
+    double t0 = now_ms();
+    CHECK_OK(proto_encode_draco(&m, NULL, &buf, &size, &err), &err);
+    double t1 = now_ms();
+    if (check_failed()) {
+        iso_mesh_free(&m);
+        return;
+    }
+    size_t raw = m.vertex_count * 12 + m.triangle_count * 12;
+    printf("  info: torus %zu vertices, %zu triangles, qp 14 speed 5: draco %zu bytes, raw "
+           "%zu bytes (%.1f%%), encode %.1f ms\n", m.vertex_count, m.triangle_count, size, raw,
+           100.0 * (double)size / (double)raw, t1 - t0);
+    CHECK(size < raw / 4);
+    iso_mesh dec;
+    t0 = now_ms();
+    CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
+    t1 = now_ms();
+    printf("  info: decode %.1f ms\n", t1 - t0);
+    if (!check_failed())
+        check_draco_match(&m, &dec, PROTO_POSITION_BITS_DEFAULT, 0);
+    iso_mesh_free(&dec);
+    free(buf);
+
+    /* With normals, as the service sends them. */
+    iso_mesh_free(&m);
+    make_torus(&m, 250, 200, 1);
+    t0 = now_ms();
+    CHECK_OK(proto_encode_draco(&m, NULL, &buf, &size, &err), &err);
+    t1 = now_ms();
+    if (!check_failed()) {
+        printf("  info: with normals (qn 10): draco %zu bytes, raw %zu bytes, encode %.1f ms\n",
+               size, m.vertex_count * 24 + m.triangle_count * 12, t1 - t0);
+        CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
+        if (!check_failed())
+            check_draco_match(&m, &dec, PROTO_POSITION_BITS_DEFAULT, 0.9999);
+        iso_mesh_free(&dec);
+        free(buf);
+    }
+    iso_mesh_free(&m);
+}
+
+static int write_file(const char *path, const unsigned char *buf, size_t size)
+{
+    FILE *f = fopen(path, "wb");
+    if (!f)
+        return -1;
+    size_t n = fwrite(buf, 1, size, f);
+    return (fclose(f) == 0 && n == size) ? 0 : -1;
+}
+
+/* Reads "element vertex N" and "element face T" from a PLY header. */
+static int ply_counts(const char *path, long *vertices, long *faces)
+{
+    FILE *f = fopen(path, "rb");
+    char line[256];
+    *vertices = *faces = -1;
+    if (!f)
+        return -1;
+    while (fgets(line, sizeof line, f) && strncmp(line, "end_header", 10) != 0) {
+        sscanf(line, "element vertex %ld", vertices);
+        sscanf(line, "element face %ld", faces);
+    }
+    fclose(f);
+    return 0;
+}
+
+/* The same bytes decode with Debian's draco_decoder (the reference implementation). */
+static void test_draco_decodes_with_draco_decoder(void)
+{
+    if (system("command -v draco_decoder >/dev/null 2>&1") != 0) {
+        check_skip("draco_decoder is not installed (Debian package draco)");
+        return;
+    }
+    iso_mesh m;
+    make_torus(&m, 250, 200, 1);
+    const iso_mesh *meshes[2] = {&m, NULL};
+    iso_mesh oct;
+    make_mesh(&oct, oct_pos, NULL, 6, oct_idx, 8);
+    meshes[1] = &oct;
+    for (int i = 0; i < 2 && !check_failed(); i++) {
+        iso_error err;
+        unsigned char *buf;
+        size_t size;
+        char drc[512], ply[512], cmd[1200];
+        CHECK_OK(proto_encode_draco(meshes[i], NULL, &buf, &size, &err), &err);
+        if (check_failed())
+            break;
+        snprintf(drc, sizeof drc, "%s/mesh%d.drc", check_temp_dir(), i);
+        snprintf(ply, sizeof ply, "%s/mesh%d.ply", check_temp_dir(), i);
+        CHECK(write_file(drc, buf, size) == 0);
+        free(buf);
+        snprintf(cmd, sizeof cmd, "draco_decoder -i '%s' -o '%s' >/dev/null 2>&1", drc, ply);
+        CHECKF(system(cmd) == 0, "%s failed", cmd);
+        long nv, nf;
+        CHECK(ply_counts(ply, &nv, &nf) == 0);
+        CHECK_EQ(nv, meshes[i]->vertex_count);
+        CHECK_EQ(nf, meshes[i]->triangle_count);
+    }
+    iso_mesh_free(&m);
+    iso_mesh_free(&oct);
+}
+
+static void test_draco_refuses_bad_options_and_meshes(void)
+{
+    iso_mesh m;
+    iso_error err;
+    unsigned char *buf = (unsigned char *)&err;
+    size_t size = 1;
+    proto_encode_options opt;
+    make_mesh(&m, tet_pos, NULL, 4, tet_idx, 4);
+    const int bad[][3] = {{7, 10, 5}, {25, 10, 5}, {14, 5, 5}, {14, 17, 5}, {14, 10, -1},
+                          {14, 10, 11}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        opt.position_bits = bad[i][0], opt.normal_bits = bad[i][1], opt.speed = bad[i][2];
+        CHECK_EQ(proto_encode_draco(&m, &opt, &buf, &size, &err), ISO_E_ARGUMENT);
+        CHECK(buf == NULL && size == 0);
+        CHECK_EQ(proto_encode_glb(&m, &opt, &buf, &size, &err), ISO_E_ARGUMENT);
+    }
+    m.indices[5] = 4; /* one past the last vertex */
+    CHECK_EQ(proto_encode_draco(&m, NULL, &buf, &size, &err), ISO_E_ARGUMENT);
+    CHECK_EQ(proto_encode_glb(&m, NULL, &buf, &size, &err), ISO_E_ARGUMENT);
+    CHECK_EQ(proto_encode_ply(&m, &buf, &size, &err), ISO_E_ARGUMENT);
+    CHECK_EQ(proto_encode_obj(&m, &buf, &size, &err), ISO_E_ARGUMENT);
+    CHECK(strstr(err.message, "index 4") != NULL);
+    m.indices[5] = 3;
+    m.positions[4] = NAN;
+    CHECK_EQ(proto_encode_draco(&m, NULL, &buf, &size, &err), ISO_E_ARGUMENT);
+    CHECK_EQ(proto_encode_glb(&m, NULL, &buf, &size, &err), ISO_E_ARGUMENT);
+    iso_mesh_free(&m);
+}
+
+/* Non-manifold and unused vertices: a bowtie of two tetrahedra sharing vertex 0, plus a
+ * vertex no triangle uses and a degenerate triangle. Edgebreaker drops the unused vertex
+ * and splits the shared one; what the shim reports must be what a decoder gets. */
+static void test_draco_info_matches_decoder(void)
+{
+    const float pos[] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, -1, 0, 0, 0, -1, 0, 0, 0, -1,
+                         9, 9, 9};
+    const uint32_t idx[] = {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3,
+                            0, 4, 5, 0, 5, 6, 0, 6, 4, 4, 6, 5, 1, 1, 2};
+    iso_mesh m;
+    make_mesh(&m, pos, NULL, 8, idx, 9);
+    proto_encode_options opt;
+    proto_encode_options_init(&opt);
+    for (opt.speed = 0; opt.speed <= 10 && !check_failed(); opt.speed += 5) {
+        iso_error err;
+        unsigned char *buf;
+        size_t size;
+        proto_draco_info info;
+        iso_mesh dec;
+        CHECK_OK(proto_draco_encode_info(&m, &opt, &buf, &size, &info, &err), &err);
+        if (check_failed())
+            break;
+        CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
+        CHECK_EQ(info.points, dec.vertex_count);
+        CHECK_EQ(info.faces, dec.triangle_count);
+        CHECK_EQ(dec.triangle_count, 8);
+        CHECK(dec.vertex_count >= 7 && dec.vertex_count <= 8);
+        float lo[3], hi[3];
+        iso_mesh_bounds(&dec, lo, hi);
+        for (int c = 0; c < 3; c++)
+            CHECK(info.min[c] == lo[c] && info.max[c] == hi[c]);
+        iso_mesh_free(&dec);
+        free(buf);
+    }
+    iso_mesh_free(&m);
+}
+
+static void test_draco_decoder_refuses_garbage(void)
+{
+    iso_mesh m, dec;
+    iso_error err;
+    unsigned char *buf;
+    size_t size;
+    unsigned char junk[4096];
+
+    /* Random bytes, and random bytes behind a valid Draco header. */
+    for (int i = 0; i < 300 && !check_failed(); i++) {
+        size_t n = 1 + rng() % sizeof junk;
+        for (size_t k = 0; k < n; k++)
+            junk[k] = (unsigned char)rng();
+        if (i % 2 && n > 11)
+            memcpy(junk, "DRACO\x02\x02\x01\x01\x00\x00", 11); /* mesh, edgebreaker */
+        int rc = proto_draco_decode(junk, n, &dec, &err);
+        CHECKF(rc == ISO_E_FORMAT, "garbage %d (%zu bytes) gave %d", i, n, rc);
+        CHECK(dec.vertex_count == 0 && dec.positions == NULL);
+        iso_mesh_free(&dec);
+    }
+    CHECK_EQ(proto_draco_decode("", 0, &dec, &err), ISO_E_FORMAT);
+
+    /* Every truncation of a valid stream of a small mesh and a sample of a large one. */
+    make_mesh(&m, oct_pos, oct_pos, 6, oct_idx, 8);
+    for (int big = 0; big < 2 && !check_failed(); big++) {
+        if (big) {
+            iso_mesh_free(&m);
+            make_torus(&m, 60, 40, 1);
+        }
+        CHECK_OK(proto_encode_draco(&m, NULL, &buf, &size, &err), &err);
+        if (check_failed())
+            break;
+        size_t step = big ? 1 + size / 300 : 1;
+        for (size_t n = 0; n < size; n += n < 64 ? 1 : step) {
+            int rc = proto_draco_decode(buf, n, &dec, &err);
+            CHECKF(rc == ISO_E_FORMAT, "prefix of %zu of %zu bytes gave %d", n, size, rc);
+            iso_mesh_free(&dec);
+        }
+        free(buf);
+    }
+    iso_mesh_free(&m);
+}
+
+/* Flipped bytes in a valid stream may still decode (Draco has no checksum); what must hold
+ * is no crash, and a decoded mesh whose indices are in range. */
+static void test_draco_decoder_survives_corruption(void)
+{
+    iso_mesh m, dec;
+    iso_error err;
+    unsigned char *buf;
+    size_t size;
+    make_torus(&m, 30, 20, 1);
+    CHECK_OK(proto_encode_draco(&m, NULL, &buf, &size, &err), &err);
+    if (check_failed()) {
+        iso_mesh_free(&m);
+        return;
+    }
+    unsigned char *copy = malloc(size);
+    CHECK(copy != NULL);
+    size_t decoded = 0;
+    for (int i = 0; copy && i < 2000 && !check_failed(); i++) {
+        memcpy(copy, buf, size);
+        for (int k = 0; k < 1 + i % 4; k++)
+            copy[rng() % size] ^= (unsigned char)(1u << (rng() % 8));
+        int rc = proto_draco_decode(copy, size, &dec, &err);
+        CHECKF(rc == 0 || rc == ISO_E_FORMAT, "corruption %d gave %d", i, rc);
+        if (rc == 0) {
+            decoded++;
+            CHECK(proto_mesh_check(&dec, 0, &err) == 0);
+        }
+        iso_mesh_free(&dec);
+    }
+    printf("  info: %zu of 2000 corrupted streams still decoded\n", decoded);
+    free(copy);
+    free(buf);
+    iso_mesh_free(&m);
+}
+
+/* ---- glb ---- */
+
+/* The number after `key` in `json` (first occurrence after `from`), or -1. */
+static double json_number(const char *json, const char *from, const char *key)
+{
+    const char *p = strstr(from ? from : json, key);
+    return p ? strtod(p + strlen(key), NULL) : -1;
+}
+
+/* Parses a glb back: header, chunks, JSON; returns the JSON (malloc'd, NUL-terminated) and
+ * the BIN chunk (pointer into buf, or NULL). */
+static char *glb_parse(const unsigned char *buf, size_t size, const unsigned char **bin,
+                       size_t *bin_size)
+{
+    *bin = NULL;
+    *bin_size = 0;
+    CHECK(size >= 20);
+    if (size < 20)
+        return NULL;
+    CHECK(memcmp(buf, "glTF", 4) == 0);
+    CHECK_EQ(get_u32(buf + 4), 2);
+    CHECK_EQ(get_u32(buf + 8), size);
+    CHECK_EQ(size % 4, 0);
+    size_t jlen = get_u32(buf + 12);
+    CHECK(memcmp(buf + 16, "JSON", 4) == 0);
+    CHECK(jlen % 4 == 0 && 20 + jlen <= size);
+    if (check_failed())
+        return NULL;
+    const unsigned char *j = buf + 20;
+    size_t at = 20 + jlen;
+    if (at < size) {
+        CHECK(at + 8 <= size);
+        if (check_failed())
+            return NULL;
+        *bin_size = get_u32(buf + at);
+        CHECK(memcmp(buf + at + 4, "BIN\0", 4) == 0);
+        CHECK(*bin_size % 4 == 0 && at + 8 + *bin_size == size);
+        *bin = buf + at + 8;
+    }
+    /* JSON padding is spaces; the text itself has no NUL. */
+    CHECK(memchr(j, 0, jlen) == NULL);
+    char *json = malloc(jlen + 1);
+    CHECK(json != NULL);
+    if (json) {
+        memcpy(json, j, jlen);
+        json[jlen] = 0;
+        CHECK(jlen == 0 || json[jlen - 1] == '}' || json[jlen - 1] == ' ');
+    }
+    return json;
+}
+
+static void check_glb(const iso_mesh *m, const proto_encode_options *opt)
+{
+    iso_error err;
+    unsigned char *buf;
+    size_t size, bin_size;
+    const unsigned char *bin;
+    CHECK_OK(proto_encode_glb(m, opt, &buf, &size, &err), &err);
+    if (check_failed())
+        return;
+    char *json = glb_parse(buf, size, &bin, &bin_size);
+    if (!json) {
+        free(buf);
+        return;
+    }
+    CHECK(strstr(json, "\"extensionsUsed\":[\"KHR_draco_mesh_compression\"]") != NULL);
+    CHECK(strstr(json, "\"extensionsRequired\":[\"KHR_draco_mesh_compression\"]") != NULL);
+    CHECK(strstr(json, "\"asset\":{\"version\":\"2.0\"") != NULL);
+    CHECK(bin != NULL);
+    const char *ext = strstr(json, "\"KHR_draco_mesh_compression\":{\"bufferView\":0");
+    CHECK(ext != NULL);
+    const char *views = strstr(json, "\"bufferViews\":");
+    CHECK(views != NULL);
+    if (!bin || !ext || !views)
+        goto done;
+    double off = json_number(json, views, "\"byteOffset\":");
+    double len = json_number(json, views, "\"byteLength\":");
+    double buflen = json_number(json, strstr(json, "\"buffers\":"), "\"byteLength\":");
+    CHECK(off >= 0 && len > 0 && off + len <= (double)bin_size);
+    CHECK(buflen >= off + len && buflen <= (double)bin_size && buflen + 4 > (double)bin_size);
+    if (check_failed())
+        goto done;
+    iso_mesh dec;
+    CHECK_OK(proto_draco_decode(bin + (size_t)off, (size_t)len, &dec, &err), &err);
+    if (!check_failed()) {
+        /* Accessors: POSITION (with min/max equal to the decoded bounds, bit for bit),
+         * NORMAL when present, indices. */
+        const char *acc = strstr(json, "\"accessors\":");
+        CHECK(acc != NULL);
+        CHECK(strstr(json, "\"componentType\":5126,\"count\":") != NULL);
+        CHECK(strstr(json, "\"componentType\":5125,\"count\":") != NULL);
+        CHECK_EQ(json_number(json, acc, "\"count\":"), dec.vertex_count);
+        CHECK_EQ(json_number(json, strstr(json, "5125"), "\"count\":"), 3 * dec.triangle_count);
+        CHECK_EQ(strstr(json, "\"NORMAL\"") != NULL, m->normals != NULL);
+        float lo[3], hi[3];
+        iso_mesh_bounds(&dec, lo, hi);
+        const char *p = acc ? strstr(acc, "\"min\":[") : NULL, *q = acc ? strstr(acc, "\"max\":[") : NULL;
+        CHECK(p && q);
+        if (p && q) {
+            char *e;
+            p += 7, q += 7;
+            for (int c = 0; c < 3; c++) {
+                float a = strtof(p, &e), b;
+                p = e + 1;
+                b = strtof(q, &e);
+                q = e + 1;
+                CHECKF(a == lo[c] && b == hi[c], "axis %d: min/max %.9g %.9g, decoded %.9g %.9g",
+                       c, a, b, lo[c], hi[c]);
+            }
+        }
+        CHECK_EQ(dec.triangle_count, m->triangle_count);
+    }
+    iso_mesh_free(&dec);
+    /* BIN padding is zeros. */
+    for (size_t i = (size_t)(off + len); i < bin_size; i++)
+        CHECK_EQ(bin[i], 0);
+done:
+    free(json);
+    free(buf);
+}
+
+static void test_glb_container(void)
+{
+    iso_mesh m;
+    make_mesh(&m, tri_pos, NULL, 3, tri_idx, 1);
+    check_glb(&m, NULL);
+    iso_mesh_free(&m);
+    make_mesh(&m, oct_pos, oct_pos, 6, oct_idx, 8);
+    check_glb(&m, NULL);
+    iso_mesh_free(&m);
+    proto_encode_options opt;
+    proto_encode_options_init(&opt);
+    make_torus(&m, 250, 200, 1);
+    for (opt.speed = 0; opt.speed <= 10 && !check_failed(); opt.speed += 5)
+        check_glb(&m, &opt);
+    iso_mesh_free(&m);
+}
+
+/* ---- empty meshes ---- */
+
+static void test_empty_mesh_gives_valid_files(void)
+{
+    iso_error err;
+    unsigned char *buf;
+    size_t size, bin_size;
+    const unsigned char *bin;
+    iso_mesh m, dec;
+    /* No vertices at all, vertices but no triangles, and only a degenerate triangle. */
+    const uint32_t degenerate[] = {0, 1, 1};
+    for (int kind = 0; kind < 3 && !check_failed(); kind++) {
+        make_mesh(&m, tri_pos, NULL, kind ? 3 : 0, degenerate, kind == 2 ? 1 : 0);
+
+        CHECK_OK(proto_encode_ply(&m, &buf, &size, &err), &err);
+        if (!check_failed()) {
+            char want[64];
+            snprintf(want, sizeof want, "element vertex %zu\n", m.vertex_count);
+            CHECK(strstr((const char *)buf, want) != NULL);
+            snprintf(want, sizeof want, "element face %zu\n", m.triangle_count);
+            CHECK(strstr((const char *)buf, want) != NULL);
+            check_ply_payload(&m, buf, size);
+            free(buf);
+        }
+
+        CHECK_OK(proto_encode_obj(&m, &buf, &size, &err), &err);
+        if (!check_failed()) {
+            CHECK(size > 0 && buf[0] == '#' && buf[size - 1] == '\n');
+            free(buf);
+        }
+
+        /* Draco: a stream that decodes to an empty mesh, here and with draco_decoder. */
+        CHECK_OK(proto_encode_draco(&m, NULL, &buf, &size, &err), &err);
+        if (!check_failed()) {
+            CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
+            CHECK_EQ(dec.vertex_count, 0);
+            CHECK_EQ(dec.triangle_count, 0);
+            iso_mesh_free(&dec);
+            char drc[512], ply[512], cmd[1200];
+            snprintf(drc, sizeof drc, "%s/empty%d.drc", check_temp_dir(), kind);
+            snprintf(ply, sizeof ply, "%s/empty%d.ply", check_temp_dir(), kind);
+            CHECK(write_file(drc, buf, size) == 0);
+            snprintf(cmd, sizeof cmd, "draco_decoder -i '%s' -o '%s' >/dev/null 2>&1", drc, ply);
+            if (kind == 0 && system("command -v draco_decoder >/dev/null 2>&1") == 0) {
+                long nv, nf;
+                CHECKF(system(cmd) == 0, "%s failed", cmd);
+                CHECK(ply_counts(ply, &nv, &nf) == 0);
+                CHECK(nv == 0 && nf == 0);
+            }
+            free(buf);
+        }
+
+        /* glb: a container with a scene and no mesh, no BIN chunk. */
+        CHECK_OK(proto_encode_glb(&m, NULL, &buf, &size, &err), &err);
+        if (!check_failed()) {
+            char *json = glb_parse(buf, size, &bin, &bin_size);
+            CHECK(json != NULL && bin == NULL);
+            if (json) {
+                CHECK(strstr(json, "\"asset\":{\"version\":\"2.0\"") != NULL);
+                CHECK(strstr(json, "\"scenes\":[{}]") != NULL);
+                CHECK(strstr(json, "meshes") == NULL && strstr(json, "accessors") == NULL);
+            }
+            free(json);
+            free(buf);
+        }
+        iso_mesh_free(&m);
+    }
+}
+
+int main(void)
+{
+    CHECK_RUN(test_ply_triangle_exact);
+    CHECK_RUN(test_ply_normals_header_and_payload);
+    CHECK_RUN(test_ply_100k_triangles_read_back);
+    CHECK_RUN(test_obj_triangle_exact);
+    CHECK_RUN(test_obj_normals_round_trip);
+    CHECK_RUN(test_draco_round_trip_small_meshes);
+    CHECK_RUN(test_draco_round_trip_bits_and_speeds);
+    CHECK_RUN(test_draco_speed_10_keeps_order);
+    CHECK_RUN(test_draco_100k_triangles);
+    CHECK_RUN(test_draco_decodes_with_draco_decoder);
+    CHECK_RUN(test_draco_refuses_bad_options_and_meshes);
+    CHECK_RUN(test_draco_info_matches_decoder);
+    CHECK_RUN(test_draco_decoder_refuses_garbage);
+    CHECK_RUN(test_draco_decoder_survives_corruption);
+    CHECK_RUN(test_glb_container);
+    CHECK_RUN(test_empty_mesh_gives_valid_files);
+    return check_finish();
+}
