@@ -107,6 +107,12 @@ bool decoded_bounds(const draco::PointAttribute &att, int bits, float min[3], fl
     return true;
 }
 
+// A triangle with a repeated index: edgebreaker drops it, and it covers no area.
+bool degenerate(const uint32_t *f)
+{
+    return f[0] == f[1] || f[1] == f[2] || f[2] == f[0];
+}
+
 int encode(const iso_mesh *mesh, const proto_encode_options *opt, unsigned char **out,
            size_t *out_size, proto_draco_info *info, iso_error *err)
 {
@@ -121,7 +127,7 @@ int encode(const iso_mesh *mesh, const proto_encode_options *opt, unsigned char 
     size_t faces = 0;
     for (size_t t = 0; t < nt; t++) {
         const uint32_t *f = mesh->indices + 3 * t;
-        if (f[0] == f[1] || f[1] == f[2] || f[2] == f[0])
+        if (degenerate(f))
             continue;
         faces++;
         for (int k = 0; k < 3; k++)
@@ -154,7 +160,7 @@ int encode(const iso_mesh *mesh, const proto_encode_options *opt, unsigned char 
     draco::FaceIndex fi(0);
     for (size_t t = 0; t < nt; t++) {
         const uint32_t *f = mesh->indices + 3 * t;
-        if (f[0] == f[1] || f[1] == f[2] || f[2] == f[0])
+        if (degenerate(f))
             continue;
         draco::Mesh::Face face;
         for (int k = 0; k < 3; k++)
