@@ -125,7 +125,7 @@ static void test_ply_triangle_exact(void)
     size_t size;
     make_mesh(&m, tri_pos, NULL, 3, tri_idx, 1);
     CHECK_OK(proto_encode_ply(&m, &buf, &size, &err), &err);
-    if (check_failed()) {
+    if (!buf) {
         iso_mesh_free(&m);
         return;
     }
@@ -195,7 +195,7 @@ static void test_ply_normals_header_and_payload(void)
     size_t size;
     make_mesh(&m, oct_pos, oct_pos, 6, oct_idx, 8);
     CHECK_OK(proto_encode_ply(&m, &buf, &size, &err), &err);
-    if (check_failed()) {
+    if (!buf) {
         iso_mesh_free(&m);
         return;
     }
@@ -226,7 +226,7 @@ static void test_ply_100k_triangles_read_back(void)
     make_torus(&m, 250, 200, 0);
     CHECK_EQ(m.triangle_count, 100000);
     CHECK_OK(proto_encode_ply(&m, &buf, &size, &err), &err);
-    if (!check_failed()) {
+    if (buf) {
         check_ply_payload(&m, buf, size);
         free(buf);
     }
@@ -244,7 +244,7 @@ static void test_obj_triangle_exact(void)
     const float pos[] = {0, 0, 0, 1.5f, -0.25f, 0, 0, 1e-3f, 123456.789f};
     make_mesh(&m, pos, NULL, 3, tri_idx, 1);
     CHECK_OK(proto_encode_obj(&m, &buf, &size, &err), &err);
-    if (check_failed()) {
+    if (!buf) {
         iso_mesh_free(&m);
         return;
     }
@@ -268,7 +268,7 @@ static void test_obj_normals_round_trip(void)
     size_t size;
     make_torus(&m, 12, 8, 1);
     CHECK_OK(proto_encode_obj(&m, &buf, &size, &err), &err);
-    if (check_failed()) {
+    if (!buf) {
         iso_mesh_free(&m);
         return;
     }
@@ -493,7 +493,7 @@ static void draco_round_trip(const iso_mesh *m, const proto_encode_options *opt,
     size_t size;
     iso_mesh dec;
     CHECK_OK(proto_encode_draco(m, opt, &buf, &size, &err), &err);
-    if (check_failed())
+    if (!buf)
         return;
     CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
     if (!check_failed())
@@ -546,7 +546,7 @@ static void test_draco_speed_10_keeps_order(void)
     opt.speed = 10;
     make_mesh(&m, tet_pos, NULL, 4, tet_idx, 4);
     CHECK_OK(proto_encode_draco(&m, &opt, &buf, &size, &err), &err);
-    if (check_failed()) {
+    if (!buf) {
         iso_mesh_free(&m);
         return;
     }
@@ -576,7 +576,7 @@ static void test_draco_100k_triangles(void)
     double t0 = now_ms();
     CHECK_OK(proto_encode_draco(&m, NULL, &buf, &size, &err), &err);
     double t1 = now_ms();
-    if (check_failed()) {
+    if (!buf) {
         iso_mesh_free(&m);
         return;
     }
@@ -601,7 +601,7 @@ static void test_draco_100k_triangles(void)
     t0 = now_ms();
     CHECK_OK(proto_encode_draco(&m, NULL, &buf, &size, &err), &err);
     t1 = now_ms();
-    if (!check_failed()) {
+    if (buf) {
         printf("  info: with normals (qn 10): draco %zu bytes, raw %zu bytes, encode %.1f ms\n",
                size, m.vertex_count * 24 + m.triangle_count * 12, t1 - t0);
         CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
@@ -657,7 +657,7 @@ static void test_draco_decodes_with_draco_decoder(void)
         size_t size;
         char drc[512], ply[512], cmd[1200];
         CHECK_OK(proto_encode_draco(meshes[i], NULL, &buf, &size, &err), &err);
-        if (check_failed())
+        if (!buf)
             break;
         snprintf(drc, sizeof drc, "%s/mesh%d.drc", check_temp_dir(), i);
         snprintf(ply, sizeof ply, "%s/mesh%d.ply", check_temp_dir(), i);
@@ -678,7 +678,7 @@ static void test_draco_refuses_bad_options_and_meshes(void)
 {
     iso_mesh m;
     iso_error err;
-    unsigned char *buf = (unsigned char *)&err;
+    unsigned char *buf = (unsigned char *)&err; /* not NULL, to see the encoders clear it */
     size_t size = 1;
     proto_encode_options opt;
     make_mesh(&m, tet_pos, NULL, 4, tet_idx, 4);
@@ -723,7 +723,7 @@ static void test_draco_info_matches_decoder(void)
         proto_draco_info info;
         iso_mesh dec;
         CHECK_OK(proto_draco_encode_info(&m, &opt, &buf, &size, &info, &err), &err);
-        if (check_failed())
+        if (!buf)
             break;
         CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
         CHECK_EQ(info.points, dec.vertex_count);
@@ -770,7 +770,7 @@ static void test_draco_decoder_refuses_garbage(void)
             make_torus(&m, 60, 40, 1);
         }
         CHECK_OK(proto_encode_draco(&m, NULL, &buf, &size, &err), &err);
-        if (check_failed())
+        if (!buf)
             break;
         size_t step = big ? 1 + size / 300 : 1;
         for (size_t n = 0; n < size; n += n < 64 ? 1 : step) {
@@ -793,7 +793,7 @@ static void test_draco_decoder_survives_corruption(void)
     size_t size;
     make_torus(&m, 30, 20, 1);
     CHECK_OK(proto_encode_draco(&m, NULL, &buf, &size, &err), &err);
-    if (check_failed()) {
+    if (!buf) {
         iso_mesh_free(&m);
         return;
     }
@@ -876,7 +876,7 @@ static void check_glb(const iso_mesh *m, const proto_encode_options *opt)
     size_t size, bin_size;
     const unsigned char *bin;
     CHECK_OK(proto_encode_glb(m, opt, &buf, &size, &err), &err);
-    if (check_failed())
+    if (!buf)
         return;
     char *json = glb_parse(buf, size, &bin, &bin_size);
     if (!json) {
@@ -971,7 +971,7 @@ static void test_empty_mesh_gives_valid_files(void)
         make_mesh(&m, tri_pos, NULL, kind ? 3 : 0, degenerate, kind == 2 ? 1 : 0);
 
         CHECK_OK(proto_encode_ply(&m, &buf, &size, &err), &err);
-        if (!check_failed()) {
+        if (buf) {
             char want[64];
             snprintf(want, sizeof want, "element vertex %zu\n", m.vertex_count);
             CHECK(strstr((const char *)buf, want) != NULL);
@@ -982,14 +982,14 @@ static void test_empty_mesh_gives_valid_files(void)
         }
 
         CHECK_OK(proto_encode_obj(&m, &buf, &size, &err), &err);
-        if (!check_failed()) {
+        if (buf) {
             CHECK(size > 0 && buf[0] == '#' && buf[size - 1] == '\n');
             free(buf);
         }
 
         /* Draco: a stream that decodes to an empty mesh, here and with draco_decoder. */
         CHECK_OK(proto_encode_draco(&m, NULL, &buf, &size, &err), &err);
-        if (!check_failed()) {
+        if (buf) {
             CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
             CHECK_EQ(dec.vertex_count, 0);
             CHECK_EQ(dec.triangle_count, 0);
@@ -1010,7 +1010,7 @@ static void test_empty_mesh_gives_valid_files(void)
 
         /* glb: a container with a scene and no mesh, no BIN chunk. */
         CHECK_OK(proto_encode_glb(&m, NULL, &buf, &size, &err), &err);
-        if (!check_failed()) {
+        if (buf) {
             char *json = glb_parse(buf, size, &bin, &bin_size);
             CHECK(json != NULL && bin == NULL);
             if (json) {
