@@ -1,6 +1,7 @@
 /* glb.c: the glTF 2.0 binary encoder: one triangle primitive whose data is a Draco stream
  * (KHR_draco_mesh_compression), as three.js's GLTFLoader + DRACOLoader read it. */
 #include "encode.h"
+#include "bytes.h"
 #include "draco_shim.h"
 
 #include <assert.h>
@@ -89,15 +90,6 @@ static void json_empty(glb_json *j)
                 "\"scene\":0,\"scenes\":[{}]}");
 }
 
-static unsigned char *put_u32(unsigned char *p, uint32_t v)
-{
-    p[0] = (unsigned char)v;
-    p[1] = (unsigned char)(v >> 8);
-    p[2] = (unsigned char)(v >> 16);
-    p[3] = (unsigned char)(v >> 24);
-    return p + 4;
-}
-
 static size_t pad4(size_t n)
 {
     return (n + 3) & ~(size_t)3;
@@ -140,17 +132,17 @@ int proto_encode_glb(const iso_mesh *mesh, const proto_encode_options *opt,
     }
 
     unsigned char *p = buf;
-    p = put_u32(p, GLB_MAGIC);
-    p = put_u32(p, GLB_VERSION);
-    p = put_u32(p, (uint32_t)size);
-    p = put_u32(p, (uint32_t)json_padded);
-    p = put_u32(p, GLB_CHUNK_JSON);
+    p = proto_put_u32(p, GLB_MAGIC);
+    p = proto_put_u32(p, GLB_VERSION);
+    p = proto_put_u32(p, (uint32_t)size);
+    p = proto_put_u32(p, (uint32_t)json_padded);
+    p = proto_put_u32(p, GLB_CHUNK_JSON);
     memcpy(p, json.text, json.len);
     memset(p + json.len, ' ', json_padded - json.len);
     p += json_padded;
     if (draco_size) {
-        p = put_u32(p, (uint32_t)bin_padded);
-        p = put_u32(p, GLB_CHUNK_BIN);
+        p = proto_put_u32(p, (uint32_t)bin_padded);
+        p = proto_put_u32(p, GLB_CHUNK_BIN);
         memcpy(p, draco, draco_size);
         memset(p + draco_size, 0, bin_padded - draco_size);
         p += bin_padded;

@@ -1,6 +1,7 @@
 /* ply.c: the binary little-endian PLY encoder, and the option defaults and mesh checks that
  * every encoder of encode.h shares. */
 #include "encode.h"
+#include "bytes.h"
 
 #include <assert.h>
 #include <math.h>
@@ -43,23 +44,6 @@ int proto_mesh_check(const iso_mesh *mesh, int finite, iso_error *err)
     if (finite && mesh->normals && !all_finite(mesh->normals, 3 * mesh->vertex_count))
         return iso_error_set(err, ISO_E_ARGUMENT, "mesh has a non-finite normal");
     return 0;
-}
-
-/* Byte by byte, so the output is little endian whatever the host. */
-static unsigned char *put_u32(unsigned char *p, uint32_t v)
-{
-    p[0] = (unsigned char)v;
-    p[1] = (unsigned char)(v >> 8);
-    p[2] = (unsigned char)(v >> 16);
-    p[3] = (unsigned char)(v >> 24);
-    return p + 4;
-}
-
-static unsigned char *put_f32(unsigned char *p, float f)
-{
-    uint32_t v;
-    memcpy(&v, &f, sizeof v);
-    return put_u32(p, v);
 }
 
 int proto_encode_ply(const iso_mesh *mesh, unsigned char **out, size_t *out_size,
@@ -108,15 +92,15 @@ int proto_encode_ply(const iso_mesh *mesh, unsigned char **out, size_t *out_size
     p += hlen;
     for (size_t v = 0; v < mesh->vertex_count; v++) {
         for (int c = 0; c < 3; c++)
-            p = put_f32(p, mesh->positions[3 * v + c]);
+            p = proto_put_f32(p, mesh->positions[3 * v + c]);
         if (has_normals)
             for (int c = 0; c < 3; c++)
-                p = put_f32(p, mesh->normals[3 * v + c]);
+                p = proto_put_f32(p, mesh->normals[3 * v + c]);
     }
     for (size_t t = 0; t < mesh->triangle_count; t++) {
         *p++ = 3;
         for (int c = 0; c < 3; c++)
-            p = put_u32(p, mesh->indices[3 * t + c]);
+            p = proto_put_u32(p, mesh->indices[3 * t + c]);
     }
     assert((size_t)(p - buf) == size);
     *out = buf;
