@@ -18,6 +18,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "clock.h"
 #include "mc.h"
 #include "trilinear.h"
 #include "tets.h"
@@ -35,13 +36,6 @@ typedef struct walk {
     double brick[BRICK_SAMPLES];
     uint32_t brick_lo[3], brick_n[3];
 } walk;
-
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
-}
 
 static int active(const walk *w, double min, double max)
 {
@@ -224,7 +218,7 @@ static int finish(const iso_volume *vol, iso_space space, iso_mesh *mesh,
         to_world(vol, mesh);
     stats->triangles = mesh->triangle_count;
     stats->vertices = mesh->vertex_count;
-    stats->extract_ms = now_ms() - start;
+    stats->extract_ms = iso_clock_ms() - start;
     return 0;
 }
 
@@ -233,7 +227,7 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
 {
     static walk zero_walk;
     iso_extract_stats local;
-    double start = now_ms();
+    double start = iso_clock_ms();
     if (!stats)
         stats = &local;
     memset(stats, 0, sizeof *stats);
@@ -273,7 +267,7 @@ int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,
                           iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
 {
     iso_extract_stats local;
-    double start = now_ms();
+    double start = iso_clock_ms();
     if (!stats)
         stats = &local;
     memset(stats, 0, sizeof *stats);

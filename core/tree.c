@@ -23,6 +23,7 @@
 #include <unistd.h>
 #include <zlib.h>
 
+#include "clock.h"
 #include "trilinear.h"
 
 /* ---- boxes ---- */
@@ -224,13 +225,6 @@ static void *fit_worker(void *arg)
     }
 }
 
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
-}
-
 static int worker_count(void)
 {
     long n = sysconf(_SC_NPROCESSORS_ONLN);
@@ -240,7 +234,7 @@ static int worker_count(void)
 int iso_tree_build(const iso_volume *vol, iso_progress_fn progress, void *context,
                    iso_tree **out, iso_error *err)
 {
-    double start = now_ms();
+    double start = iso_clock_ms();
     layout l = {0};
     iso_tree *tree = NULL;
     *out = NULL;
@@ -282,7 +276,7 @@ int iso_tree_build(const iso_volume *vol, iso_progress_fn progress, void *contex
     tree->nodes = l.nodes;
     tree->node_count = l.count;
     tree->volume_crc = iso_tree_volume_crc(vol);
-    tree->build_ms = now_ms() - start;
+    tree->build_ms = iso_clock_ms() - start;
     free(l.boxes);
     *out = tree;
     return 0;
@@ -435,7 +429,7 @@ static int check_structure(const iso_volume *vol, const iso_tree_node *nodes, si
 
 int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_error *err)
 {
-    double start = now_ms();
+    double start = iso_clock_ms();
     *out = NULL;
     int fd = open(path, O_RDONLY | O_CLOEXEC);
     if (fd < 0)
@@ -497,7 +491,7 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
     tree->volume_crc = h.volume_crc;
     tree->mapping = map;
     tree->mapping_bytes = bytes;
-    tree->build_ms = now_ms() - start;
+    tree->build_ms = iso_clock_ms() - start;
     *out = tree;
     return 0;
 }

@@ -10,6 +10,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "clock.h"
 #include "loader.h"
 #include "resample.h"
 
@@ -22,13 +23,6 @@ int srv_fail(const char *fmt, ...)
     va_end(ap);
     fputc('\n', stderr);
     return 1;
-}
-
-double srv_now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
 }
 
 void srv_progress(void *label, double fraction)
@@ -77,7 +71,7 @@ int srv_parse_dims(const char *text, size_t dims[3])
 int srv_open(const srv_open_options *opt, srv_subject *out)
 {
     iso_error err;
-    double start = srv_now_ms();
+    double start = iso_clock_ms();
     memset(out, 0, sizeof *out);
     out->name = opt->path;
     if (iso_load(opt->path, NULL, &out->vol, &err))
@@ -92,7 +86,7 @@ int srv_open(const srv_open_options *opt, srv_subject *out)
         iso_vol_destroy(out->vol);
         out->vol = small;
     }
-    out->load_ms = srv_now_ms() - start;
+    out->load_ms = iso_clock_ms() - start;
     if (!opt->want_tree)
         return 0;
     int rc = opt->hierarchy ? iso_tree_load(out->vol, opt->hierarchy, &out->tree, &err)

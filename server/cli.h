@@ -42,7 +42,6 @@ int srv_fail(const char *fmt, ...)
 
 /* Progress for long steps: drawn on stderr only when it is a terminal. */
 void srv_progress(void *label, double fraction);
-double srv_now_ms(void);
 
 int srv_cmd_info(int argc, char **argv);
 int srv_cmd_build(int argc, char **argv);
