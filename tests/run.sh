@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Runs every test: the unit binaries of the normal and the sanitizer build, then the
-# end-to-end scripts in tests/cli/ (which print the same PASS/FAIL/SKIP lines), and closes
+# end-to-end scripts tests/*/test_*.sh (CLI, HTTP, browser; they print the same PASS/FAIL/SKIP lines), and closes
 # with "N passed, N failed, N skipped". Exit status 1 if anything failed.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -26,7 +26,7 @@ done
 for t in build/san/tests/test_*; do
     [ -x "$t" ] && run_one "$(basename "$t") (asan+ubsan)" env ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 "$t"
 done
-for t in tests/cli/test_*.sh; do
+for t in tests/*/test_*.sh; do
     [ -f "$t" ] && run_one "$(basename "$t")" bash "$t"
 done
 
