@@ -332,3 +332,17 @@ void iso_vol_index_to_world(const iso_volume *vol, const double index[3], double
         world[r] = vol->origin[r] + vol->direction[r][0] * scaled[0] +
                    vol->direction[r][1] * scaled[1] + vol->direction[r][2] * scaled[2];
 }
+
+void iso_vol_affine(const iso_volume *vol, double affine[3][4])
+{
+    double zero[3] = {0, 0, 0}, origin[3];
+    iso_vol_index_to_world(vol, zero, origin);
+    for (int c = 0; c < 3; c++) {
+        double unit[3] = {c == 0, c == 1, c == 2}, w[3];
+        iso_vol_index_to_world(vol, unit, w);
+        for (int r = 0; r < 3; r++)
+            affine[r][c] = w[r] - origin[r];
+    }
+    for (int r = 0; r < 3; r++)
+        affine[r][3] = origin[r];
+}

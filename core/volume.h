@@ -80,5 +80,8 @@ void iso_vol_update_stats(iso_volume *vol);
 
 /* Index space (i,j,k may be fractional) to world millimetres. */
 void iso_vol_index_to_world(const iso_volume *vol, const double index[3], double world[3]);
+/* The same map as a 3x4 affine matrix [A | origin], world = A * index + origin, read off
+ * iso_vol_index_to_world so that the two always agree. */
+void iso_vol_affine(const iso_volume *vol, double affine[3][4]);
 
 #endif

@@ -1,0 +1,127 @@
+/* test_normals.c: B-spline gradient normals. Every order reproduces linear functions, so a
+ * ramp gives its exact normal (index and world space, anisotropic spacing and a rotated
+ * frame); on a sphere every normal is unit and points outward (toward lower values), and
+ * the smoother orders are no worse than trilinear. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "extract.h"
+#include "field.h"
+#include "normals.h"
+#include "tree.h"
+
+static void test_names(void)
+{
+    CHECK_EQ(iso_normals_order_from_name("none"), 0);
+    CHECK_EQ(iso_normals_order_from_name("trilinear"), 2);
+    CHECK_EQ(iso_normals_order_from_name("triquadratic"), 3);
+    CHECK_EQ(iso_normals_order_from_name("tricubic"), 4);
+    CHECK_EQ(iso_normals_order_from_name("cubic"), -1);
+    CHECK_EQ(iso_normals_order_from_name(NULL), -1);
+    for (int o = 0; o <= 4; o++)
+        if (o != 1)
+            CHECK_EQ(iso_normals_order_from_name(iso_normals_name(o)), o);
+}
+
+/* f = 2i - 3j + 5k on 12^3; spacing (0.5, 2, 1); the frame rotated 90 degrees about z. */
+static void test_ramp_exact_every_order(void)
+{
+    iso_error err;
+    size_t dims[3] = {12, 12, 12};
+    iso_volume *vol = iso_vol_create(dims, ISO_F32, 0, &err);
+    CHECK(vol != NULL);
+    if (!vol)
+        return;
+    for (size_t k = 0; k < 12; k++)
+        for (size_t j = 0; j < 12; j++)
+            for (size_t i = 0; i < 12; i++)
+                iso_vol_set(vol, i, j, k, 2.0 * i - 3.0 * j + 5.0 * k);
+    vol->spacing[0] = 0.5, vol->spacing[1] = 2, vol->spacing[2] = 1;
+    double rot[3][3] = {{0, -1, 0}, {1, 0, 0}, {0, 0, 1}};
+    memcpy(vol->direction, rot, sizeof rot);
+    iso_vol_update_stats(vol);
+    /* Index gradient (2,-3,5); world gradient = A^-T g with A = R diag(s):
+     * A^-T = R diag(1/s), so world g = R (4, -1.5, 5) = (1.5, 4, 5). */
+    const double index_n[3] = {-2, 3, -5}, world_n[3] = {-1.5, -4, -5};
+    for (int space = 0; space < 2; space++)
+        for (int order = 2; order <= 4; order++) {
+            iso_mesh mesh;
+            iso_mesh_init(&mesh);
+            CHECK_OK(iso_mesh_reserve(&mesh, 3, 1), &err);
+            double pts[3][3] = {{4.3, 5.6, 6.1}, {3, 4, 5}, {7.5, 2.25, 8.9}};
+            for (int v = 0; v < 3; v++) {
+                double w[3];
+                if (space == ISO_SPACE_WORLD)
+                    iso_vol_index_to_world(vol, pts[v], w);
+                else
+                    memcpy(w, pts[v], sizeof w);
+                for (int c = 0; c < 3; c++)
+                    mesh.positions[3 * v + c] = (float)w[c];
+            }
+            mesh.vertex_count = 3;
+            CHECK_OK(iso_normals_compute(vol, &mesh, order, (iso_space)(space ? ISO_SPACE_INDEX : ISO_SPACE_WORLD), &err), &err);
+            const double *want = space ? index_n : world_n;
+            double len = sqrt(want[0] * want[0] + want[1] * want[1] + want[2] * want[2]);
+            for (int v = 0; v < 3 && mesh.normals; v++)
+                for (int c = 0; c < 3; c++)
+                    CHECK_NEAR(mesh.normals[3 * v + c], want[c] / len, 2e-6);
+            CHECK_OK(iso_normals_compute(vol, &mesh, 0, ISO_SPACE_WORLD, &err), &err);
+            CHECK(mesh.normals == NULL);
+            iso_mesh_free(&mesh);
+        }
+    iso_vol_destroy(vol);
+}
+
+/* The sphere field is R - |p - c|: the true outward normal is (p - c) / |p - c|. */
+static void test_sphere_outward_unit_and_ordered(void)
+{
+    iso_error err;
+    iso_volume *vol = NULL;
+    iso_tree *tree = NULL;
+    CHECK_OK(iso_field_load("field:sphere:48", NULL, &vol, &err), &err);
+    if (!vol)
+        return;
+    iso_vol_update_stats(vol);
+    CHECK_OK(iso_tree_build(vol, NULL, NULL, &tree, &err), &err);
+    iso_mesh mesh;
+    iso_mesh_init(&mesh);
+    iso_extract_params params = {.level = 8.3};
+    CHECK_OK(iso_extract(tree, &params, &mesh, NULL, &err), &err);
+    CHECK(mesh.vertex_count > 1000);
+    double mean[5] = {0}, worst[5] = {0};
+    const double c = 23.5;
+    for (int order = 2; order <= 4; order++) {
+        CHECK_OK(iso_normals_compute(vol, &mesh, order, ISO_SPACE_WORLD, &err), &err);
+        for (size_t v = 0; v < mesh.vertex_count && mesh.normals; v++) {
+            const float *p = mesh.positions + 3 * v, *n = mesh.normals + 3 * v;
+            double r[3] = {p[0] - c, p[1] - c, p[2] - c};
+            double rl = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+            double nl = sqrt((double)n[0] * n[0] + (double)n[1] * n[1] + (double)n[2] * n[2]);
+            CHECKF(fabs(nl - 1) < 1e-5, "order %d vertex %zu: |n| = %.9f", order, v, nl);
+            double dot = (n[0] * r[0] + n[1] * r[1] + n[2] * r[2]) / rl / nl;
+            CHECKF(dot > 0, "order %d vertex %zu points inward", order, v);
+            double angle = acos(dot > 1 ? 1 : dot) * 180 / M_PI;
+            mean[order] += angle / (double)mesh.vertex_count;
+            if (angle > worst[order])
+                worst[order] = angle;
+        }
+    }
+    printf("normals sphere 48^3 level 8.3: trilinear mean %.4f max %.4f deg, triquadratic mean %.4f max %.4f, "
+           "tricubic mean %.4f max %.4f\n", mean[2], worst[2], mean[3], worst[3], mean[4], worst[4]);
+    CHECK(mean[3] <= mean[2] && mean[4] <= mean[2]);
+    CHECK(mean[2] < 3.0 && mean[3] < 0.5 && mean[4] < 0.5);
+    iso_mesh_free(&mesh);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+int main(void)
+{
+    CHECK_RUN(test_names);
+    CHECK_RUN(test_ramp_exact_every_order);
+    CHECK_RUN(test_sphere_outward_unit_and_ordered);
+    return check_finish();
+}
