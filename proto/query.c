@@ -1,0 +1,189 @@
+/* query.c: parsing and validating mesh request parameters (see query.h). */
+#include "query.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+#include "encode.h"
+#include "normals.h"
+
+int proto_problem_set(proto_problem *problem, int status, const char *parameter,
+                      const char *fmt, ...)
+{
+    if (!problem)
+        return -1;
+    problem->status = status;
+    snprintf(problem->parameter, sizeof problem->parameter, "%s", parameter ? parameter : "");
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(problem->detail, sizeof problem->detail, fmt, ap);
+    va_end(ap);
+    return -1;
+}
+
+/* Values are echoed in problem details; long or odd ones are cut and flagged. */
+static const char *shown(const char *value, char *buf, size_t size)
+{
+    size_t n = 0;
+    for (const char *c = value; *c && n + 4 < size; c++)
+        buf[n++] = (*c >= 0x20 && *c < 0x7f && *c != '"') ? *c : '?';
+    buf[n] = '\0';
+    if (strlen(value) >= size - 4)
+        snprintf(buf + n, size - n, "...");
+    return buf;
+}
+
+/* A decimal number, whole string: digits, sign, point, exponent. strtod alone would also
+ * take hex, "inf", "nan" and leading blanks, which a URL should not carry. */
+static int parse_decimal(const char *key, const char *value, double *out, proto_problem *problem)
+{
+    char buf[40];
+    if (!value || !*value)
+        return proto_problem_set(problem, 400, key, "%s needs a value, e.g. %s=100", key, key);
+    if (!strcasecmp(value, "nan") || !strcasecmp(value, "inf") || !strcasecmp(value, "+inf") ||
+        !strcasecmp(value, "-inf") || !strcasecmp(value, "infinity") ||
+        !strcasecmp(value, "-infinity"))
+        return proto_problem_set(problem, 400, key, "%s must be a finite number, not \"%s\"",
+                                 key, shown(value, buf, sizeof buf));
+    if (strspn(value, "0123456789+-.eE") != strlen(value))
+        return proto_problem_set(problem, 400, key, "%s is not a number: \"%s\"", key,
+                                 shown(value, buf, sizeof buf));
+    char *end;
+    errno = 0;
+    double v = strtod(value, &end);
+    if (end == value || *end)
+        return proto_problem_set(problem, 400, key, "%s is not a number: \"%s\"", key,
+                                 shown(value, buf, sizeof buf));
+    if (errno == ERANGE || !isfinite(v))
+        return proto_problem_set(problem, 400, key, "%s must be a finite number, not \"%s\"",
+                                 key, shown(value, buf, sizeof buf));
+    *out = v;
+    return 0;
+}
+
+/* A whole number in [min, max]. */
+static int parse_count(const char *key, const char *value, unsigned long min, unsigned long max,
+                       unsigned long *out, proto_problem *problem)
+{
+    char buf[40];
+    if (!value || !*value)
+        return proto_problem_set(problem, 400, key, "%s needs a value", key);
+    if (strspn(value, "0123456789") != strlen(value) || strlen(value) > 12)
+        return proto_problem_set(problem, 400, key, "%s must be a whole number from %lu to %lu, not \"%s\"",
+                                 key, min, max, shown(value, buf, sizeof buf));
+    unsigned long v = strtoul(value, NULL, 10);
+    if (v < min || v > max)
+        return proto_problem_set(problem, 400, key, "%s must be from %lu to %lu, not %lu", key,
+                                 min, max, v);
+    *out = v;
+    return 0;
+}
+
+static const char *const format_names[] = {"draco", "glb", "ply"};
+static const char *const format_types[] = {"application/x-draco", "model/gltf-binary",
+                                           "application/x-ply"};
+
+const char *proto_format_name(proto_format format) { return format_names[format]; }
+const char *proto_format_content_type(proto_format format) { return format_types[format]; }
+
+/* The parameters, in the order the key lists them. */
+enum { P_LEVEL, P_TOLERANCE, P_NORMALS, P_FORMAT, P_QP, P_QN, P_BUDGET, P_COUNT };
+static const char *const param_names[P_COUNT] = {"level", "tolerance", "normals", "format",
+                                                 "qp", "qn", "budget"};
+
+static int parse_one(int which, const char *value, proto_mesh_request *out, proto_problem *problem)
+{
+    const char *key = param_names[which];
+    char buf[40];
+    unsigned long n;
+    switch (which) {
+    case P_LEVEL:
+        if (parse_decimal(key, value, &out->level, problem))
+            return -1;
+        if (fabs(out->level) > PROTO_VALUE_MAX)
+            return proto_problem_set(problem, 400, key, "level must be within +-%g", PROTO_VALUE_MAX);
+        out->level += 0.0;
+        return 0;
+    case P_TOLERANCE:
+        if (parse_decimal(key, value, &out->tolerance, problem))
+            return -1;
+        if (!(out->tolerance >= 0) || out->tolerance > PROTO_TOLERANCE_MAX)
+            return proto_problem_set(problem, 400, key, "tolerance must be from 0 to %g, not %s",
+                                     PROTO_TOLERANCE_MAX, shown(value, buf, sizeof buf));
+        out->tolerance += 0.0; /* -0 and 0 are one request */
+        return 0;
+    case P_NORMALS:
+        out->normals = value ? iso_normals_order_from_name(value) : -1;
+        if (out->normals < 0)
+            return proto_problem_set(problem, 400, key,
+                                     "normals must be none, trilinear, triquadratic or tricubic, not \"%s\"",
+                                     shown(value ? value : "", buf, sizeof buf));
+        return 0;
+    case P_FORMAT:
+        for (int f = 0; f < 3; f++)
+            if (value && !strcmp(value, format_names[f])) {
+                out->format = (proto_format)f;
+                return 0;
+            }
+        return proto_problem_set(problem, 400, key, "format must be draco, glb or ply, not \"%s\"",
+                                 shown(value ? value : "", buf, sizeof buf));
+    case P_QP:
+        if (parse_count(key, value, PROTO_POSITION_BITS_MIN, PROTO_POSITION_BITS_MAX, &n, problem))
+            return -1;
+        out->position_bits = (int)n;
+        return 0;
+    case P_QN:
+        if (parse_count(key, value, PROTO_NORMAL_BITS_MIN, PROTO_NORMAL_BITS_MAX, &n, problem))
+            return -1;
+        out->normal_bits = (int)n;
+        return 0;
+    default:
+        if (parse_count(key, value, 1, PROTO_BUDGET_MAX, &n, problem))
+            return -1;
+        out->budget = (uint32_t)n;
+        return 0;
+    }
+}
+
+int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh_request *out,
+                             proto_problem *problem)
+{
+    char buf[40];
+    int seen[P_COUNT] = {0};
+    *out = (proto_mesh_request){.normals = PROTO_NORMALS_DEFAULT,
+                                .format = PROTO_FORMAT_DRACO,
+                                .position_bits = PROTO_POSITION_BITS_DEFAULT,
+                                .normal_bits = PROTO_NORMAL_BITS_DEFAULT};
+    for (size_t i = 0; i < count; i++) {
+        const char *key = params[i].key ? params[i].key : "";
+        int which = 0;
+        while (which < P_COUNT && strcmp(key, param_names[which]))
+            which++;
+        if (which == P_COUNT)
+            return proto_problem_set(problem, 400, NULL,
+                                     "unknown parameter \"%s\"; the mesh takes level, tolerance, "
+                                     "normals, format, qp, qn and budget",
+                                     shown(key, buf, sizeof buf));
+        if (seen[which]++)
+            return proto_problem_set(problem, 400, key, "%s is given more than once", key);
+        if (parse_one(which, params[i].value, out, problem))
+            return -1;
+    }
+    if (!seen[P_LEVEL])
+        return proto_problem_set(problem, 400, "level", "level is required, e.g. ?level=700");
+    return 0;
+}
+
+size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t size)
+{
+    int n = snprintf(buf, size, "level=%.17g&tolerance=%.17g&normals=%s&format=%s&qp=%d&qn=%d&budget=%u",
+                     req->level, req->tolerance, iso_normals_name(req->normals),
+                     format_names[req->format], req->position_bits,
+                     req->normals ? req->normal_bits : 0, req->budget);
+    return n < 0 ? 0 : (size_t)n;
+}

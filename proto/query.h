@@ -1,0 +1,71 @@
+/* query.h: the mesh request's query parameters, parsed and validated without sockets.
+ *
+ * The server hands over the decoded (key, value) pairs of a request in arrival order; this
+ * module checks each one and either fills a proto_mesh_request or says, in a proto_problem,
+ * which parameter is wrong and why (the body of a 400 response). It also gives the request's
+ * normalised form, the key of caches and ETags: two URLs asking for the same mesh
+ * (level=700 and level=700.0, parameters in another order, defaults spelt out or not) have
+ * the same key. */
+#ifndef PROTO_QUERY_H
+#define PROTO_QUERY_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+typedef enum proto_format { PROTO_FORMAT_DRACO, PROTO_FORMAT_GLB, PROTO_FORMAT_PLY } proto_format;
+
+/* One query parameter; value is NULL for a bare key ("?level"). */
+typedef struct proto_param {
+    const char *key;
+    const char *value;
+} proto_param;
+
+/* Limits of the parameters the API accepts. */
+#define PROTO_BUDGET_MAX 100000000u  /* triangles */
+#define PROTO_TOLERANCE_MAX 1e30     /* beyond this a tolerance means nothing for any volume */
+#define PROTO_VALUE_MAX 1e300        /* |level| */
+
+typedef struct proto_mesh_request {
+    double level;
+    double tolerance;      /* >= 0; default 0 */
+    int normals;           /* B-spline order: 0 none, 2 trilinear, 3 triquadratic, 4 tricubic */
+    proto_format format;   /* default draco */
+    int position_bits;     /* qp, default 14 */
+    int normal_bits;       /* qn, default 10 */
+    uint32_t budget;       /* triangles; 0 = no budget */
+} proto_mesh_request;
+
+/* What went wrong with a request, for an application/problem+json body (RFC 9457). */
+typedef struct proto_problem {
+    int status;            /* HTTP status */
+    char parameter[32];    /* the offending query parameter, or "" */
+    char detail[256];      /* one sentence for a person */
+} proto_problem;
+
+/* The default normals order of mesh requests: tricubic (DESIGN.md, issue 9). */
+#define PROTO_NORMALS_DEFAULT 4
+
+/* Parses the parameters of /v1/volumes/{id}/mesh. Returns 0 and fills *out, or -1 and fills
+ * *problem (status 400, the parameter, the reason: missing, not a number, not finite, out
+ * of range, unknown value, unknown parameter, given twice). Safe on any input. */
+int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh_request *out,
+                             proto_problem *problem);
+
+/* The normalised form of a request ("level=700&tolerance=0&normals=tricubic&..."), every
+ * parameter present, numbers printed so that they round-trip. Writes at most size bytes
+ * (NUL included) and returns the length it needs, like snprintf. */
+size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t size);
+
+/* "draco", "glb", "ply"; the Content-Type and file extension of each. */
+const char *proto_format_name(proto_format format);
+const char *proto_format_content_type(proto_format format);
+
+/* Fills a problem (status, parameter may be NULL, printf-style detail); returns -1. */
+int proto_problem_set(proto_problem *problem, int status, const char *parameter,
+                      const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 4, 5)))
+#endif
+    ;
+
+#endif
