@@ -1,11 +1,9 @@
 #!/usr/bin/env bash
-# The README's run command until the HTTP server exists: the default volume's surface,
-# extracted with the hierarchy, written to build/default.ply, with its report.
+# The README's run command: the daemon on the default collection (Debian's mricron-data
+# brain templates and analytic phantoms), hierarchies cached in build/cache, on
+# http://127.0.0.1:8080/ unless ISOSERVE_LISTEN says otherwise. Ctrl-C stops it cleanly.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-volume=${ISOSERVE_VOLUME:-field:ml:128}
-level=${ISOSERVE_LEVEL:-0.5}
-tolerance=${ISOSERVE_TOLERANCE:-0.01}
-build/isoserve info "$volume"
-build/isoserve extract "$volume" --level "$level" --tolerance "$tolerance" -o build/default.ply --json
-echo "wrote build/default.ply"
+listen=${ISOSERVE_LISTEN:-127.0.0.1:8080}
+echo "isoserve: open http://$listen/ in a browser (Ctrl-C stops the server)"
+exec build/isoserve serve --listen "$listen" --cache-dir build/cache "$@"

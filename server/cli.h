@@ -47,5 +47,6 @@ int srv_cmd_info(int argc, char **argv);
 int srv_cmd_build(int argc, char **argv);
 int srv_cmd_extract(int argc, char **argv);
 int srv_cmd_bench(int argc, char **argv);
+int srv_cmd_serve(int argc, char **argv);
 
 #endif

@@ -14,6 +14,10 @@ static const struct {
     {"extract", srv_cmd_extract,
      "extract VOLUME --level L [--tolerance T] [-o OUT.ply|OUT.obj] [--json] [--hierarchy FILE]\n"
      "                 [--resample WxHxD] [--index-space] [--full-scan]"},
+    {"serve", srv_cmd_serve,
+     "serve [--catalog FILE | --volumes DIR] [--listen 127.0.0.1:8080] [--cache-dir DIR]\n"
+     "                 [--threads N] [--queue N] [--cache-mb N] [--cors-origin ORIGIN]...\n"
+     "                 [--web-root DIR] [--drain-seconds N] [--max-connections N] [--max-volume-mb N]"},
     {"bench", srv_cmd_bench,
      "bench VOLUME --level L [--tolerances 0,6,10,...] [--json FILE] [--repeat N] [--resample WxHxD]"},
 };

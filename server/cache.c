@@ -1,0 +1,189 @@
+/* cache.c: shared mesh bodies and their byte-bounded LRU cache (see cache.h). */
+#include "cache.h"
+
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+struct srv_cache_item {
+    char *key;
+    uint64_t hash;
+    srv_body *body;
+    srv_cache_item *chain;          /* next in the bucket */
+    srv_cache_item *newer, *older;  /* LRU list */
+};
+
+srv_body *srv_body_create(unsigned char *data, size_t size)
+{
+    srv_body *body = calloc(1, sizeof *body);
+    if (!body) {
+        free(data);
+        return NULL;
+    }
+    atomic_init(&body->refs, 1);
+    body->data = data;
+    body->size = size;
+    body->budget_fits = -1;
+    return body;
+}
+
+void srv_body_retain(srv_body *body)
+{
+    atomic_fetch_add(&body->refs, 1);
+}
+
+void srv_body_release(srv_body *body)
+{
+    if (body && atomic_fetch_sub(&body->refs, 1) == 1) {
+        free(body->data);
+        free(body);
+    }
+}
+
+static uint64_t hash_key(const char *key)
+{
+    uint64_t h = 1469598103934665603ull;
+    for (const unsigned char *c = (const unsigned char *)key; *c; c++)
+        h = (h ^ *c) * 1099511628211ull;
+    return h;
+}
+
+int srv_cache_init(srv_cache *cache, size_t limit_bytes)
+{
+    memset(cache, 0, sizeof *cache);
+    cache->limit = limit_bytes;
+    cache->bucket_count = 4096;
+    cache->buckets = calloc(cache->bucket_count, sizeof *cache->buckets);
+    if (!cache->buckets)
+        return -1;
+    pthread_mutex_init(&cache->lock, NULL);
+    return 0;
+}
+
+/* Unlinks item from its bucket and the LRU list. Lock held. */
+static void unlink_item(srv_cache *cache, srv_cache_item *item)
+{
+    srv_cache_item **slot = &cache->buckets[item->hash % cache->bucket_count];
+    while (*slot != item)
+        slot = &(*slot)->chain;
+    *slot = item->chain;
+    if (item->newer)
+        item->newer->older = item->older;
+    else
+        cache->newest = item->older;
+    if (item->older)
+        item->older->newer = item->newer;
+    else
+        cache->oldest = item->newer;
+    cache->bytes -= item->body->size;
+    cache->items--;
+}
+
+static void free_item(srv_cache_item *item)
+{
+    srv_body_release(item->body);
+    free(item->key);
+    free(item);
+}
+
+void srv_cache_destroy(srv_cache *cache)
+{
+    if (!cache->buckets)
+        return;
+    while (cache->oldest) {
+        srv_cache_item *item = cache->oldest;
+        unlink_item(cache, item);
+        free_item(item);
+    }
+    free(cache->buckets);
+    pthread_mutex_destroy(&cache->lock);
+    memset(cache, 0, sizeof *cache);
+}
+
+static srv_cache_item *lookup(srv_cache *cache, const char *key, uint64_t hash)
+{
+    for (srv_cache_item *i = cache->buckets[hash % cache->bucket_count]; i; i = i->chain)
+        if (i->hash == hash && !strcmp(i->key, key))
+            return i;
+    return NULL;
+}
+
+/* Puts item at the newest end of the LRU list. Lock held. */
+static void push_newest(srv_cache *cache, srv_cache_item *item)
+{
+    item->newer = NULL;
+    item->older = cache->newest;
+    if (cache->newest)
+        cache->newest->newer = item;
+    cache->newest = item;
+    if (!cache->oldest)
+        cache->oldest = item;
+}
+
+srv_body *srv_cache_get(srv_cache *cache, const char *key)
+{
+    uint64_t hash = hash_key(key);
+    pthread_mutex_lock(&cache->lock);
+    srv_cache_item *item = lookup(cache, key, hash);
+    srv_body *body = NULL;
+    if (item) {
+        /* Move to the newest end: unlink from the list only (it stays in its bucket). */
+        if (item != cache->newest) {
+            item->newer->older = item->older;
+            if (item->older)
+                item->older->newer = item->newer;
+            else
+                cache->oldest = item->newer;
+            push_newest(cache, item);
+        }
+        body = item->body;
+        srv_body_retain(body);
+    }
+    pthread_mutex_unlock(&cache->lock);
+    atomic_fetch_add(item ? &cache->hits : &cache->misses, 1);
+    return body;
+}
+
+void srv_cache_put(srv_cache *cache, const char *key, srv_body *body)
+{
+    if (body->size > cache->limit)
+        return;
+    srv_cache_item *item = calloc(1, sizeof *item);
+    char *copy = strdup(key);
+    if (!item || !copy) { /* caching is an optimisation: without memory, skip it */
+        free(item);
+        free(copy);
+        return;
+    }
+    item->key = copy;
+    item->hash = hash_key(key);
+    item->body = body;
+    srv_body_retain(body);
+    srv_cache_item *evicted = NULL;
+    pthread_mutex_lock(&cache->lock);
+    srv_cache_item *old = lookup(cache, key, item->hash);
+    if (old) {
+        unlink_item(cache, old);
+        old->chain = evicted;
+        evicted = old;
+    }
+    while (cache->oldest && cache->bytes + body->size > cache->limit) {
+        srv_cache_item *victim = cache->oldest;
+        unlink_item(cache, victim);
+        victim->chain = evicted;
+        evicted = victim;
+        atomic_fetch_add(&cache->evictions, 1);
+    }
+    srv_cache_item **slot = &cache->buckets[item->hash % cache->bucket_count];
+    item->chain = *slot;
+    *slot = item;
+    push_newest(cache, item);
+    cache->bytes += body->size;
+    cache->items++;
+    pthread_mutex_unlock(&cache->lock);
+    while (evicted) { /* freed outside the lock */
+        srv_cache_item *next = evicted->chain;
+        free_item(evicted);
+        evicted = next;
+    }
+}

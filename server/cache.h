@@ -1,0 +1,56 @@
+/* cache.h: encoded mesh bodies and the LRU cache that keeps them.
+ *
+ * A body is shared: the cache holds one reference, every response being sent holds one,
+ * and it is freed when the last lets go, so eviction never pulls bytes from under a
+ * response in flight. The cache is bounded in bytes (the bodies' sizes) and evicts the
+ * least recently used bodies first; one mutex guards it (operations are O(1) expected). */
+#ifndef SRV_CACHE_H
+#define SRV_CACHE_H
+
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stddef.h>
+
+/* One encoded mesh and what its headers say about it. */
+typedef struct srv_body {
+    _Atomic int refs;
+    unsigned char *data;
+    size_t size;
+    const char *content_type;       /* static string */
+    size_t triangles, vertices, cells_visited;
+    double extract_ms, encode_ms, error_bound, tolerance, area_mm2;
+    double volume_mm3;              /* enclosed volume; meaningful only when closed */
+    int closed;                     /* no open or non-manifold edge */
+    int budget_fits;                /* -1: no budget asked; else 0 or 1 */
+} srv_body;
+
+/* A body owning data (malloc'd, taken over), with one reference. NULL on no memory (data
+ * is freed then). */
+srv_body *srv_body_create(unsigned char *data, size_t size);
+void srv_body_retain(srv_body *body);
+/* Drops a reference; frees at zero. NULL is allowed. */
+void srv_body_release(srv_body *body);
+
+typedef struct srv_cache_item srv_cache_item;
+
+typedef struct srv_cache {
+    pthread_mutex_t lock;
+    srv_cache_item **buckets;
+    size_t bucket_count;
+    srv_cache_item *newest, *oldest;  /* the LRU list */
+    size_t bytes, limit, items;
+    _Atomic unsigned long long hits, misses, evictions;
+} srv_cache;
+
+/* limit_bytes 0 disables caching (every get misses, put keeps nothing). */
+int srv_cache_init(srv_cache *cache, size_t limit_bytes);
+void srv_cache_destroy(srv_cache *cache);
+/* The body cached under key, retained for the caller (release it), or NULL. Counts a hit
+ * or a miss. */
+srv_body *srv_cache_get(srv_cache *cache, const char *key);
+/* Caches body under key (the cache retains it), replacing an older body under the same
+ * key and evicting old ones until the total fits. A body larger than the whole limit is
+ * not cached. */
+void srv_cache_put(srv_cache *cache, const char *key, srv_body *body);
+
+#endif

@@ -1,0 +1,247 @@
+/* catalog.c: catalog files, volume directories and the default collection (see catalog.h). */
+#include "catalog.h"
+
+#include <dirent.h>
+#include <jansson.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "loader.h"
+
+int srv_catalog_id_valid(const char *id)
+{
+    size_t n = strlen(id);
+    if (n < 1 || n > SRV_ID_MAX)
+        return 0;
+    return strspn(id, "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789._-") == n;
+}
+
+void srv_catalog_free(srv_catalog *catalog)
+{
+    if (!catalog)
+        return;
+    for (size_t i = 0; i < catalog->count; i++) {
+        free(catalog->entries[i].path);
+        free(catalog->entries[i].name);
+        free(catalog->entries[i].modality);
+    }
+    free(catalog->entries);
+    catalog->entries = NULL;
+    catalog->count = 0;
+}
+
+static int has_id(const srv_catalog *catalog, const char *id)
+{
+    for (size_t i = 0; i < catalog->count; i++)
+        if (!strcmp(catalog->entries[i].id, id))
+            return 1;
+    return 0;
+}
+
+/* Appends an entry (copies every string). Returns 0, or ISO_E_NOMEM. */
+static int add(srv_catalog *catalog, const char *id, const char *path, const char *name,
+               const char *modality, const double *levels, size_t level_count, iso_error *err)
+{
+    srv_catalog_entry *grown = realloc(catalog->entries, (catalog->count + 1) * sizeof *grown);
+    if (!grown)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory reading the catalog");
+    catalog->entries = grown;
+    srv_catalog_entry *e = &grown[catalog->count];
+    memset(e, 0, sizeof *e);
+    snprintf(e->id, sizeof e->id, "%s", id);
+    e->path = strdup(path);
+    e->name = strdup(name ? name : id);
+    e->modality = strdup(modality ? modality : "");
+    if (!e->path || !e->name || !e->modality) {
+        free(e->path);
+        free(e->name);
+        free(e->modality);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory reading the catalog");
+    }
+    e->level_count = level_count < SRV_LEVELS_MAX ? level_count : SRV_LEVELS_MAX;
+    if (e->level_count)
+        memcpy(e->levels, levels, e->level_count * sizeof *levels);
+    catalog->count++;
+    return 0;
+}
+
+/* ---------------------------------------------------------------- catalog files */
+
+/* Joins a relative path to the catalog's directory; absolute paths and fields stay. */
+static char *resolve(const char *catalog_file, const char *path)
+{
+    if (path[0] == '/' || !strncmp(path, "field:", 6))
+        return strdup(path);
+    const char *slash = strrchr(catalog_file, '/');
+    int dir_len = slash ? (int)(slash - catalog_file) : 1;
+    const char *dir = slash ? catalog_file : ".";
+    size_t size = (size_t)dir_len + strlen(path) + 2;
+    char *out = malloc(size);
+    if (out)
+        snprintf(out, size, "%.*s/%s", dir_len, dir, path);
+    return out;
+}
+
+/* One entry of a catalog file; 1 = skipped (reported), 0 = added, < 0 = error. */
+static int read_entry(const char *file, size_t index, json_t *item, srv_catalog *out,
+                      iso_error *err)
+{
+    const char *id = json_string_value(json_object_get(item, "id"));
+    const char *path = json_string_value(json_object_get(item, "path"));
+    json_t *levels = json_object_get(item, "levels");
+    if (!json_is_object(item) || !id || !path) {
+        fprintf(stderr, "isoserve: %s: volume %zu needs string fields \"id\" and \"path\"; skipped\n",
+                file, index);
+        return 1;
+    }
+    if (!srv_catalog_id_valid(id) || has_id(out, id)) {
+        fprintf(stderr, "isoserve: %s: volume %zu: id \"%s\" is %s; skipped\n", file, index, id,
+                has_id(out, id) ? "taken" : "not [A-Za-z0-9._-]{1,64}");
+        return 1;
+    }
+    double values[SRV_LEVELS_MAX];
+    size_t count = 0;
+    if (levels && !json_is_array(levels)) {
+        fprintf(stderr, "isoserve: %s: volume \"%s\": \"levels\" is not an array; skipped\n", file, id);
+        return 1;
+    }
+    for (size_t i = 0; levels && i < json_array_size(levels) && count < SRV_LEVELS_MAX; i++) {
+        json_t *v = json_array_get(levels, i);
+        if (!json_is_number(v)) {
+            fprintf(stderr, "isoserve: %s: volume \"%s\": level %zu is not a number; skipped\n",
+                    file, id, i);
+            return 1;
+        }
+        values[count++] = json_number_value(v);
+    }
+    char *full = resolve(file, path);
+    if (!full)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory reading %s", file);
+    int rc = add(out, id, full, json_string_value(json_object_get(item, "name")),
+                 json_string_value(json_object_get(item, "modality")), values, count, err);
+    free(full);
+    return rc;
+}
+
+int srv_catalog_read(const char *file, srv_catalog *out, iso_error *err)
+{
+    memset(out, 0, sizeof *out);
+    json_error_t jerr;
+    json_t *root = json_load_file(file, JSON_REJECT_DUPLICATES, &jerr);
+    if (!root)
+        return iso_error_set(err, ISO_E_FORMAT, "%s:%d:%d: %s", file, jerr.line, jerr.column,
+                             jerr.text);
+    json_t *list = json_is_array(root) ? root : json_object_get(root, "volumes");
+    if (!json_is_array(list)) {
+        json_decref(root);
+        return iso_error_set(err, ISO_E_FORMAT,
+                             "%s: expected {\"volumes\": [...]} or an array of volumes", file);
+    }
+    int rc = 0;
+    for (size_t i = 0; i < json_array_size(list) && rc >= 0; i++)
+        rc = read_entry(file, i, json_array_get(list, i), out, err);
+    json_decref(root);
+    if (rc < 0)
+        srv_catalog_free(out);
+    return rc < 0 ? rc : 0;
+}
+
+/* ---------------------------------------------------------------- directories */
+
+/* The id of a file: its name without the last extension, and without one more when the
+ * last was a compression suffix ("brain.nii.gz" -> "brain"). */
+static void id_of(const char *file_name, char *id, size_t size)
+{
+    snprintf(id, size, "%s", file_name);
+    char *dot = strrchr(id, '.');
+    if (dot && dot != id && (!strcmp(dot, ".gz") || !strcmp(dot, ".bz2") || !strcmp(dot, ".zst"))) {
+        *dot = '\0';
+        dot = strrchr(id, '.');
+    }
+    if (dot && dot != id)
+        *dot = '\0';
+}
+
+static int by_id(const void *a, const void *b)
+{
+    return strcmp(((const srv_catalog_entry *)a)->id, ((const srv_catalog_entry *)b)->id);
+}
+
+int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err)
+{
+    memset(out, 0, sizeof *out);
+    DIR *d = opendir(dir);
+    if (!d)
+        return iso_error_set(err, ISO_E_IO, "%s: cannot open the directory: %m", dir);
+    struct dirent *ent;
+    int rc = 0;
+    while (rc == 0 && (ent = readdir(d))) {
+        if (ent->d_name[0] == '.')
+            continue;
+        size_t size = strlen(dir) + strlen(ent->d_name) + 2;
+        char *path = malloc(size);
+        if (!path) {
+            rc = iso_error_set(err, ISO_E_NOMEM, "out of memory scanning %s", dir);
+            break;
+        }
+        snprintf(path, size, "%s/%s", dir, ent->d_name);
+        struct stat st;
+        char id[256];
+        id_of(ent->d_name, id, sizeof id);
+        if (stat(path, &st) || !S_ISREG(st.st_mode) || !iso_load_recognises(path))
+            ; /* not a volume of its own */
+        else if (!srv_catalog_id_valid(id) || has_id(out, id))
+            fprintf(stderr, "isoserve: %s: id \"%s\" is %s; skipped\n", path, id,
+                    has_id(out, id) ? "taken by another file" : "not [A-Za-z0-9._-]{1,64}");
+        else
+            rc = add(out, id, path, NULL, NULL, NULL, 0, err);
+        free(path);
+    }
+    closedir(d);
+    if (rc) {
+        srv_catalog_free(out);
+        return rc;
+    }
+    qsort(out->entries, out->count, sizeof *out->entries, by_id);
+    return 0;
+}
+
+/* ---------------------------------------------------------------- default collection */
+
+#define MRICRON "/usr/share/mricron/templates/"
+
+static const struct {
+    const char *id, *path, *name, *modality;
+    double levels[2];
+    size_t level_count; /* 0: Otsu on the histogram */
+} default_volumes[] = {
+    {"ch2bet", MRICRON "ch2bet.nii.gz", "Colin 27 T1 brain, skull stripped (mricron)", "MR", {0}, 0},
+    {"ch2", MRICRON "ch2.nii.gz", "Colin 27 T1 head (mricron)", "MR", {0}, 0},
+    {"ch2better", MRICRON "ch2better.nii.gz", "Colin 27 T1 head, 0.5 mm (mricron)", "MR", {0}, 0},
+    {"marschner-lobb", "field:ml:128", "Marschner-Lobb test signal", "phantom", {0.5}, 1},
+    {"torus", "field:torus:128", "Torus", "phantom", {0, 8}, 2},
+    {"sphere", "field:sphere:96", "Sphere", "phantom", {0, 20}, 2},
+};
+
+int srv_catalog_default(srv_catalog *out, iso_error *err)
+{
+    memset(out, 0, sizeof *out);
+    for (size_t i = 0; i < sizeof default_volumes / sizeof default_volumes[0]; i++) {
+        if (strncmp(default_volumes[i].path, "field:", 6) && access(default_volumes[i].path, R_OK)) {
+            fprintf(stderr, "isoserve: %s: not installed (Debian package mricron-data); skipped\n",
+                    default_volumes[i].path);
+            continue;
+        }
+        int rc = add(out, default_volumes[i].id, default_volumes[i].path, default_volumes[i].name,
+                     default_volumes[i].modality, default_volumes[i].levels,
+                     default_volumes[i].level_count, err);
+        if (rc) {
+            srv_catalog_free(out);
+            return rc;
+        }
+    }
+    return 0;
+}

@@ -1,0 +1,49 @@
+/* catalog.h: which volumes the daemon serves: read from a catalog file (JSON), found in a
+ * directory, or the default collection. A catalog only names volumes; loading them is
+ * collection.c's job. Requests name volumes by id, never by path. */
+#ifndef SRV_CATALOG_H
+#define SRV_CATALOG_H
+
+#include <stddef.h>
+
+#include "error.h"
+
+#define SRV_ID_MAX 64
+#define SRV_LEVELS_MAX 8
+
+typedef struct srv_catalog_entry {
+    char id[SRV_ID_MAX + 1];  /* [A-Za-z0-9._-]{1,64} */
+    char *path;               /* file path or field:NAME[:N] */
+    char *name;               /* for people; the id when the catalog gives none */
+    char *modality;           /* "CT", "MR", "phantom", ... or "" */
+    double levels[SRV_LEVELS_MAX];
+    size_t level_count;       /* 0: suggest levels from the histogram */
+} srv_catalog_entry;
+
+typedef struct srv_catalog {
+    srv_catalog_entry *entries;
+    size_t count;
+} srv_catalog;
+
+/* 1 if id matches [A-Za-z0-9._-]{1,64}. */
+int srv_catalog_id_valid(const char *id);
+
+/* Reads a catalog file: {"volumes": [{"id", "path", "name"?, "modality"?, "levels"?}, ...]}
+ * (or the array alone). Relative paths are taken from the catalog's directory. A bad entry
+ * (bad id, duplicate id, no path) is reported on stderr with its position and skipped; a
+ * file that is not such JSON is an error. */
+int srv_catalog_read(const char *file, srv_catalog *out, iso_error *err);
+
+/* Every loadable file of dir (not hidden, not the data file of a detached header) becomes
+ * a volume whose id is its file name without its extension(s): "head.nhdr" -> "head",
+ * "brain.nii.gz" -> "brain". Files whose id is not valid or is taken are reported and
+ * skipped. Entries are sorted by id. */
+int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err);
+
+/* The default collection: Debian's mricron-data brain templates (those installed) and
+ * analytic phantoms, each with suggested levels. */
+int srv_catalog_default(srv_catalog *out, iso_error *err);
+
+void srv_catalog_free(srv_catalog *catalog);
+
+#endif

@@ -1,0 +1,148 @@
+/* collection.c: preloading volumes and hierarchies (see collection.h). */
+#include "collection.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "cli.h"
+#include "clock.h"
+#include "histogram.h"
+#include "loader.h"
+
+/* Bump when extraction or encoding changes what a mesh URL returns: it is part of every
+ * volume's version, so ETags and caches in front of the server move on. */
+#define SRV_MESH_ALGORITHM_VERSION 1
+
+int srv_collection_init(srv_collection *c, const srv_catalog *catalog)
+{
+    memset(c, 0, sizeof *c);
+    c->total = catalog->count;
+    c->volumes = calloc(catalog->count ? catalog->count : 1, sizeof *c->volumes);
+    return c->volumes ? 0 : -1;
+}
+
+void srv_collection_free(srv_collection *c)
+{
+    size_t n = atomic_load(&c->count);
+    for (size_t i = 0; i < n; i++) {
+        iso_tree_destroy(c->volumes[i].tree);
+        iso_vol_destroy(c->volumes[i].vol);
+    }
+    free(c->volumes);
+    memset(c, 0, sizeof *c);
+}
+
+const srv_volume *srv_collection_find(const srv_collection *c, const char *id)
+{
+    size_t n = atomic_load_explicit(&c->count, memory_order_acquire);
+    for (size_t i = 0; i < n; i++)
+        if (!strcmp(c->volumes[i].entry->id, id))
+            return &c->volumes[i];
+    return NULL;
+}
+
+size_t srv_collection_hierarchy_bytes(const srv_collection *c)
+{
+    size_t n = atomic_load_explicit(&c->count, memory_order_acquire), bytes = 0;
+    for (size_t i = 0; i < n; i++)
+        bytes += iso_tree_bytes(c->volumes[i].tree);
+    return bytes;
+}
+
+/* FNV-1a over the geometry: spacing, origin and direction move every vertex. */
+static uint32_t geometry_hash(const iso_volume *vol)
+{
+    uint32_t h = 2166136261u;
+    const unsigned char *parts[3] = {(const unsigned char *)vol->spacing,
+                                     (const unsigned char *)vol->origin,
+                                     (const unsigned char *)vol->direction};
+    const size_t sizes[3] = {sizeof vol->spacing, sizeof vol->origin, sizeof vol->direction};
+    for (int p = 0; p < 3; p++)
+        for (size_t i = 0; i < sizes[p]; i++)
+            h = (h ^ parts[p][i]) * 16777619u;
+    return h;
+}
+
+/* The hierarchy from the cache dir if it is there, valid and not older than the volume's
+ * file; otherwise built and written back. Returns 0 or 1 (reported on stderr). */
+static int load_tree(srv_volume *v, const srv_preload_options *opt, char *label)
+{
+    iso_error err;
+    char file[4096] = "";
+    if (opt->cache_dir) {
+        snprintf(file, sizeof file, "%s/%s.isotree", opt->cache_dir, v->entry->id);
+        struct stat tree_st, vol_st;
+        int newer = !stat(file, &tree_st) &&
+                    (stat(v->entry->path, &vol_st) || tree_st.st_mtime >= vol_st.st_mtime);
+        if (newer && !iso_tree_load(v->vol, file, &v->tree, &err)) {
+            v->tree_from_file = 1;
+            return 0;
+        }
+        if (newer)
+            fprintf(stderr, "isoserve: %s: %s; rebuilding\n", v->entry->id, err.message);
+    }
+    if (iso_tree_build(v->vol, srv_progress, label, &v->tree, &err)) {
+        fprintf(stderr, "isoserve: %s: building the hierarchy: %s; skipped\n", v->entry->id,
+                err.message);
+        return 1;
+    }
+    if (file[0] && iso_tree_save(v->tree, file, &err))
+        fprintf(stderr, "isoserve: %s: hierarchy not cached: %s\n", v->entry->id, err.message);
+    return 0;
+}
+
+/* Loads one entry into v; 0, or 1 when it is skipped (reported). */
+static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload_options *opt,
+                    size_t index, size_t total)
+{
+    iso_error err;
+    memset(v, 0, sizeof *v);
+    v->entry = e;
+    double start = iso_clock_ms();
+    iso_load_options lopt = {.max_bytes = opt->max_volume_bytes};
+    if (iso_load(e->path, &lopt, &v->vol, &err)) {
+        fprintf(stderr, "isoserve: volume \"%s\": %s; skipped\n", e->id, err.message);
+        return 1;
+    }
+    char label[160];
+    snprintf(label, sizeof label, "isoserve: [%zu/%zu] %s: hierarchy", index + 1, total, e->id);
+    if (load_tree(v, opt, label)) {
+        iso_vol_destroy(v->vol);
+        return 1;
+    }
+    snprintf(v->version, sizeof v->version, "%08x%08x-%d", (unsigned)v->tree->volume_crc,
+             (unsigned)geometry_hash(v->vol), SRV_MESH_ALGORITHM_VERSION);
+    iso_hist_compute(v->vol, SRV_HISTOGRAM_BINS, v->histogram);
+    if (e->level_count) {
+        memcpy(v->levels, e->levels, e->level_count * sizeof *v->levels);
+        v->level_count = e->level_count;
+    } else {
+        v->level_count = iso_hist_suggest_levels(v->histogram, SRV_HISTOGRAM_BINS,
+                                                 v->vol->value_min, v->vol->value_max,
+                                                 v->levels, SRV_LEVELS_MAX);
+    }
+    fprintf(stderr, "isoserve: [%zu/%zu] %s: %zux%zux%zu %s, hierarchy %s in %.0f ms (%zu KB)\n",
+            index + 1, total, e->id, v->vol->dims[0], v->vol->dims[1], v->vol->dims[2],
+            iso_vol_type_name(v->vol->type), v->tree_from_file ? "read" : "built",
+            iso_clock_ms() - start, iso_tree_bytes(v->tree) / 1024);
+    return 0;
+}
+
+void srv_collection_preload(srv_collection *c, const srv_catalog *catalog,
+                            const srv_preload_options *opt)
+{
+    if (opt->cache_dir && mkdir(opt->cache_dir, 0755) && errno != EEXIST)
+        fprintf(stderr, "isoserve: --cache-dir %s: %s; hierarchies will not be cached\n",
+                opt->cache_dir, strerror(errno));
+    for (size_t i = 0; i < catalog->count && !atomic_load(&c->stop); i++) {
+        size_t n = atomic_load(&c->count);
+        if (!load_one(&c->volumes[n], &catalog->entries[i], opt, i, catalog->count))
+            atomic_store_explicit(&c->count, n + 1, memory_order_release);
+        atomic_store(&c->attempted, i + 1);
+    }
+    atomic_store(&c->ready, 1);
+}

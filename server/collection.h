@@ -1,0 +1,59 @@
+/* collection.h: the volumes the daemon serves, loaded with their hierarchies.
+ *
+ * Preloading runs in its own thread while the HTTP server already answers (healthz says
+ * 503 until it is done). Volumes are published one by one: readers see a prefix of the
+ * array that is complete and never changes again, so lookups need no lock. */
+#ifndef SRV_COLLECTION_H
+#define SRV_COLLECTION_H
+
+#include <stdatomic.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "catalog.h"
+#include "tree.h"
+#include "volume.h"
+
+#define SRV_HISTOGRAM_BINS 256
+
+typedef struct srv_volume {
+    const srv_catalog_entry *entry;   /* borrowed from the catalog */
+    iso_volume *vol;
+    iso_tree *tree;
+    char version[40];                 /* samples, geometry and algorithm: the ETag base */
+    uint64_t histogram[SRV_HISTOGRAM_BINS];
+    double levels[SRV_LEVELS_MAX];    /* the catalog's, else Otsu's */
+    size_t level_count;
+    int tree_from_file;               /* 1: read from the cache dir */
+} srv_volume;
+
+typedef struct srv_collection {
+    srv_volume *volumes;              /* capacity: the catalog's count */
+    _Atomic size_t count;             /* published (loaded) volumes */
+    _Atomic size_t attempted;         /* catalog entries tried so far */
+    size_t total;                     /* catalog entries */
+    _Atomic int ready;                /* every entry tried */
+    _Atomic int stop;                 /* set on shutdown: preloading ends after the volume at hand */
+} srv_collection;
+
+typedef struct srv_preload_options {
+    const char *cache_dir;            /* hierarchy files; NULL: always build */
+    uint64_t max_volume_bytes;        /* 0: the core's default */
+} srv_preload_options;
+
+/* Prepares an empty collection for the catalog (which must outlive it). */
+int srv_collection_init(srv_collection *c, const srv_catalog *catalog);
+/* Loads every entry of the catalog in order: the volume, then its hierarchy from the cache
+ * dir when that file is valid and newer than the volume, else built (progress on the
+ * terminal) and written there atomically. A volume that fails to load is reported and
+ * skipped. Sets ready at the end. Blocking: run it in a thread; setting c->stop ends it
+ * after the volume at hand. */
+void srv_collection_preload(srv_collection *c, const srv_catalog *catalog,
+                            const srv_preload_options *opt);
+/* The published volume with this id, or NULL. Lock-free. */
+const srv_volume *srv_collection_find(const srv_collection *c, const char *id);
+/* Bytes of all published hierarchies. */
+size_t srv_collection_hierarchy_bytes(const srv_collection *c);
+void srv_collection_free(srv_collection *c);
+
+#endif

@@ -1,0 +1,569 @@
+/* http.c: routes, responses and the request life cycle over libmicrohttpd (see http.h).
+ *
+ * A request's life: the access handler is called first with no state (we attach a
+ * srv_request with its start time), then again to answer; the completion callback logs
+ * it, counts it in the metrics and frees the state. Every response is created, given its
+ * headers, queued and destroyed at once. */
+#include "http.h"
+
+#include <microhttpd.h>
+#include <netdb.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "clock.h"
+#include "document.h"
+#include "mesh_job.h"
+#include "query.h"
+#include "static_files.h"
+
+#define MAX_PARAMS 32
+
+typedef struct srv_request {
+    double start;
+    srv_route route;
+    int status;
+    size_t bytes;
+    char method[16];
+    char path[256];
+} srv_request;
+
+static const char expose_headers[] =
+    "ETag, X-Iso-Triangles, X-Iso-Vertices, X-Iso-Cells-Visited, X-Iso-Extract-Ms, "
+    "X-Iso-Encode-Ms, X-Iso-Error-Bound, X-Iso-Tolerance, X-Iso-Area-Mm2, X-Iso-Volume-Mm3, "
+    "X-Iso-Budget-Fits, X-Iso-Cache";
+
+/* ---------------------------------------------------------------- responses */
+
+static void add_cors(const srv_server *s, struct MHD_Connection *c, struct MHD_Response *r)
+{
+    const char *origin = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Origin");
+    if (s->config.cors_origin_count == 0) {
+        MHD_add_response_header(r, "Access-Control-Allow-Origin", "*");
+    } else {
+        MHD_add_response_header(r, "Vary", "Origin");
+        for (size_t i = 0; origin && i < s->config.cors_origin_count; i++)
+            if (!strcmp(origin, s->config.cors_origins[i]))
+                MHD_add_response_header(r, "Access-Control-Allow-Origin", origin);
+    }
+    MHD_add_response_header(r, "Access-Control-Expose-Headers", expose_headers);
+}
+
+/* Queues r with status, records what the log and metrics need, destroys r. */
+static enum MHD_Result send_response(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                                     int status, struct MHD_Response *r, size_t bytes)
+{
+    if (!r)
+        return MHD_NO;
+    add_cors(s, c, r);
+    req->status = status;
+    req->bytes = bytes;
+    enum MHD_Result ok = MHD_queue_response(c, (unsigned)status, r);
+    MHD_destroy_response(r);
+    return ok;
+}
+
+/* A response owning a malloc'd NUL-terminated text (freed with it, or here on failure). */
+static struct MHD_Response *text_response(char *text, const char *content_type,
+                                          const char *cache_control, size_t *size)
+{
+    if (!text)
+        return NULL;
+    *size = strlen(text);
+    struct MHD_Response *r = MHD_create_response_from_buffer(*size, text, MHD_RESPMEM_MUST_FREE);
+    if (!r) {
+        free(text);
+        return NULL;
+    }
+    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, content_type);
+    MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, cache_control);
+    return r;
+}
+
+static void add_retry_after(const srv_server *s, struct MHD_Response *r)
+{
+    char retry[16];
+    snprintf(retry, sizeof retry, "%u", s->config.retry_after_s);
+    MHD_add_response_header(r, MHD_HTTP_HEADER_RETRY_AFTER, retry);
+}
+
+static enum MHD_Result send_text(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                                 int status, char *text, const char *content_type,
+                                 const char *cache_control)
+{
+    size_t size = 0;
+    struct MHD_Response *r = text_response(text, content_type, cache_control, &size);
+    return send_response(s, c, req, status, r, size);
+}
+
+static enum MHD_Result send_problem(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                                    const proto_problem *problem, const char *path)
+{
+    char *body = proto_json_problem(problem, path);
+    if (!body) /* jansson refused a string (never expected): a fixed body still says what */
+        body = strdup("{\"type\":\"urn:isoserve:problem:internal\",\"title\":\"Error\"}");
+    size_t size = 0;
+    struct MHD_Response *r = text_response(body, "application/problem+json", "no-store", &size);
+    if (r && problem->status == 405)
+        MHD_add_response_header(r, MHD_HTTP_HEADER_ALLOW, "GET, HEAD, OPTIONS");
+    if (r && problem->status == 503)
+        add_retry_after(s, r);
+    return send_response(s, c, req, problem->status, r, size);
+}
+
+static enum MHD_Result fail(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                            const char *path, int status, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 6, 7)))
+#endif
+    ;
+static enum MHD_Result fail(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                            const char *path, int status, const char *fmt, ...)
+{
+    proto_problem problem = {.status = status};
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(problem.detail, sizeof problem.detail, fmt, ap);
+    va_end(ap);
+    return send_problem(s, c, req, &problem, path);
+}
+
+/* ---------------------------------------------------------------- documents */
+
+static proto_volume_doc doc_of(const srv_volume *v)
+{
+    return (proto_volume_doc){
+        .id = v->entry->id, .name = v->entry->name, .modality = v->entry->modality,
+        .version = v->version, .vol = v->vol, .levels = v->levels, .level_count = v->level_count,
+        .histogram = v->histogram, .histogram_bins = SRV_HISTOGRAM_BINS,
+        .hierarchy_nodes = v->tree->node_count, .hierarchy_bytes = iso_tree_bytes(v->tree),
+        .hierarchy_ms = v->tree->build_ms, .hierarchy_from_file = v->tree_from_file};
+}
+
+static enum MHD_Result route_volumes(srv_server *s, struct MHD_Connection *c, srv_request *req)
+{
+    size_t n = atomic_load(&s->collection->count);
+    proto_volume_doc *docs = calloc(n ? n : 1, sizeof *docs);
+    if (!docs)
+        return MHD_NO;
+    for (size_t i = 0; i < n; i++)
+        docs[i] = doc_of(&s->collection->volumes[i]);
+    char *text = proto_json_volume_list(docs, n);
+    free(docs);
+    return send_text(s, c, req, 200, text, "application/json", "no-cache");
+}
+
+static enum MHD_Result route_volume(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                                    const srv_volume *v)
+{
+    proto_volume_doc doc = doc_of(v);
+    return send_text(s, c, req, 200, proto_json_volume(&doc, 1), "application/json", "no-cache");
+}
+
+static enum MHD_Result route_health(srv_server *s, struct MHD_Connection *c, srv_request *req)
+{
+    int ready = atomic_load(&s->collection->ready);
+    char *text = proto_json_health(ready, atomic_load(ready ? &s->collection->count
+                                                            : &s->collection->attempted),
+                                   s->collection->total);
+    size_t size = 0;
+    struct MHD_Response *r = text_response(text, "application/json", "no-store", &size);
+    if (r && !ready)
+        add_retry_after(s, r);
+    return send_response(s, c, req, ready ? 200 : 503, r, size);
+}
+
+static enum MHD_Result route_metrics(srv_server *s, struct MHD_Connection *c, srv_request *req)
+{
+    srv_metrics_gauges g = {0};
+    g.cache_hits = atomic_load(&s->cache->hits);
+    g.cache_misses = atomic_load(&s->cache->misses);
+    g.cache_evictions = atomic_load(&s->cache->evictions);
+    pthread_mutex_lock(&s->cache->lock);
+    g.cache_bytes = s->cache->bytes;
+    g.cache_items = s->cache->items;
+    pthread_mutex_unlock(&s->cache->lock);
+    g.cache_limit = s->cache->limit;
+    srv_pool_load(s->pool, &g.queue_length, &g.extractions_running);
+    g.queue_capacity = s->pool->queue_capacity;
+    g.workers = s->pool->thread_count;
+    g.extractions_total = atomic_load(&s->pool->completed);
+    g.coalesced_total = atomic_load(&s->pool->coalesced);
+    g.rejected_total = atomic_load(&s->pool->rejected);
+    g.hierarchy_bytes = srv_collection_hierarchy_bytes(s->collection);
+    g.volumes = atomic_load(&s->collection->count);
+    g.volumes_total = s->collection->total;
+    g.ready = atomic_load(&s->collection->ready);
+    size_t size;
+    char *text = srv_metrics_render(&s->metrics, &g, &size);
+    return send_text(s, c, req, 200, text, "text/plain; version=0.0.4; charset=utf-8", "no-store");
+}
+
+/* ---------------------------------------------------------------- meshes */
+
+typedef struct param_list {
+    proto_param items[MAX_PARAMS];
+    size_t count, overflow;
+} param_list;
+
+static enum MHD_Result collect_param(void *cls, enum MHD_ValueKind kind, const char *key,
+                                     const char *value)
+{
+    (void)kind;
+    param_list *list = cls;
+    if (list->count < MAX_PARAMS)
+        list->items[list->count++] = (proto_param){key, value};
+    else
+        list->overflow++;
+    return MHD_YES;
+}
+
+/* The strong ETag of a mesh: the volume's version and a hash of the normalised request. */
+static void mesh_etag(const srv_volume *v, const char *normalised, char *etag, size_t size)
+{
+    unsigned long long h = 1469598103934665603ull;
+    for (const unsigned char *p = (const unsigned char *)normalised; *p; p++)
+        h = (h ^ *p) * 1099511628211ull;
+    snprintf(etag, size, "\"%s-%016llx\"", v->version, h);
+}
+
+/* If-None-Match holds etag (or "*"): RFC 9110's weak comparison, which If-None-Match uses. */
+static int etag_matches(const char *header, const char *etag)
+{
+    if (!header)
+        return 0;
+    size_t n = strlen(etag);
+    for (const char *p = header; *p;) {
+        p += strspn(p, " \t,");
+        if (*p == '*')
+            return 1;
+        if (!strncmp(p, "W/", 2))
+            p += 2;
+        if (!strncmp(p, etag, n) && (p[n] == '\0' || p[n] == ',' || p[n] == ' ' || p[n] == '\t'))
+            return 1;
+        p += strcspn(p, ",");
+    }
+    return 0;
+}
+
+static void add_number(struct MHD_Response *r, const char *name, const char *fmt, double value)
+{
+    char text[48];
+    snprintf(text, sizeof text, fmt, value);
+    MHD_add_response_header(r, name, text);
+}
+
+static void release_body(void *cls)
+{
+    srv_body_release(cls);
+}
+
+static void add_cache_headers(struct MHD_Response *r, const char *etag)
+{
+    MHD_add_response_header(r, MHD_HTTP_HEADER_ETAG, etag);
+    MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "public, max-age=31536000, immutable");
+}
+
+/* Sends a body; takes over the caller's reference. */
+static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                                 srv_body *body, const char *etag, const char *file_name,
+                                 int hit)
+{
+    struct MHD_Response *r = MHD_create_response_from_buffer_with_free_callback_cls(
+        body->size, body->data, release_body, body);
+    if (!r) {
+        srv_body_release(body);
+        return MHD_NO;
+    }
+    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, body->content_type);
+    add_cache_headers(r, etag);
+    char disposition[160];
+    snprintf(disposition, sizeof disposition, "inline; filename=\"%s\"", file_name);
+    MHD_add_response_header(r, "Content-Disposition", disposition);
+    add_number(r, "X-Iso-Triangles", "%.0f", (double)body->triangles);
+    add_number(r, "X-Iso-Vertices", "%.0f", (double)body->vertices);
+    add_number(r, "X-Iso-Cells-Visited", "%.0f", (double)body->cells_visited);
+    add_number(r, "X-Iso-Extract-Ms", "%.3f", body->extract_ms);
+    add_number(r, "X-Iso-Encode-Ms", "%.3f", body->encode_ms);
+    add_number(r, "X-Iso-Error-Bound", "%.9g", body->error_bound);
+    add_number(r, "X-Iso-Tolerance", "%.17g", body->tolerance);
+    add_number(r, "X-Iso-Area-Mm2", "%.6g", body->area_mm2);
+    if (body->closed)
+        add_number(r, "X-Iso-Volume-Mm3", "%.6g", body->volume_mm3);
+    if (body->budget_fits >= 0)
+        MHD_add_response_header(r, "X-Iso-Budget-Fits", body->budget_fits ? "true" : "false");
+    MHD_add_response_header(r, "X-Iso-Cache", hit ? "hit" : "miss");
+    return send_response(s, c, req, 200, r, body->size);
+}
+
+static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                                  const srv_volume *v, const char *path)
+{
+    param_list params = {0};
+    MHD_get_connection_values(c, MHD_GET_ARGUMENT_KIND, collect_param, &params);
+    if (params.overflow)
+        return fail(s, c, req, path, 400, "more than %d query parameters", MAX_PARAMS);
+    proto_mesh_request mr;
+    proto_problem problem = {0};
+    if (proto_mesh_request_parse(params.items, params.count, &mr, &problem))
+        return send_problem(s, c, req, &problem, path);
+
+    char normalised[256], key[512], etag[96], file_name[128];
+    proto_mesh_request_key(&mr, normalised, sizeof normalised);
+    snprintf(key, sizeof key, "%s/%s?%s", v->entry->id, v->version, normalised);
+    mesh_etag(v, normalised, etag, sizeof etag);
+    snprintf(file_name, sizeof file_name, "%s-%g.%s", v->entry->id, mr.level,
+             mr.format == PROTO_FORMAT_DRACO ? "drc" : proto_format_name(mr.format));
+
+    if (etag_matches(MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_IF_NONE_MATCH), etag)) {
+        struct MHD_Response *r = MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
+        if (r)
+            add_cache_headers(r, etag);
+        return send_response(s, c, req, 304, r, 0);
+    }
+    srv_body *body = srv_cache_get(s->cache, key);
+    if (body)
+        return send_body(s, c, req, body, etag, file_name, 1);
+
+    srv_mesh_job *work = calloc(1, sizeof *work);
+    if (!work || !(work->key = strdup(key))) {
+        free(work);
+        return MHD_NO;
+    }
+    work->volume = v;
+    work->request = mr;
+    work->cache = s->cache;
+    int coalesced;
+    srv_job *job = srv_pool_submit(s->pool, key, srv_mesh_job_run, work, srv_mesh_job_free, &coalesced);
+    if (!job)
+        return fail(s, c, req, path, 503,
+                    "the extraction queue is full (%zu waiting); retry in %u s",
+                    s->pool->queue_capacity, s->config.retry_after_s);
+    body = srv_pool_wait(s->pool, job, &problem);
+    srv_pool_release(s->pool, job);
+    if (!body)
+        return send_problem(s, c, req, &problem, path);
+    return send_body(s, c, req, body, etag, file_name, 0);
+}
+
+/* ---------------------------------------------------------------- routing */
+
+static enum MHD_Result route_static(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                                    const char *path)
+{
+    int fd;
+    size_t size;
+    const char *type;
+    if (!s->config.web_root || srv_static_open(s->config.web_root, path, &fd, &size, &type) != 200)
+        return fail(s, c, req, path, 404, "nothing at %s", path);
+    struct MHD_Response *r = MHD_create_response_from_fd(size, fd);
+    if (!r) {
+        close(fd);
+        return MHD_NO;
+    }
+    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, type);
+    MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
+    return send_response(s, c, req, 200, r, size);
+}
+
+static enum MHD_Result preflight(srv_server *s, struct MHD_Connection *c, srv_request *req)
+{
+    struct MHD_Response *r = MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
+    if (!r)
+        return MHD_NO;
+    MHD_add_response_header(r, "Access-Control-Allow-Methods", "GET, HEAD, OPTIONS");
+    MHD_add_response_header(r, "Access-Control-Allow-Headers", "If-None-Match");
+    MHD_add_response_header(r, "Access-Control-Max-Age", "86400");
+    MHD_add_response_header(r, MHD_HTTP_HEADER_ALLOW, "GET, HEAD, OPTIONS");
+    return send_response(s, c, req, 204, r, 0);
+}
+
+static enum MHD_Result add_length(void *cls, enum MHD_ValueKind kind, const char *key, const char *value)
+{
+    (void)kind;
+    *(size_t *)cls += strlen(key) + (value ? strlen(value) + 1 : 0) + 1;
+    return MHD_YES;
+}
+
+/* Splits "/v1/volumes/{id}[/mesh]"; returns 1 for a volume, 2 for its mesh, 0 otherwise. */
+static int volume_path(const char *path, char *id, size_t size)
+{
+    static const char prefix[] = "/v1/volumes/";
+    if (strncmp(path, prefix, sizeof prefix - 1))
+        return 0;
+    const char *start = path + sizeof prefix - 1;
+    const char *slash = strchr(start, '/');
+    size_t len = slash ? (size_t)(slash - start) : strlen(start);
+    if (len == 0 || len >= size)
+        return 0;
+    memcpy(id, start, len);
+    id[len] = '\0';
+    if (!slash)
+        return 1;
+    return !strcmp(slash, "/mesh") ? 2 : 0;
+}
+
+static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                             const char *path, const char *method)
+{
+    if (!strcmp(method, "OPTIONS"))
+        return preflight(s, c, req);
+    if (strcmp(method, "GET") && strcmp(method, "HEAD"))
+        return fail(s, c, req, path, 405, "%s is not allowed here; use GET", method);
+    size_t length = strlen(path);
+    MHD_get_connection_values(c, MHD_GET_ARGUMENT_KIND, add_length, &length);
+    if (length > SRV_URI_MAX)
+        return fail(s, c, req, NULL, 414, "the request target is %zu bytes; at most %d are accepted",
+                    length, SRV_URI_MAX);
+    if (!strcmp(path, "/healthz")) {
+        req->route = SRV_ROUTE_HEALTH;
+        return route_health(s, c, req);
+    }
+    if (!strcmp(path, "/metrics")) {
+        req->route = SRV_ROUTE_METRICS;
+        return route_metrics(s, c, req);
+    }
+    if (strncmp(path, "/v1/", 4) && strcmp(path, "/v1")) {
+        req->route = SRV_ROUTE_STATIC;
+        return route_static(s, c, req, path);
+    }
+    if (!atomic_load(&s->collection->ready))
+        return fail(s, c, req, path, 503, "preloading: %zu of %zu volumes done",
+                    atomic_load(&s->collection->attempted), s->collection->total);
+    if (!strcmp(path, "/v1/volumes")) {
+        req->route = SRV_ROUTE_VOLUMES;
+        return route_volumes(s, c, req);
+    }
+    char id[SRV_ID_MAX + 2];
+    int kind = volume_path(path, id, sizeof id);
+    if (!kind)
+        return fail(s, c, req, path, 404, "no such resource; the API is /v1/volumes, "
+                    "/v1/volumes/{id} and /v1/volumes/{id}/mesh");
+    req->route = kind == 1 ? SRV_ROUTE_VOLUME : SRV_ROUTE_MESH;
+    const srv_volume *v = srv_catalog_id_valid(id) ? srv_collection_find(s->collection, id) : NULL;
+    if (!v)
+        return fail(s, c, req, path, 404, "no volume \"%s\"; /v1/volumes lists them",
+                    srv_catalog_id_valid(id) ? id : "(not a valid id)");
+    return kind == 1 ? route_volume(s, c, req, v) : route_mesh(s, c, req, v, path);
+}
+
+/* ---------------------------------------------------------------- life cycle */
+
+static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url,
+                                  const char *method, const char *version,
+                                  const char *upload_data, size_t *upload_size, void **req_cls)
+{
+    (void)version;
+    (void)upload_data;
+    srv_server *s = cls;
+    srv_request *req = *req_cls;
+    if (!req) {
+        req = calloc(1, sizeof *req);
+        if (!req)
+            return MHD_NO;
+        req->start = iso_clock_ms();
+        req->route = SRV_ROUTE_OTHER;
+        snprintf(req->method, sizeof req->method, "%s", method);
+        snprintf(req->path, sizeof req->path, "%s", url);
+        atomic_fetch_add(&s->in_flight, 1);
+        *req_cls = req;
+        return MHD_YES;
+    }
+    if (*upload_size) { /* GET takes no body: read and drop it */
+        *upload_size = 0;
+        return MHD_YES;
+    }
+    return route(s, c, req, url, method);
+}
+
+/* The access log: one line per request on stderr. Control bytes in the path are masked. */
+static void log_request(const srv_request *req, double ms)
+{
+    char when[32], path[256];
+    time_t now = time(NULL);
+    struct tm tm;
+    strftime(when, sizeof when, "%Y-%m-%dT%H:%M:%SZ", gmtime_r(&now, &tm));
+    size_t n = 0;
+    for (const char *p = req->path; *p && n + 1 < sizeof path; p++)
+        path[n++] = (*p > 0x20 && *p < 0x7f) ? *p : '?';
+    path[n] = '\0';
+    fprintf(stderr, "%s %s %s %d %zu %.1fms\n", when, req->method, path, req->status, req->bytes, ms);
+}
+
+static void on_completed(void *cls, struct MHD_Connection *c, void **req_cls,
+                         enum MHD_RequestTerminationCode code)
+{
+    (void)c;
+    srv_server *s = cls;
+    srv_request *req = *req_cls;
+    if (!req)
+        return;
+    double ms = iso_clock_ms() - req->start;
+    if (code != MHD_REQUEST_TERMINATED_COMPLETED_OK && req->status == 0)
+        req->status = 499; /* the client left, or the connection failed, before an answer */
+    log_request(req, ms);
+    srv_metrics_request(&s->metrics, req->route, req->status, ms, req->bytes);
+    free(req);
+    *req_cls = NULL;
+    atomic_fetch_sub(&s->in_flight, 1);
+}
+
+int srv_http_start(srv_server *s, iso_error *err)
+{
+    srv_metrics_init(&s->metrics);
+    s->listen_socket = -1;
+    char port[16];
+    snprintf(port, sizeof port, "%u", s->config.port);
+    struct addrinfo hints = {.ai_family = AF_UNSPEC, .ai_socktype = SOCK_STREAM,
+                             .ai_flags = AI_PASSIVE}, *addr;
+    int gai = getaddrinfo(s->config.host, port, &hints, &addr);
+    if (gai)
+        return iso_error_set(err, ISO_E_ARGUMENT, "--listen %s: %s", s->config.host, gai_strerror(gai));
+    unsigned flags = MHD_USE_THREAD_PER_CONNECTION | MHD_USE_INTERNAL_POLLING_THREAD |
+                     MHD_USE_POLL | MHD_USE_ITC | MHD_USE_ERROR_LOG;
+    if (addr->ai_family == AF_INET6)
+        flags |= MHD_USE_IPv6;
+    s->daemon = MHD_start_daemon(
+        flags, (uint16_t)s->config.port, NULL, NULL, on_request, s,
+        MHD_OPTION_SOCK_ADDR, addr->ai_addr,
+        MHD_OPTION_NOTIFY_COMPLETED, on_completed, s,
+        MHD_OPTION_CONNECTION_LIMIT, s->config.max_connections,
+        MHD_OPTION_CONNECTION_TIMEOUT, s->config.connection_timeout_s,
+        MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)64 * 1024,
+        MHD_OPTION_END);
+    freeaddrinfo(addr);
+    if (!s->daemon)
+        return iso_error_set(err, ISO_E_IO, "cannot listen on %s:%u (in use, or not an address of "
+                             "this machine)", s->config.host, s->config.port);
+    const union MHD_DaemonInfo *info = MHD_get_daemon_info(s->daemon, MHD_DAEMON_INFO_BIND_PORT);
+    s->port = info ? info->port : s->config.port;
+    return 0;
+}
+
+void srv_http_quiesce(srv_server *s)
+{
+    if (s->daemon && s->listen_socket < 0)
+        s->listen_socket = MHD_quiesce_daemon(s->daemon);
+}
+
+int srv_http_drain(srv_server *s, double timeout_ms)
+{
+    double until = iso_clock_ms() + timeout_ms;
+    while (atomic_load(&s->in_flight) > 0 && iso_clock_ms() < until)
+        usleep(10000);
+    return atomic_load(&s->in_flight);
+}
+
+void srv_http_stop(srv_server *s)
+{
+    if (s->daemon)
+        MHD_stop_daemon(s->daemon);
+    if (s->listen_socket >= 0)
+        close(s->listen_socket);
+    s->daemon = NULL;
+    s->listen_socket = -1;
+}

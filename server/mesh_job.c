@@ -1,0 +1,103 @@
+/* mesh_job.c: extract, add normals, measure, encode (see mesh_job.h). */
+#include "mesh_job.h"
+
+#include <stdlib.h>
+
+#include "budget.h"
+#include "clock.h"
+#include "encode.h"
+#include "extract.h"
+#include "normals.h"
+
+void srv_mesh_job_free(void *arg)
+{
+    srv_mesh_job *job = arg;
+    if (job)
+        free(job->key);
+    free(job);
+}
+
+/* Extraction, under the budget when one is asked. */
+static int extract(const srv_mesh_job *job, iso_mesh *mesh, iso_extract_stats *stats,
+                   srv_body *facts, iso_error *err)
+{
+    const proto_mesh_request *r = &job->request;
+    iso_extract_params params = {.level = r->level, .tolerance = r->tolerance,
+                                 .space = ISO_SPACE_WORLD};
+    facts->tolerance = r->tolerance;
+    if (!r->budget)
+        return iso_extract(job->volume->tree, &params, mesh, stats, err);
+    iso_budget_result chosen;
+    int rc = iso_extract_budget(job->volume->tree, &params, r->budget, mesh, stats, &chosen, err);
+    facts->tolerance = chosen.tolerance;
+    facts->budget_fits = chosen.fits;
+    return rc;
+}
+
+static int encode(const proto_mesh_request *r, const iso_mesh *mesh, unsigned char **out,
+                  size_t *size, iso_error *err)
+{
+    proto_encode_options opt;
+    proto_encode_options_init(&opt);
+    opt.position_bits = r->position_bits;
+    opt.normal_bits = r->normal_bits;
+    switch (r->format) {
+    case PROTO_FORMAT_GLB: return proto_encode_glb(mesh, &opt, out, size, err);
+    case PROTO_FORMAT_PLY: return proto_encode_ply(mesh, out, size, err);
+    default: return proto_encode_draco(mesh, &opt, out, size, err);
+    }
+}
+
+srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
+{
+    srv_mesh_job *job = arg;
+    const proto_mesh_request *r = &job->request;
+    iso_mesh mesh;
+    iso_mesh_init(&mesh);
+    iso_extract_stats stats = {0};
+    iso_error err = {0};
+    srv_body facts = {.budget_fits = -1};
+    unsigned char *data = NULL;
+    size_t size = 0;
+
+    double start = iso_clock_ms();
+    int rc = extract(job, &mesh, &stats, &facts, &err);
+    if (!rc && r->normals && mesh.vertex_count)
+        rc = iso_normals_compute(job->volume->vol, &mesh, r->normals, ISO_SPACE_WORLD, &err);
+    iso_mesh_edges edges = {0};
+    if (!rc)
+        rc = iso_mesh_count_edges(&mesh, &edges);
+    double extract_ms = iso_clock_ms() - start;
+    start = iso_clock_ms();
+    if (!rc)
+        rc = encode(r, &mesh, &data, &size, &err);
+    double encode_ms = iso_clock_ms() - start;
+    if (rc) {
+        iso_mesh_free(&mesh);
+        proto_problem_set(problem, rc == ISO_E_NOMEM ? 503 : 500, NULL, "%s: %s",
+                          job->volume->entry->id, err.message[0] ? err.message : iso_status_name(rc));
+        return NULL;
+    }
+    srv_body *body = srv_body_create(data, size);
+    if (!body) {
+        iso_mesh_free(&mesh);
+        proto_problem_set(problem, 503, NULL, "out of memory");
+        return NULL;
+    }
+    body->content_type = proto_format_content_type(r->format);
+    body->triangles = stats.triangles;
+    body->vertices = stats.vertices;
+    body->cells_visited = stats.cells_visited;
+    body->extract_ms = extract_ms;
+    body->encode_ms = encode_ms;
+    body->error_bound = stats.error_bound;
+    body->tolerance = facts.tolerance;
+    body->budget_fits = facts.budget_fits;
+    body->area_mm2 = iso_mesh_area(&mesh);
+    body->closed = mesh.triangle_count > 0 && edges.open == 0 && edges.nonmanifold == 0;
+    body->volume_mm3 = body->closed ? iso_mesh_enclosed_volume(&mesh) : 0;
+    iso_mesh_free(&mesh);
+    if (job->cache)
+        srv_cache_put(job->cache, job->key, body);
+    return body;
+}

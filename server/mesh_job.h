@@ -1,0 +1,23 @@
+/* mesh_job.h: one mesh request's work on a pool thread: extract (under a budget when
+ * asked), add normals, measure, encode, and leave the body in the cache. The pipeline of
+ * DESIGN.md section 2, from hierarchy to HTTP body, without any HTTP. */
+#ifndef SRV_MESH_JOB_H
+#define SRV_MESH_JOB_H
+
+#include "cache.h"
+#include "collection.h"
+#include "query.h"
+
+typedef struct srv_mesh_job {
+    const srv_volume *volume;
+    proto_mesh_request request;
+    srv_cache *cache;       /* where the body goes when done; may be NULL */
+    char *key;              /* the cache key (owned) */
+} srv_mesh_job;
+
+/* A job for the pool (see pool.h's srv_job_fn): arg is a srv_mesh_job. */
+srv_body *srv_mesh_job_run(void *arg, proto_problem *problem);
+/* Frees a srv_mesh_job made with malloc. */
+void srv_mesh_job_free(void *arg);
+
+#endif

@@ -1,0 +1,598 @@
+"""HTTP integration tests of `isoserve serve`: every route and error status, ETag/304, CORS,
+the cache, coalescing, a full queue, preloading and hierarchy files, graceful shutdown, and
+the bytes decoded back (Debian's draco_decoder, npm's draco3d in node when installed).
+
+Each server is a real process on 127.0.0.1 with port 0 (the kernel picks a free port, which
+the server prints), stopped by its PID. Prints PASS/FAIL/SKIP lines; exit status 1 on failure.
+Uses Debian's python3 with numpy only."""
+
+import http.client
+import json
+import os
+import re
+import shutil
+import signal
+import struct
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+import numpy as np
+
+BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", "build/isoserve"))
+LABEL = os.environ.get("ISO_TEST_LABEL", "http")  # the sanitizer run says http-san
+failures = 0
+
+
+def report(name, ok, why=""):
+    global failures
+    if ok:
+        print(f"PASS {LABEL}.{name}", flush=True)
+    else:
+        failures += 1
+        print(f"FAIL {LABEL}.{name}: {why}", flush=True)
+
+
+class Skip(Exception):
+    """Raised by a test that cannot run here; it says why."""
+
+
+def check(name, fn):
+    """Runs one test; an exception is a failure with its message, never a crash of the suite."""
+    try:
+        fn()
+    except Skip as e:
+        print(f"SKIP {LABEL}.{name}: {e}", flush=True)
+        return
+    except AssertionError as e:
+        report(name, False, str(e) or "assertion failed")
+    except Exception as e:  # noqa: BLE001 - any error is this test's failure
+        report(name, False, f"{type(e).__name__}: {e}")
+    else:
+        report(name, True)
+
+
+# ---------------------------------------------------------------- volumes written here
+
+def write_nrrd(path, data, spacing):
+    """An attached raw NRRD of float32 samples (data indexed [z, y, x])."""
+    z, y, x = data.shape
+    header = ("NRRD0004\ntype: float\ndimension: 3\n"
+              f"sizes: {x} {y} {z}\nspacings: {spacing[0]} {spacing[1]} {spacing[2]}\n"
+              "endian: little\nencoding: raw\n\n")
+    with open(path, "wb") as f:
+        f.write(header.encode())
+        f.write(data.astype("<f4").tobytes())
+
+
+def blob_volume():
+    """A smooth, lumpy float field (two overlapping blobs) with known samples."""
+    z, y, x = np.mgrid[0:30, 0:34, 0:38].astype(np.float64)
+    a = np.exp(-((x - 14) ** 2 + (y - 16) ** 2 + (z - 14) ** 2) / 60.0)
+    b = np.exp(-((x - 24) ** 2 + (y - 18) ** 2 + (z - 16) ** 2) / 40.0)
+    return (100 * (a + 0.8 * b)).astype(np.float32)
+
+
+def trilinear(data, p):
+    """The trilinear interpolant of data ([z,y,x]) at index points p (N x 3, x y z)."""
+    nz, ny, nx = data.shape
+    q = np.clip(p, 0, [nx - 1.000001, ny - 1.000001, nz - 1.000001])
+    i0 = np.floor(q).astype(int)
+    t = q - i0
+    out = np.zeros(len(p))
+    for dz in (0, 1):
+        for dy in (0, 1):
+            for dx in (0, 1):
+                w = ((t[:, 0] if dx else 1 - t[:, 0]) * (t[:, 1] if dy else 1 - t[:, 1])
+                     * (t[:, 2] if dz else 1 - t[:, 2]))
+                out += w * data[i0[:, 2] + dz, i0[:, 1] + dy, i0[:, 0] + dx]
+    return out
+
+
+# ---------------------------------------------------------------- servers
+
+class Server:
+    """A daemon on 127.0.0.1:0; its stderr (access log included) is collected."""
+
+    def __init__(self, args, wait_ready=True):
+        self.proc = subprocess.Popen([BIN, "serve", "--listen", "127.0.0.1:0", *args],
+                                     stderr=subprocess.PIPE, text=True)
+        self.lines = []
+        self.port = None
+        deadline = time.time() + 30
+        while time.time() < deadline:
+            line = self.proc.stderr.readline()
+            if not line:
+                break
+            self.lines.append(line)
+            m = re.search(r"listening on http://127\.0\.0\.1:(\d+)/", line)
+            if m:
+                self.port = int(m.group(1))
+                break
+        if not self.port:
+            self.proc.kill()
+            raise RuntimeError("server did not start: " + "".join(self.lines))
+        self.reader = threading.Thread(target=self._drain, daemon=True)
+        self.reader.start()
+        if wait_ready:
+            self.wait_ready()
+
+    def _drain(self):
+        for line in self.proc.stderr:
+            self.lines.append(line)
+
+    def wait_ready(self, timeout=120):
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            if self.get("/healthz").status == 200:
+                return
+            time.sleep(0.05)
+        raise RuntimeError("server not ready")
+
+    def request(self, method, target, headers=None, timeout=60):
+        conn = http.client.HTTPConnection("127.0.0.1", self.port, timeout=timeout)
+        conn.request(method, target, headers=headers or {})
+        r = conn.getresponse()
+        r.body = r.read()
+        conn.close()
+        return r
+
+    def get(self, target, headers=None, timeout=60):
+        return self.request("GET", target, headers, timeout)
+
+    def metric(self, name):
+        text = self.get("/metrics").body.decode()
+        m = re.search(rf"^{re.escape(name)} (\S+)$", text, re.M)
+        return float(m.group(1)) if m else None
+
+    def stop(self):
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+        rc = self.proc.wait(timeout=30)
+        self.reader.join(timeout=5)
+        return rc
+
+    def log(self):
+        return "".join(self.lines)
+
+    def wait_log(self, pattern, timeout=5):
+        """The log line is written when a request completes, just after the client has
+        its response: poll for it briefly."""
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            if re.search(pattern, self.log(), re.M):
+                return True
+            time.sleep(0.02)
+        return False
+
+
+def problem(r):
+    assert r.getheader("Content-Type") == "application/problem+json", r.getheader("Content-Type")
+    body = json.loads(r.body)
+    assert body["status"] == r.status and body["title"] and body["detail"], body
+    return body
+
+
+# ---------------------------------------------------------------- the main server's tests
+
+def main_tests(s, tmp, blob):
+    def volumes():
+        r = s.get("/v1/volumes")
+        assert r.status == 200 and r.getheader("Content-Type") == "application/json"
+        vols = {v["id"]: v for v in json.loads(r.body)["volumes"]}
+        assert set(vols) == {"blob", "torus", "ml"}, sorted(vols)
+        b = vols["blob"]
+        assert b["dims"] == [38, 34, 30] and b["value_type"] == "float32", b
+        assert b["spacing"] == [0.75, 1.0, 1.25], b["spacing"]
+        assert abs(b["value_range"][1] - float(blob.max())) < 1e-3, b["value_range"]
+        assert vols["torus"]["suggested_levels"] == [0.0], vols["torus"]["suggested_levels"]
+        assert len(b["suggested_levels"]) == 2 and b["value_range"][0] < b["suggested_levels"][0] < b["suggested_levels"][1] < b["value_range"][1]
+        assert len(b["index_to_world"]) == 16 and b["index_to_world"][0] == 0.75
+    check("volumes_list", volumes)
+
+    def one_volume():
+        r = s.get("/v1/volumes/blob")
+        v = json.loads(r.body)
+        h = v["histogram"]
+        assert r.status == 200 and len(h["counts"]) == 256 and sum(h["counts"]) == blob.size
+        top = int(np.floor((blob.max() - h["min"]) / (h["max"] - h["min"]) * 256))
+        assert h["counts"][255] >= 1 and top >= 255
+        assert v["hierarchy"]["nodes"] >= 1 and v["hierarchy"]["bytes"] == 16 * v["hierarchy"]["nodes"]
+        assert v["hierarchy"]["share_of_volume"] < 0.1, v["hierarchy"]
+    check("volume_document", one_volume)
+
+    # The mesh, uncompressed (PLY) and in Draco: counts agree with the headers, Draco's
+    # positions sit within half a quantization step of the exact ones, and the error bound
+    # holds at the exact vertices against the samples this test wrote.
+    level, tol = 40.0, 2.0
+    state = {}
+
+    def mesh_ply():
+        r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=ply&normals=none")
+        assert r.status == 200 and r.getheader("Content-Type") == "application/x-ply"
+        head, _, payload = r.body.partition(b"end_header\n")
+        nv = int(re.search(rb"element vertex (\d+)", head).group(1))
+        nt = int(re.search(rb"element face (\d+)", head).group(1))
+        assert nv == int(r.getheader("X-Iso-Vertices")) and nt == int(r.getheader("X-Iso-Triangles"))
+        assert nt > 500 and len(payload) == nv * 12 + nt * 13
+        pos = np.frombuffer(payload[:nv * 12], "<f4").reshape(nv, 3).astype(np.float64)
+        bound = float(r.getheader("X-Iso-Error-Bound"))
+        assert 0 <= bound <= tol and float(r.getheader("X-Iso-Tolerance")) == tol
+        for h in ("X-Iso-Cells-Visited", "X-Iso-Extract-Ms", "X-Iso-Encode-Ms", "X-Iso-Area-Mm2"):
+            assert float(r.getheader(h)) >= 0, h
+        index = pos / np.array([0.75, 1.0, 1.25])  # origin 0, identity directions
+        err = np.abs(trilinear(blob.astype(np.float64), index) - level)
+        assert err.max() <= bound + 1e-3, f"max |f - L| {err.max()} > bound {bound}"
+        state["pos"], state["bound"], state["nt"] = pos, bound, nt
+    check("mesh_ply_bound_holds", mesh_ply)
+
+    def mesh_draco():
+        r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&normals=none&qp=12")
+        assert r.status == 200 and r.getheader("Content-Type") == "application/x-draco"
+        path = os.path.join(tmp, "blob.drc")
+        open(path, "wb").write(r.body)
+        out = os.path.join(tmp, "blob_decoded.ply")
+        subprocess.run(["draco_decoder", "-i", path, "-o", out], check=True, capture_output=True)
+        data = open(out, "rb").read()
+        head, _, payload = data.partition(b"end_header\n")
+        nv = int(re.search(rb"element vertex (\d+)", head).group(1))
+        nt = int(re.search(rb"element face (\d+)", head).group(1))
+        assert nv == int(r.getheader("X-Iso-Vertices")), (nv, r.getheader("X-Iso-Vertices"))
+        assert nt == int(r.getheader("X-Iso-Triangles")) == state["nt"]
+        dec = np.frombuffer(payload[:nv * 12], "<f4").reshape(nv, 3).astype(np.float64)
+        exact = state["pos"]
+        extent = (exact.max(0) - exact.min(0)).max()
+        half_step = extent / (2 ** 12 - 1) / 2
+        # Nearest exact vertex of each decoded one, bucketed on a coarse grid.
+        cell = 4 * half_step + 1e-9
+        keys = {}
+        for i, p in enumerate(np.floor(exact / cell).astype(int)):
+            keys.setdefault(tuple(p), []).append(i)
+        worst = 0.0
+        for p in dec:
+            k = np.floor(p / cell).astype(int)
+            cand = [j for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)
+                    for j in keys.get((k[0] + dx, k[1] + dy, k[2] + dz), [])]
+            assert cand, f"decoded vertex {p} has no exact vertex near it"
+            worst = max(worst, np.abs(exact[cand] - p).max(axis=1).min())
+        assert worst <= half_step * 1.01 + 1e-6, f"moved {worst} > half step {half_step}"
+        state["drc"] = path
+    check("mesh_draco_decodes_within_half_step", mesh_draco)
+
+    def draco3d_node():
+        node_dir = "web/node_modules/draco3d"
+        if not os.path.isdir(node_dir) or not shutil.which("node") or "drc" not in state:
+            raise Skip("web/node_modules/draco3d not installed (make web)")
+        script = r"""
+const draco3d = require(process.argv[2]);
+const fs = require('fs');
+draco3d.createDecoderModule({}).then(m => {
+  const buf = fs.readFileSync(process.argv[3]);
+  const dec = new m.Decoder(), mesh = new m.Mesh();
+  const st = dec.DecodeArrayToMesh(new Int8Array(buf), buf.length, mesh);
+  if (!st.ok()) { console.log('error ' + st.error_msg()); process.exit(1); }
+  console.log(mesh.num_points() + ' ' + mesh.num_faces());
+});"""
+        out = subprocess.run(["node", "-e", script, os.path.abspath(node_dir), state["drc"]],
+                             capture_output=True, text=True, timeout=60)
+        assert out.returncode == 0, out.stdout + out.stderr
+        nv, nt = map(int, out.stdout.split())
+        assert nt == state["nt"], (nt, state["nt"])
+        assert nv == len(state["pos"]), (nv, len(state["pos"]))
+    check("mesh_draco3d_node", draco3d_node)
+
+    def mesh_glb():
+        r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=glb")
+        b = r.body
+        assert r.status == 200 and r.getheader("Content-Type") == "model/gltf-binary"
+        magic, version, length = struct.unpack_from("<III", b, 0)
+        assert magic == 0x46546C67 and version == 2 and length == len(b)
+        jlen, jtype = struct.unpack_from("<II", b, 12)
+        assert jtype == 0x4E4F534A
+        doc = json.loads(b[20:20 + jlen])
+        blen, btype = struct.unpack_from("<II", b, 20 + jlen)
+        assert btype == 0x004E4942 and 28 + jlen + blen == len(b)
+        assert "KHR_draco_mesh_compression" in doc["extensionsRequired"]
+        prim = doc["meshes"][0]["primitives"][0]
+        ext = prim["extensions"]["KHR_draco_mesh_compression"]
+        view = doc["bufferViews"][ext["bufferView"]]
+        assert view["byteOffset"] + view["byteLength"] <= blen
+        assert "NORMAL" in prim["attributes"], prim["attributes"]
+        assert doc["accessors"][prim["indices"]]["count"] == 3 * int(r.getheader("X-Iso-Triangles"))
+    check("mesh_glb_structure", mesh_glb)
+
+    def etag_and_cache():
+        t = f"/v1/volumes/blob/mesh?level={level}&tolerance=3"
+        a = s.get(t)
+        b = s.get(f"/v1/volumes/blob/mesh?tolerance=3.0&level={level}&normals=tricubic&format=draco")
+        assert a.status == b.status == 200
+        etag = a.getheader("ETag")
+        assert etag and etag.startswith('"') and etag == b.getheader("ETag"), (etag, b.getheader("ETag"))
+        assert a.getheader("X-Iso-Cache") == "miss" and b.getheader("X-Iso-Cache") == "hit"
+        assert a.body == b.body
+        assert a.getheader("Cache-Control") == "public, max-age=31536000, immutable"
+        c = s.get(t, {"If-None-Match": etag})
+        assert c.status == 304 and c.body == b"" and c.getheader("ETag") == etag
+        d = s.get(t, {"If-None-Match": f'"other", W/{etag}'})
+        assert d.status == 304
+        e = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance=4", {"If-None-Match": etag})
+        assert e.status == 200 and e.getheader("ETag") != etag
+    check("etag_304_and_cache", etag_and_cache)
+
+    def cors():
+        r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance=3", {"Origin": "http://example.org"})
+        assert r.getheader("Access-Control-Allow-Origin") == "*"
+        exposed = r.getheader("Access-Control-Expose-Headers")
+        for h in ("X-Iso-Triangles", "X-Iso-Error-Bound", "X-Iso-Tolerance", "ETag"):
+            assert h in exposed, exposed
+        p = s.request("OPTIONS", "/v1/volumes/blob/mesh", {"Origin": "http://example.org",
+                                                          "Access-Control-Request-Method": "GET"})
+        assert p.status == 204 and "GET" in p.getheader("Access-Control-Allow-Methods")
+    check("cors_headers", cors)
+
+    def budget():
+        r = s.get(f"/v1/volumes/blob/mesh?level={level}&budget=400&normals=none")
+        nt = int(r.getheader("X-Iso-Triangles"))
+        assert r.status == 200 and 0 < nt <= 400, nt
+        assert float(r.getheader("X-Iso-Tolerance")) > 0 and r.getheader("X-Iso-Budget-Fits") == "true"
+    check("budget_picks_tolerance", budget)
+
+    def empty_mesh():
+        r = s.get("/v1/volumes/blob/mesh?level=1e6")
+        assert r.status == 200 and r.getheader("X-Iso-Triangles") == "0" and len(r.body) > 0
+    check("empty_mesh_is_200", empty_mesh)
+
+    def errors():
+        cases = [
+            ("/v1/volumes/blob/mesh", 400, "level", "required"),
+            ("/v1/volumes/blob/mesh?level=abc", 400, "level", "not a number"),
+            ("/v1/volumes/blob/mesh?level=nan", 400, "level", "finite"),
+            ("/v1/volumes/blob/mesh?level=1&tolerance=inf", 400, "tolerance", "finite"),
+            ("/v1/volumes/blob/mesh?level=1&tolerance=-2", 400, "tolerance", "from 0"),
+            ("/v1/volumes/blob/mesh?level=1&qp=30", 400, "qp", "from 8 to 24"),
+            ("/v1/volumes/blob/mesh?level=1&normals=flat", 400, "normals", "tricubic"),
+            ("/v1/volumes/blob/mesh?level=1&format=stl", 400, "format", "draco"),
+            ("/v1/volumes/blob/mesh?level=1&level=2", 400, "level", "more than once"),
+            ("/v1/volumes/blob/mesh?level=1&colour=red", 400, None, "unknown parameter"),
+            ("/v1/volumes/nope/mesh?level=1", 404, None, "nope"),
+            ("/v1/volumes/nope", 404, None, "nope"),
+            ("/v1/volumes/blob/other", 404, None, "no such resource"),
+            ("/v1/elsewhere", 404, None, "no such resource"),
+            ("/v1/volumes/..%2F..%2Fetc%2Fpasswd/mesh?level=1", 404, None, "no such resource"),
+            ("/v1/volumes/bl%20ob/mesh?level=1", 404, None, "not a valid id"),
+            ("/v1/volumes/blob/mesh?level=1&" + "x" * 5000, 414, None, "bytes"),
+        ]
+        for target, status, param, words in cases:
+            r = s.get(target)
+            assert r.status == status, f"{target[:80]}: {r.status} {r.body[:200]}"
+            body = problem(r)
+            assert body.get("parameter") == param, f"{target[:60]}: {body}"
+            assert words in body["detail"], f"{target[:60]}: {body['detail']}"
+        r = s.request("POST", "/v1/volumes")
+        assert r.status == 405 and "GET" in r.getheader("Allow") and problem(r)
+        r = s.request("DELETE", "/v1/volumes/blob")
+        assert r.status == 405 and problem(r)
+    check("error_statuses_and_problems", errors)
+
+    def metrics_and_log():
+        text = s.get("/metrics").body.decode()
+        for needle in ('isoserve_http_requests_total{route="mesh",status="200"}',
+                       'isoserve_http_requests_total{route="mesh",status="400"}',
+                       'isoserve_http_request_duration_seconds_bucket{route="mesh",le="+Inf"}',
+                       "isoserve_mesh_cache_hits_total", "isoserve_mesh_cache_misses_total",
+                       "isoserve_http_response_bytes_total", "isoserve_extractions_in_flight 0",
+                       "isoserve_extraction_queue_length 0", "isoserve_hierarchy_bytes"):
+            assert needle in text, f"{needle} not in /metrics"
+        assert s.metric("isoserve_mesh_cache_hits_total") >= 1, "no cache hit counted"
+        assert s.wait_log(r"^\S+Z GET /v1/volumes/blob/mesh 200 \d+ [\d.]+ms$"), s.log()[-500:]
+        assert s.wait_log(r"^\S+Z POST /v1/volumes 405 \d+ [\d.]+ms$"), "no 405 log line"
+    check("metrics_and_access_log", metrics_and_log)
+
+    def static_files():
+        r = s.get("/")
+        assert r.status == 200 and b"isoserve test page" in r.body, r.status
+        assert r.getheader("Content-Type").startswith("text/html")
+        for bad in ("/../../etc/passwd", "/.secret", "/missing.js", "/%2e%2e/%2e%2e/etc/passwd"):
+            r = s.get(bad)
+            assert r.status == 404, (bad, r.status)
+    check("static_files_and_traversal", static_files)
+
+    def coalescing():
+        # ml:160 at tolerance 0 with tricubic normals takes long enough for 8 requests to meet.
+        before_x = s.metric("isoserve_extractions_total")
+        before_c = s.metric("isoserve_coalesced_requests_total")
+        before_h = s.metric("isoserve_mesh_cache_hits_total")
+        results = []
+
+        def fetch():
+            r = s.get("/v1/volumes/ml/mesh?level=0.5&tolerance=0")
+            results.append((r.status, r.getheader("ETag"), len(r.body)))
+        threads = [threading.Thread(target=fetch) for _ in range(8)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert len(results) == 8 and all(r[0] == 200 for r in results), results
+        assert len({r[1:] for r in results}) == 1, results
+        dx = s.metric("isoserve_extractions_total") - before_x
+        dc = s.metric("isoserve_coalesced_requests_total") - before_c
+        dh = s.metric("isoserve_mesh_cache_hits_total") - before_h
+        assert dx == 1 and dc + dh == 7 and dc >= 1, f"extractions +{dx}, coalesced +{dc}, hits +{dh}"
+    check("coalescing_one_extraction", coalescing)
+
+
+# ---------------------------------------------------------------- other servers
+
+def queue_full(tmp, catalog):
+    s = Server(["--catalog", catalog, "--threads", "1", "--queue", "1", "--web-root", tmp])
+    try:
+        statuses = {}
+
+        def fetch(level):
+            r = s.get(f"/v1/volumes/ml/mesh?level={level}&tolerance=0")
+            statuses[level] = (r.status, r.getheader("Retry-After"), r)
+        levels = [0.3, 0.4, 0.45, 0.55, 0.6, 0.7]
+        threads = [threading.Thread(target=fetch, args=(lv,)) for lv in levels]
+        for t in threads:
+            t.start()
+            time.sleep(0.02)
+        for t in threads:
+            t.join()
+        codes = sorted(v[0] for v in statuses.values())
+        assert codes.count(503) >= 1 and codes.count(200) >= 2, codes
+        for st, retry, r in statuses.values():
+            if st == 503:
+                assert retry == "1" and "queue is full" in problem(r)["detail"]
+        assert s.metric("isoserve_rejected_requests_total") == codes.count(503)
+        assert 'route="mesh",status="503"' in s.get("/metrics").body.decode()
+    finally:
+        s.stop()
+
+
+def graceful_shutdown(tmp, catalog):
+    s = Server(["--catalog", catalog, "--threads", "1", "--web-root", tmp])
+    result = {}
+
+    def fetch():
+        result["r"] = s.get("/v1/volumes/ml/mesh?level=0.52&tolerance=0")
+    t = threading.Thread(target=fetch)
+    t.start()
+    deadline = time.time() + 10
+    while time.time() < deadline and s.metric("isoserve_extractions_in_flight") != 1:
+        time.sleep(0.005)
+    s.proc.send_signal(signal.SIGTERM)
+    t.join(timeout=60)
+    rc = s.proc.wait(timeout=30)
+    assert rc == 0, f"exit status {rc}"
+    r = result.get("r")
+    assert r is not None and r.status == 200 and len(r.body) > 1000, r and r.status
+    assert int(r.getheader("X-Iso-Triangles")) > 1000
+    try:
+        http.client.HTTPConnection("127.0.0.1", s.port, timeout=2).request("GET", "/healthz")
+        raise AssertionError("still accepting after shutdown")
+    except OSError:
+        pass
+    assert re.search(r"finishing \d+ requests in flight", s.log()) and "stopped" in s.log(), s.log()[-400:]
+
+
+def preload_and_cache_dir(tmp):
+    cache = os.path.join(tmp, "hier")
+    cat = os.path.join(tmp, "big.json")
+    json.dump({"volumes": [{"id": "big", "path": "field:ml:224"},
+                           {"id": "gone", "path": "missing.nrrd"},
+                           {"id": "bad id!", "path": "field:sphere:8"},
+                           {"id": "small", "path": "field:sphere:24", "levels": [2]}]},
+              open(cat, "w"))
+    s = Server(["--catalog", cat, "--cache-dir", cache, "--web-root", tmp], wait_ready=False)
+    try:
+        first = s.get("/healthz")
+        early = s.get("/v1/volumes")
+        s.wait_ready()
+        assert first.status == 503 and first.getheader("Retry-After") and json.loads(first.body)["status"] == "loading", first.status
+        assert early.status == 503 and problem(early)
+        ids = [v["id"] for v in json.loads(s.get("/v1/volumes").body)["volumes"]]
+        assert ids == ["big", "small"], ids
+        assert "missing.nrrd" in s.log() and "bad id!" in s.log()
+        v = json.loads(s.get("/v1/volumes/big").body)
+        assert v["hierarchy"]["from_file"] is False
+    finally:
+        assert s.stop() == 0
+    files = sorted(os.listdir(cache))
+    assert files == ["big.isotree", "small.isotree"], files
+    s = Server(["--catalog", cat, "--cache-dir", cache, "--web-root", tmp])
+    try:
+        assert json.loads(s.get("/v1/volumes/big").body)["hierarchy"]["from_file"] is True
+        assert "big: 224x224x224 f32, hierarchy read" in s.log(), s.log()
+    finally:
+        s.stop()
+    # A damaged file is refused, rebuilt and rewritten; the volume is still served.
+    path = os.path.join(cache, "small.isotree")
+    data = bytearray(open(path, "rb").read())
+    data[80] ^= 0xFF
+    open(path, "wb").write(data)
+    s = Server(["--catalog", cat, "--cache-dir", cache, "--web-root", tmp])
+    try:
+        assert "small" in s.log() and "rebuilding" in s.log(), s.log()
+        assert json.loads(s.get("/v1/volumes/small").body)["hierarchy"]["from_file"] is False
+        assert s.get("/v1/volumes/small/mesh?level=2").status == 200
+    finally:
+        s.stop()
+    assert open(path, "rb").read() != bytes(data)
+
+
+def volumes_dir(tmp, blob):
+    d = os.path.join(tmp, "dir")
+    os.mkdir(d)
+    write_nrrd(os.path.join(d, "blob.nrrd"), blob, (1, 1, 1))
+    with open(os.path.join(d, "detached.nhdr"), "w") as f:
+        f.write("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 4\nencoding: raw\ndata file: detached.raw\n")
+    open(os.path.join(d, "detached.raw"), "wb").write(bytes(range(64)))
+    open(os.path.join(d, "broken.nrrd"), "wb").write(b"NRRD0004\ntype: float\n")
+    open(os.path.join(d, ".hidden.nrrd"), "wb").write(b"")
+    open(os.path.join(d, "notes.txt"), "w").write("not a volume")
+    s = Server(["--volumes", d, "--web-root", tmp])
+    try:
+        ids = [v["id"] for v in json.loads(s.get("/v1/volumes").body)["volumes"]]
+        assert ids == ["blob", "detached"], ids
+        assert "broken.nrrd" in s.log() and "skipped" in s.log()
+    finally:
+        s.stop()
+
+
+def cors_origins(tmp, catalog):
+    s = Server(["--catalog", catalog, "--cors-origin", "https://viewer.example", "--web-root", tmp])
+    try:
+        r = s.get("/v1/volumes", {"Origin": "https://viewer.example"})
+        assert r.getheader("Access-Control-Allow-Origin") == "https://viewer.example"
+        assert "Origin" in r.getheader("Vary")
+        r = s.get("/v1/volumes", {"Origin": "https://evil.example"})
+        assert r.getheader("Access-Control-Allow-Origin") is None
+    finally:
+        s.stop()
+
+
+def bad_options():
+    for args, words in ((["--listen", "nowhere"], "HOST:PORT"),
+                        (["--threads", "0"], "--threads"),
+                        (["--catalog", "/nonexistent.json"], "nonexistent.json"),
+                        (["--catalog", "a", "--volumes", "b"], "not both"),
+                        (["--bogus", "1"], "--bogus")):
+        p = subprocess.run([BIN, "serve", *args], capture_output=True, text=True, timeout=30)
+        assert p.returncode == 1 and words in p.stderr, (args, p.returncode, p.stderr)
+
+
+def main():
+    if not os.access(BIN, os.X_OK):
+        print(f"FAIL {LABEL}.binary: {BIN} missing (run make)")
+        return 1
+    tmp = tempfile.mkdtemp(prefix="isoserve-http-")
+    try:
+        blob = blob_volume()
+        write_nrrd(os.path.join(tmp, "blob.nrrd"), blob, (0.75, 1.0, 1.25))
+        open(os.path.join(tmp, "index.html"), "w").write("<!doctype html><title>isoserve test page</title>")
+        catalog = os.path.join(tmp, "catalog.json")
+        json.dump({"volumes": [
+            {"id": "blob", "path": "blob.nrrd", "name": "Two blobs", "modality": "phantom"},
+            {"id": "torus", "path": "field:torus:64", "levels": [0]},
+            {"id": "ml", "path": "field:ml:160", "levels": [0.5]}]}, open(catalog, "w"))
+        s = Server(["--catalog", catalog, "--web-root", tmp, "--threads", "2"])
+        try:
+            main_tests(s, tmp, blob)
+        finally:
+            rc = s.stop()
+            report("sigterm_exits_0", rc == 0, f"exit status {rc}")
+        check("queue_full_503", lambda: queue_full(tmp, catalog))
+        check("graceful_shutdown_finishes_request", lambda: graceful_shutdown(tmp, catalog))
+        check("preload_healthz_and_cache_dir", lambda: preload_and_cache_dir(tmp))
+        check("volumes_dir_ids", lambda: volumes_dir(tmp, blob))
+        check("cors_configured_origins", lambda: cors_origins(tmp, catalog))
+        check("bad_options", bad_options)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
