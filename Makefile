@@ -31,7 +31,7 @@ TEST_BIN   = $(TEST_SRC:tests/unit/%.c=$(BUILD)/tests/%)
 # Objects of the test support must survive between runs (they are not final targets).
 .SECONDARY:
 
-.PHONY: all setup test unit-tests bench run clean sanitize
+.PHONY: all setup test unit-tests bench run clean sanitize node-deps
 all: $(BUILD)/isoserve
 
 $(BUILD)/%.o: %.c
@@ -62,7 +62,15 @@ setup:
 sanitize:
 	$(MAKE) BUILD=$(SAN_BUILD) OPT="$(SAN_FLAGS)" all unit-tests
 
+# npm packages (three.js, draco3d), pinned by web/package-lock.json: installed with npm ci
+# when missing or older than the lockfile. No network, no packages: the build says so.
+web/node_modules/.package-lock.json: web/package-lock.json web/package.json
+	cd web && npm ci --no-audit --no-fund || { echo "npm ci failed in web/ (no network?)"; exit 1; }
+
+node-deps: web/node_modules/.package-lock.json
+
 test: setup
+	$(MAKE) node-deps
 	$(MAKE) all unit-tests
 	$(MAKE) sanitize
 	bash tests/run.sh

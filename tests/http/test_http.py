@@ -266,10 +266,10 @@ def main_tests(s, tmp, blob):
         if not os.path.isdir(node_dir) or not shutil.which("node") or "drc" not in state:
             raise Skip("web/node_modules/draco3d not installed (make web)")
         script = r"""
-const draco3d = require(process.argv[2]);
+const draco3d = require(process.argv[1]);
 const fs = require('fs');
 draco3d.createDecoderModule({}).then(m => {
-  const buf = fs.readFileSync(process.argv[3]);
+  const buf = fs.readFileSync(process.argv[2]);
   const dec = new m.Decoder(), mesh = new m.Mesh();
   const st = dec.DecodeArrayToMesh(new Int8Array(buf), buf.length, mesh);
   if (!st.ok()) { console.log('error ' + st.error_msg()); process.exit(1); }
