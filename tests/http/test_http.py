@@ -301,7 +301,21 @@ draco3d.createDecoderModule({}).then(m => {
         assert view["byteOffset"] + view["byteLength"] <= blen
         assert "NORMAL" in prim["attributes"], prim["attributes"]
         assert doc["accessors"][prim["indices"]]["count"] == 3 * int(r.getheader("X-Iso-Triangles"))
+        state["glb"] = os.path.join(tmp, "blob.glb")
+        open(state["glb"], "wb").write(b)
+        state["glb_counts"] = (int(r.getheader("X-Iso-Triangles")), int(r.getheader("X-Iso-Vertices")))
     check("mesh_glb_structure", mesh_glb)
+
+    def glb_three():
+        if not os.path.isdir("web/node_modules/three") or "glb" not in state:
+            raise Skip("web/node_modules/three not installed (make node-deps)")
+        out = subprocess.run(["node", "tests/http/gltf_load.mjs", state["glb"], os.path.abspath("web")],
+                             capture_output=True, text=True, timeout=60)
+        assert out.returncode == 0, out.stdout + out.stderr
+        tri, ver, normals = out.stdout.split()
+        assert (int(tri), int(ver)) == state["glb_counts"], (out.stdout, state["glb_counts"])
+        assert normals == "true", out.stdout
+    check("mesh_glb_loads_in_three_gltfloader", glb_three)
 
     def etag_and_cache():
         t = f"/v1/volumes/blob/mesh?level={level}&tolerance=3"
