@@ -7,10 +7,10 @@ CXX      ?= g++
 WARN     := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes \
             -Wpointer-arith -Wcast-qual -Wvla
 OPT      ?= -O2 -g
-CFLAGS   := $(OPT) -std=c11 -D_DEFAULT_SOURCE -D_POSIX_C_SOURCE=200809L $(WARN) -pthread -Icore -Iproto
+CFLAGS   := $(OPT) -std=c11 -D_DEFAULT_SOURCE -D_POSIX_C_SOURCE=200809L $(WARN) -pthread -Icore -Iproto -I/usr/include/nifti
 CXXFLAGS := $(OPT) -std=c++17 -Wall -Wextra -Werror -Icore -Iproto $(shell pkg-config --cflags draco 2>/dev/null)
 LIBS     := $(shell pkg-config --libs libmicrohttpd jansson 2>/dev/null) \
-            -ldraco -lz -lm -pthread -lstdc++
+            -lnifti2 -ldraco -lz -lm -pthread -lstdc++
 
 BUILD    ?= build
 SAN_BUILD := build/san

@@ -346,3 +346,29 @@ void iso_vol_affine(const iso_volume *vol, double affine[3][4])
     for (int r = 0; r < 3; r++)
         affine[r][3] = origin[r];
 }
+
+int iso_vol_set_affine(iso_volume *vol, const double affine[3][4], const char *what,
+                       iso_error *err)
+{
+    double length[3];
+    for (int c = 0; c < 3; c++) {
+        length[c] = sqrt(affine[0][c] * affine[0][c] + affine[1][c] * affine[1][c] +
+                         affine[2][c] * affine[2][c]);
+        if (!isfinite(length[c]) || !(length[c] > 0) || !isfinite(affine[c][3]))
+            return iso_error_set(err, ISO_E_FORMAT, "%s: axis %d of the index-to-world map is %s",
+                                 what, c, isfinite(length[c]) && isfinite(affine[c][3]) ? "zero" : "not finite");
+    }
+    double det = affine[0][0] * (affine[1][1] * affine[2][2] - affine[1][2] * affine[2][1]) -
+                 affine[0][1] * (affine[1][0] * affine[2][2] - affine[1][2] * affine[2][0]) +
+                 affine[0][2] * (affine[1][0] * affine[2][1] - affine[1][1] * affine[2][0]);
+    if (!(fabs(det) > 1e-12 * length[0] * length[1] * length[2]))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: the index-to-world map is singular (axes in one plane)", what);
+    for (int c = 0; c < 3; c++) {
+        vol->spacing[c] = length[c];
+        for (int r = 0; r < 3; r++)
+            vol->direction[r][c] = affine[r][c] / length[c];
+    }
+    for (int r = 0; r < 3; r++)
+        vol->origin[r] = affine[r][3];
+    return 0;
+}

@@ -4,8 +4,11 @@
  * their own voxel type and in host byte order (loaders swap on read). Index space has
  * sample (i,j,k) at point (i,j,k); world millimetres are
  *     world = origin + direction * (index * spacing)
- * with direction a 3x3 rotation (columns are the world directions of the i, j, k axes;
- * identity unless the file says otherwise). */
+ * with direction's columns the unit world directions of the i, j, k axes (identity unless
+ * the file says otherwise; not necessarily orthogonal: a sheared affine from a NIfTI sform
+ * keeps its shear). World space is LPS millimetres (DICOM, ITK, 3D Slicer's model files):
+ * x grows to the patient's left, y to posterior, z to superior; loaders of RAS formats
+ * (NIfTI) negate x and y. */
 #ifndef ISO_VOLUME_H
 #define ISO_VOLUME_H
 
@@ -80,6 +83,12 @@ void iso_vol_update_stats(iso_volume *vol);
 
 /* Index space (i,j,k may be fractional) to world millimetres. */
 void iso_vol_index_to_world(const iso_volume *vol, const double index[3], double world[3]);
+/* Sets spacing, direction and origin from a 3x4 affine [A | origin] (world = A index +
+ * origin): spacing = the column lengths, direction = the unit columns. Refuses (with
+ * ISO_E_FORMAT, `what` naming the source in the message) a non-finite or singular A.
+ * The volume is unchanged on error. */
+int iso_vol_set_affine(iso_volume *vol, const double affine[3][4], const char *what,
+                       iso_error *err);
 /* The same map as a 3x4 affine matrix [A | origin], world = A * index + origin, read off
  * iso_vol_index_to_world so that the two always agree. */
 void iso_vol_affine(const iso_volume *vol, double affine[3][4]);

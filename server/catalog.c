@@ -215,12 +215,12 @@ int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err)
 
 static const struct {
     const char *id, *path, *name, *modality;
-    double levels[2];
+    double levels[2];   /* brain surface and white matter for the templates */
     size_t level_count; /* 0: Otsu on the histogram */
 } default_volumes[] = {
-    {"ch2bet", MRICRON "ch2bet.nii.gz", "Colin 27 T1 brain, skull stripped (mricron)", "MR", {0}, 0},
+    {"ch2bet", MRICRON "ch2bet.nii.gz", "Colin 27 T1 brain, skull stripped (mricron)", "MR", {30, 90}, 2},
     {"ch2", MRICRON "ch2.nii.gz", "Colin 27 T1 head (mricron)", "MR", {0}, 0},
-    {"ch2better", MRICRON "ch2better.nii.gz", "Colin 27 T1 head, 0.5 mm (mricron)", "MR", {0}, 0},
+    {"ch2better", MRICRON "ch2better.nii.gz", "Colin 27 T1 brain, 0.5 mm (mricron)", "MR", {30, 95}, 2},
     {"marschner-lobb", "field:ml:128", "Marschner-Lobb test signal", "phantom", {0.5}, 1},
     {"torus", "field:torus:128", "Torus", "phantom", {0, 8}, 2},
     {"sphere", "field:sphere:96", "Sphere", "phantom", {0, 20}, 2},

@@ -567,6 +567,28 @@ def cors_origins(tmp, catalog):
         s.stop()
 
 
+def default_collection(tmp):
+    """No catalog: Debian's mricron-data templates (NIfTI) and the phantoms."""
+    if LABEL != "http":
+        raise Skip("the default collection preloads 60 M voxels; checked in the normal build only")
+    s = Server(["--web-root", tmp])
+    try:
+        vols = {v["id"]: v for v in json.loads(s.get("/v1/volumes").body)["volumes"]}
+        want = {"marschner-lobb", "torus", "sphere"}
+        if os.path.exists("/usr/share/mricron/templates/ch2bet.nii.gz"):
+            want |= {"ch2bet", "ch2", "ch2better"}
+        assert set(vols) == want, sorted(vols)
+        if "ch2bet" in vols:
+            v = vols["ch2bet"]
+            assert v["dims"] == [181, 217, 181] and v["value_type"] == "uint8", v
+            assert v["suggested_levels"] == [30.0, 90.0] and v["modality"] == "MR"
+            assert v["index_to_world"][:4] == [-1.0, 0.0, 0.0, 90.0], v["index_to_world"]
+            r = s.get("/v1/volumes/ch2bet/mesh?level=30&tolerance=5&normals=none")
+            assert r.status == 200 and int(r.getheader("X-Iso-Triangles")) > 10000
+    finally:
+        assert s.stop() == 0
+
+
 def bad_options():
     for args, words in ((["--listen", "nowhere"], "HOST:PORT"),
                         (["--threads", "0"], "--threads"),
@@ -602,6 +624,7 @@ def main():
         check("preload_healthz_and_cache_dir", lambda: preload_and_cache_dir(tmp))
         check("volumes_dir_ids", lambda: volumes_dir(tmp, blob))
         check("cors_configured_origins", lambda: cors_origins(tmp, catalog))
+        check("default_collection", lambda: default_collection(tmp))
         check("bad_options", bad_options)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
