@@ -25,7 +25,7 @@
 
 enum field_id {
     F_TYPE, F_DIMENSION, F_SIZES, F_ENDIAN, F_ENCODING, F_SPACINGS, F_SPACE_DIRECTIONS,
-    F_SPACE_ORIGIN, F_SPACE_DIMENSION, F_BYTE_SKIP, F_LINE_SKIP, F_DATA_FILE, F_COUNT
+    F_SPACE_ORIGIN, F_SPACE_DIMENSION, F_BYTE_SKIP, F_LINE_SKIP, F_DATA_FILE, F_SPACE, F_COUNT
 };
 
 typedef struct parser {
@@ -39,6 +39,7 @@ typedef struct parser {
     double directions[MAX_AXES][3];
     int has_direction[MAX_AXES]; /* 0 for "none" */
     int have_endian;
+    int space_ras;             /* "space: right-anterior-superior": flip x and y to LPS */
     iso_nrrd_header *hdr;
 } parser;
 
@@ -342,14 +343,39 @@ static int field_line_skip(parser *p, const char *field, const char *value)
     return rc;
 }
 
-/* A single data file, relative to the header's directory unless absolute. The multi-file
- * forms ("LIST", or a printf format with a range) describe slices in separate files. */
+/* The world space. isoserve's is LPS (volume.h): RAS headers are flipped on x and y;
+ * scanner and unnamed 3-D spaces are taken as they are. */
+static int field_space(parser *p, const char *field, const char *value)
+{
+    static const char *const ras[] = {"right-anterior-superior", "RAS"};
+    static const char *const taken[] = {"left-posterior-superior", "LPS", "scanner-xyz",
+                                        "3D-right-handed", "3D-left-handed"};
+    for (size_t i = 0; i < 2; i++)
+        if (!strcmp(value, ras[i])) {
+            p->space_ras = 1;
+            return ISO_OK;
+        }
+    for (size_t i = 0; i < 5; i++)
+        if (!strcmp(value, taken[i]))
+            return ISO_OK;
+    return field_error(p, ISO_E_UNSUPPORTED, field, "'%s' is not a 3-D space isoserve knows", value);
+}
+
+/* A single data file beside the header: a plain name or a path below the header's
+ * directory, never absolute and never through "..", so that a header cannot make the
+ * server read other files (the file must also be a regular file, checked on open). The
+ * multi-file forms ("LIST", or a printf format with a range) describe slices in separate
+ * files. */
 static int field_data_file(parser *p, const char *field, const char *value)
 {
     const char *slash = strrchr(p->path, '/');
-    size_t dir_len = slash && value[0] != '/' ? (size_t)(slash - p->path) + 1 : 0;
+    size_t dir_len = slash ? (size_t)(slash - p->path) + 1 : 0;
     if (value[0] == '\0')
         return field_error(p, ISO_E_FORMAT, field, "no file name");
+    if (value[0] == '/' || !strcmp(value, "..") || !strncmp(value, "../", 3) ||
+        strstr(value, "/../") || (strlen(value) >= 3 && !strcmp(value + strlen(value) - 3, "/..")))
+        return field_error(p, ISO_E_FORMAT, field,
+                           "'%s' leaves the header's directory; the data file must sit beside it", value);
     if (strcmp(value, "LIST") == 0 || strncmp(value, "LIST ", 5) == 0 ||
         (strchr(value, '%') && strchr(value, ' ')))
         return field_error(p, ISO_E_UNSUPPORTED, field,
@@ -386,6 +412,7 @@ static const struct {
     {"lineskip", F_LINE_SKIP, field_line_skip},
     {"data file", F_DATA_FILE, field_data_file},
     {"datafile", F_DATA_FILE, field_data_file},
+    {"space", F_SPACE, field_space},
 };
 
 /* Parses one header line after the magic: a comment, a key:=value pair, a field or (in an
@@ -537,6 +564,12 @@ static int finish_header(parser *p)
             h->direction[d][d] = p->spacings[a] < 0 ? -1 : 1;
         }
     }
+    if (p->space_ras)
+        for (int r = 0; r < 2; r++) {
+            h->origin[r] = -h->origin[r];
+            for (int c = 0; c < 3; c++)
+                h->direction[r][c] = -h->direction[r][c];
+        }
     return ISO_OK;
 }
 
@@ -829,6 +862,11 @@ int iso_nrrd_load(const char *path, const iso_load_options *opt, iso_volume **ou
     f = fopen(hdr->data_path, "rb");
     if (!f) {
         rc = iso_error_set(err, ISO_E_IO, "%s: cannot open: %s", name, strerror(errno));
+        goto fail;
+    }
+    struct stat st;
+    if (fstat(fileno(f), &st) || !S_ISREG(st.st_mode)) {
+        rc = iso_error_set(err, ISO_E_FORMAT, "%s: not a regular file", name);
         goto fail;
     }
     rc = seek_to_samples(f, hdr, name, err);

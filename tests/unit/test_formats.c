@@ -250,6 +250,41 @@ static void test_nifti_hostile(void)
     CHECK(iso_load(junk, NULL, &vol, &err) == ISO_E_FORMAT && vol == NULL && strstr(err.message, "junk.nii"));
 }
 
+/* NRRD's space directions and origin, in RAS and in LPS, give the affine the header
+ * states, in LPS. */
+static void test_nrrd_space_directions(void)
+{
+    static const char *const spaces[] = {"right-anterior-superior", "left-posterior-superior"};
+    for (int s = 0; s < 2; s++) {
+        char header[512];
+        int n = snprintf(header, sizeof header,
+                         "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n"
+                         "space: %s\nspace directions: (0.5,0.1,0) (0,2,0) (0,0,1)\n"
+                         "space origin: (1,2,3)\n\n", spaces[s]);
+        const char *path = temp_path(s ? "lps.nrrd" : "ras.nrrd");
+        FILE *f = fopen(path, "wb");
+        CHECK(f != NULL);
+        if (!f)
+            return;
+        fwrite(header, 1, (size_t)n, f);
+        fwrite("\1\2\3\4\5\6\7\10", 1, 8, f);
+        fclose(f);
+        iso_error err;
+        iso_volume *vol = NULL;
+        CHECK_OK(iso_load(path, NULL, &vol, &err), &err);
+        if (!vol)
+            return;
+        double a[3][4], flip = s ? 1 : -1;
+        iso_vol_affine(vol, a);
+        double want[3][4] = {{0.5 * flip, 0, 0, 1 * flip}, {0.1 * flip, 2 * flip, 0, 2 * flip}, {0, 0, 1, 3}};
+        for (int r = 0; r < 3; r++)
+            for (int c = 0; c < 4; c++)
+                CHECKF(fabs(a[r][c] - want[r][c]) < 1e-12, "%s: affine[%d][%d] = %g, want %g",
+                       spaces[s], r, c, a[r][c], want[r][c]);
+        iso_vol_destroy(vol);
+    }
+}
+
 /* The shared scans: the original NIfTI equals its NRRD twin voxel for voxel. */
 static void test_shared_nifti_twins(void)
 {
@@ -304,6 +339,7 @@ int main(void)
     CHECK_RUN(test_nifti_rescale_and_sform_vertex);
     CHECK_RUN(test_nifti_pixdim_only);
     CHECK_RUN(test_nifti_hostile);
+    CHECK_RUN(test_nrrd_space_directions);
     CHECK_RUN(test_shared_nifti_twins);
     return check_finish();
 }

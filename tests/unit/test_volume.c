@@ -514,10 +514,29 @@ static void test_nrrd_detached(void)
     check_detached_i16(dir, "rel.nhdr", "NRRD0004\ntype: short\ndimension: 3\nsizes: 3 5 7\n"
                        "endian: big\nencoding: raw\ndata file: data/vol.raw\n");
 
-    /* Absolute, and "datafile" spelling, with a blank line and trailing junk after it. */
+    /* "datafile" spelling, with a blank line and trailing junk after it. */
     snprintf(header, sizeof header, "NRRD0003\ntype: short\ndimension: 3\nsizes: 3 5 7\n"
-             "endian: big\nencoding: raw\ndatafile: %s\n\nignored\n", data_path);
-    check_detached_i16(dir, "abs.nhdr", header);
+             "endian: big\nencoding: raw\ndatafile: data/vol.raw\n\nignored\n");
+    check_detached_i16(dir, "spelling.nhdr", header);
+
+    /* A header may not point outside its own directory, nor at a device. */
+    static const struct { const char *name, *data, *detail; } outside[] = {
+        {"abs.nhdr", "/etc/hostname", "leaves the header's directory"},
+        {"up.nhdr", "../vol.raw", "leaves the header's directory"},
+        {"middle.nhdr", "data/../../vol.raw", "leaves the header's directory"},
+        {"device.nhdr", "zero", "not a regular file"},
+    };
+    char dev_link[1200];
+    snprintf(dev_link, sizeof dev_link, "%s/zero", dir);
+    CHECK(symlink("/dev/zero", dev_link) == 0);
+    for (size_t i = 0; i < sizeof outside / sizeof outside[0]; i++) {
+        char hpath[1200];
+        snprintf(header, sizeof header, "NRRD0004\ntype: int16\ndimension: 3\nsizes: 3 5 7\n"
+                 "endian: big\nencoding: raw\ndata file: %s\n", outside[i].data);
+        snprintf(hpath, sizeof hpath, "%s/%s", dir, outside[i].name);
+        write_file(hpath, header, strlen(header), NULL, 0);
+        expect_error(hpath, 0, ISO_E_FORMAT, outside[i].detail);
+    }
 
     /* Line skip then byte skip, as for data behind a PGM header. */
     snprintf(data_path, sizeof data_path, "%s/skips.raw", sub);
