@@ -6,6 +6,7 @@
 #include <strings.h>
 
 #include "field.h"
+#include "metaimage.h"
 #include "nifti.h"
 #include "nrrd.h"
 
@@ -33,17 +34,23 @@ static int is_nrrd(const char *path)
     return has_suffix(path, ".nrrd") || has_suffix(path, ".nhdr");
 }
 
-/* Tried in order, the first that recognises a path loads it. MetaImage (.mhd, .mha), raw data with a sidecar and DICOM series slot in as more rows;
- * prefixes such as "field:" come first so that they win over any suffix. */
 static int is_nifti(const char *path)
 {
     return has_suffix(path, ".nii") || has_suffix(path, ".nii.gz");
 }
 
+static int is_metaimage(const char *path)
+{
+    return has_suffix(path, ".mhd") || has_suffix(path, ".mha");
+}
+
+/* Tried in order, the first that recognises a path loads it. DICOM series slot in as more
+ * rows; prefixes such as "field:" come first so that they win over any suffix. */
 static const loader loaders[] = {
     {"field", is_field, iso_field_load},
     {"nrrd", is_nrrd, iso_nrrd_load},
     {"nifti", is_nifti, iso_nifti_load},
+    {"metaimage", is_metaimage, iso_metaimage_load},
 };
 
 #define LOADER_COUNT (sizeof loaders / sizeof loaders[0])
@@ -65,7 +72,7 @@ int iso_load(const char *path, const iso_load_options *opt, iso_volume **out, is
     l = find_loader(path);
     if (!l)
         return iso_error_set(err, ISO_E_UNSUPPORTED,
-                             "%s: not a volume format isoserve reads (.nrrd, .nhdr, .nii, .nii.gz, field:NAME)",
+                             "%s: not a volume format isoserve reads (.nrrd, .nhdr, .nii, .nii.gz, .mhd, .mha, field:NAME)",
                              path);
     rc = l->load(path, opt, out, err);
     if (rc != ISO_OK) {

@@ -833,37 +833,25 @@ static void swap_samples(void *data, size_t count, size_t size)
     }
 }
 
-int iso_nrrd_load(const char *path, const iso_load_options *opt, iso_volume **out,
-                  iso_error *err)
+int iso_nrrd_load_samples(const char *path, const iso_nrrd_header *hdr,
+                          const iso_load_options *opt, iso_volume **out, iso_error *err)
 {
-    iso_nrrd_header *hdr = NULL;
     iso_volume *vol = NULL;
     FILE *f = NULL;
     char name[ISO_NRRD_MAX_PATH + 64];
     uint64_t max_bytes = opt && opt->max_bytes ? opt->max_bytes : ISO_VOL_DEFAULT_MAX_BYTES;
     int rc;
-    assert(path && out);
+    assert(path && hdr && out);
     *out = NULL;
-
-    hdr = malloc(sizeof *hdr); /* about 4 KB of path: kept off small thread stacks */
-    if (!hdr)
-        return iso_error_set(err, ISO_E_NOMEM, "%s: out of memory", path);
-    rc = iso_nrrd_read_header(path, hdr, err);
-    if (rc != ISO_OK)
-        goto fail;
-    if (hdr->data_bytes > max_bytes) {
-        rc = iso_error_set(err, ISO_E_LIMIT,
-                           "%s: %zux%zux%zu %s samples (%" PRIu64 " bytes) exceed the limit of %"
-                           PRIu64 " bytes", path, hdr->dims[0], hdr->dims[1], hdr->dims[2],
-                           iso_vol_type_name(hdr->type), hdr->data_bytes, max_bytes);
-        goto fail;
-    }
+    if (hdr->data_bytes > max_bytes)
+        return iso_error_set(err, ISO_E_LIMIT,
+                             "%s: %zux%zux%zu %s samples (%" PRIu64 " bytes) exceed the limit of %"
+                             PRIu64 " bytes", path, hdr->dims[0], hdr->dims[1], hdr->dims[2],
+                             iso_vol_type_name(hdr->type), hdr->data_bytes, max_bytes);
     data_name(hdr, path, name, sizeof name);
     f = fopen(hdr->data_path, "rb");
-    if (!f) {
-        rc = iso_error_set(err, ISO_E_IO, "%s: cannot open: %s", name, strerror(errno));
-        goto fail;
-    }
+    if (!f)
+        return iso_error_set(err, ISO_E_IO, "%s: cannot open: %s", name, strerror(errno));
     struct stat st;
     if (fstat(fileno(f), &st) || !S_ISREG(st.st_mode)) {
         rc = iso_error_set(err, ISO_E_FORMAT, "%s: not a regular file", name);
@@ -892,14 +880,26 @@ int iso_nrrd_load(const char *path, const iso_load_options *opt, iso_volume **ou
     memcpy(vol->origin, hdr->origin, sizeof vol->origin);
     memcpy(vol->direction, hdr->direction, sizeof vol->direction);
     fclose(f);
-    free(hdr);
     *out = vol;
     return ISO_OK;
 
 fail:
-    if (f)
-        fclose(f);
+    fclose(f);
     iso_vol_destroy(vol);
+    return rc;
+}
+
+int iso_nrrd_load(const char *path, const iso_load_options *opt, iso_volume **out,
+                  iso_error *err)
+{
+    assert(path && out);
+    *out = NULL;
+    iso_nrrd_header *hdr = malloc(sizeof *hdr); /* about 4 KB of path: kept off small thread stacks */
+    if (!hdr)
+        return iso_error_set(err, ISO_E_NOMEM, "%s: out of memory", path);
+    int rc = iso_nrrd_read_header(path, hdr, err);
+    if (rc == ISO_OK)
+        rc = iso_nrrd_load_samples(path, hdr, opt, out, err);
     free(hdr);
     return rc;
 }

@@ -47,6 +47,14 @@ typedef struct iso_nrrd_header {
  * and field), ISO_E_UNSUPPORTED or ISO_E_LIMIT (sizes overflow). Safe on untrusted files. */
 int iso_nrrd_read_header(const char *path, iso_nrrd_header *hdr, iso_error *err);
 
+/* Reads the samples a header describes (raw or gzip/zlib, byte and line skips, either
+ * byte order) into a new volume with the header's geometry (stats not computed). The
+ * MetaImage and raw+sidecar loaders fill an iso_nrrd_header and read through this too.
+ * path names the volume in messages. Refuses more than opt->max_bytes before allocating,
+ * and a data file that is not a regular file. */
+int iso_nrrd_load_samples(const char *path, const iso_nrrd_header *hdr,
+                          const iso_load_options *opt, iso_volume **out, iso_error *err);
+
 /* Loads a whole NRRD volume into a new volume in host byte order (stats not computed).
  * opt may be NULL. Refuses volumes over opt->max_bytes before allocating. Returns the codes
  * of iso_nrrd_read_header plus ISO_E_TRUNCATED (the data ends early: the message gives the

@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <zlib.h>
 
 #include "check.h"
 #include "extract.h"
@@ -285,6 +286,125 @@ static void test_nrrd_space_directions(void)
     }
 }
 
+/* ---- MetaImage */
+
+static void write_bytes(const char *path, const void *a, size_t a_len, const void *b, size_t b_len)
+{
+    FILE *f = fopen(path, "wb");
+    CHECK(f != NULL);
+    if (!f)
+        return;
+    CHECK(fwrite(a, 1, a_len, f) == a_len);
+    if (b_len)
+        CHECK(fwrite(b, 1, b_len, f) == b_len);
+    fclose(f);
+}
+
+/* An .mha with zlib-compressed float samples after the header, axes permuted by the
+ * TransformMatrix (i along world y, j along world -x) and an Offset. */
+static void test_metaimage_local_compressed(void)
+{
+    float data[4 * 3 * 2];
+    for (int n = 0; n < 24; n++)
+        data[n] = (float)n * 0.5f;
+    unsigned char packed[512];
+    uLongf packed_size = sizeof packed;
+    CHECK(compress(packed, &packed_size, (const Bytef *)data, sizeof data) == Z_OK);
+    char header[512];
+    int n = snprintf(header, sizeof header,
+                     "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
+                     "CompressedData = True\nCompressedDataSize = %lu\nTransformMatrix = 0 1 0 -1 0 0 0 0 1\n"
+                     "Offset = 10 -20 30\nElementSpacing = 0.5 2 3\nDimSize = 4 3 2\n"
+                     "ElementType = MET_FLOAT\nElementDataFile = LOCAL\n", (unsigned long)packed_size);
+    const char *path = temp_path("local.mha");
+    write_bytes(path, header, (size_t)n, packed, packed_size);
+    iso_error err;
+    iso_volume *vol = NULL;
+    CHECK_OK(iso_load(path, NULL, &vol, &err), &err);
+    if (!vol)
+        return;
+    CHECK(vol->type == ISO_F32 && vol->dims[0] == 4 && vol->dims[1] == 3 && vol->dims[2] == 2);
+    CHECK(memcmp(vol->data, data, sizeof data) == 0);
+    double a[3][4];
+    iso_vol_affine(vol, a);
+    double want[3][4] = {{0, -2, 0, 10}, {0.5, 0, 0, -20}, {0, 0, 3, 30}};
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 4; c++)
+            CHECKF(fabs(a[r][c] - want[r][c]) < 1e-12, "affine[%d][%d] = %g, want %g", r, c, a[r][c], want[r][c]);
+    iso_vol_destroy(vol);
+}
+
+/* An .mhd with big-endian int16 samples in a file beside it. */
+static void test_metaimage_detached_big_endian(void)
+{
+    unsigned char raw[2 * 2 * 2 * 2];
+    for (int n = 0; n < 8; n++) {
+        int v = n * 1000 - 3000;
+        raw[2 * n] = (unsigned char)((v >> 8) & 0xff);
+        raw[2 * n + 1] = (unsigned char)(v & 0xff);
+    }
+    write_bytes(temp_path("be.raw"), raw, sizeof raw, NULL, 0);
+    const char *h = "NDims = 3\nDimSize = 2 2 2\nElementType = MET_SHORT\nElementByteOrderMSB = True\n"
+                    "ElementDataFile = be.raw\n";
+    write_bytes(temp_path("be.mhd"), h, strlen(h), NULL, 0);
+    iso_error err;
+    iso_volume *vol = NULL;
+    CHECK_OK(iso_load(temp_path("be.mhd"), NULL, &vol, &err), &err);
+    if (!vol)
+        return;
+    CHECK(vol->type == ISO_I16);
+    CHECK_EQ(iso_vol_get(vol, 1, 1, 1), 4000);
+    CHECK_EQ(iso_vol_get(vol, 0, 0, 0), -3000);
+    iso_vol_destroy(vol);
+}
+
+static void test_metaimage_hostile(void)
+{
+    unsigned char raw[8] = {0};
+    write_bytes(temp_path("ok.raw"), raw, sizeof raw, NULL, 0);
+    static const struct {
+        const char *name, *header, *words;
+        int code;
+    } cases[] = {
+        {"abs.mhd", "NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = /etc/hostname\n",
+         "leaves the header's directory", ISO_E_FORMAT},
+        {"up.mhd", "NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = ../ok.raw\n",
+         "leaves the header's directory", ISO_E_FORMAT},
+        {"list.mhd", "NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = LIST\n",
+         "several files", ISO_E_UNSUPPORTED},
+        {"long.mhd", "NDims = 3\nDimSize = 2 2 2\nElementType = MET_LONG\nElementDataFile = ok.raw\n",
+         "MET_LONG", ISO_E_UNSUPPORTED},
+        {"flat.mhd", "NDims = 2\nDimSize = 2 2\nElementType = MET_UCHAR\nElementDataFile = ok.raw\n",
+         "3-D", ISO_E_UNSUPPORTED},
+        {"thin.mhd", "NDims = 3\nDimSize = 2 1 2\nElementType = MET_UCHAR\nElementDataFile = ok.raw\n",
+         "at least 2", ISO_E_FORMAT},
+        {"zero.mhd", "NDims = 3\nDimSize = 2 2 2\nElementSpacing = 1 0 1\nElementType = MET_UCHAR\nElementDataFile = ok.raw\n",
+         "zero, negative", ISO_E_FORMAT},
+        {"negative.mhd", "NDims = 3\nDimSize = 2 2 2\nElementSpacing = 1 -2 1\nElementType = MET_UCHAR\nElementDataFile = ok.raw\n",
+         "zero, negative", ISO_E_FORMAT},
+        {"lying.mhd", "NDims = 3\nDimSize = 2 2 3\nElementType = MET_UCHAR\nElementDataFile = ok.raw\n",
+         "", ISO_E_TRUNCATED},
+        {"huge.mhd", "NDims = 3\nDimSize = 100000 100000 100000\nElementType = MET_UCHAR\nElementDataFile = ok.raw\n",
+         "exceed the limit", ISO_E_LIMIT},
+        {"nodata.mhd", "NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\n", "without ElementDataFile", ISO_E_FORMAT},
+        {"junk.mhd", "\x7f\x45LF binary", "Key = Value", ISO_E_FORMAT},
+        {"channels.mhd", "NDims = 3\nDimSize = 2 2 2\nElementNumberOfChannels = 3\nElementType = MET_UCHAR\nElementDataFile = ok.raw\n",
+         "channels", ISO_E_UNSUPPORTED},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        const char *path = temp_path(cases[i].name);
+        write_bytes(path, cases[i].header, strlen(cases[i].header), NULL, 0);
+        iso_error err = {0};
+        iso_volume *vol = NULL;
+        iso_load_options opt = {.max_bytes = 1 << 20};
+        int rc = iso_load(path, &opt, &vol, &err);
+        CHECKF(rc == cases[i].code && vol == NULL, "%s: rc %d (want %d): %s", cases[i].name, rc, cases[i].code, err.message);
+        CHECKF(strstr(err.message, cases[i].name) != NULL && strstr(err.message, cases[i].words) != NULL,
+               "%s: message \"%s\" lacks the file or \"%s\"", cases[i].name, err.message, cases[i].words);
+        iso_vol_destroy(vol);
+    }
+}
+
 /* The shared scans: the original NIfTI equals its NRRD twin voxel for voxel. */
 static void test_shared_nifti_twins(void)
 {
@@ -333,6 +453,36 @@ static void test_shared_nifti_twins(void)
     iso_vol_destroy(b);
 }
 
+/* HeadMRVolume.mhd reads as 48x62x42 uint8 at 4 mm, its samples the .raw file's bytes. */
+static void test_shared_metaimage(void)
+{
+    const char *dir = check_shared_volumes();
+    if (!dir) {
+        check_skip("needs ../shared/volumes");
+        return;
+    }
+    char mhd[600], raw[600];
+    snprintf(mhd, sizeof mhd, "%s/orig/HeadMRVolume.mhd", dir);
+    snprintf(raw, sizeof raw, "%s/orig/HeadMRVolume.raw", dir);
+    iso_error err;
+    iso_volume *vol = NULL;
+    CHECK_OK(iso_load(mhd, NULL, &vol, &err), &err);
+    if (!vol)
+        return;
+    CHECK(vol->dims[0] == 48 && vol->dims[1] == 62 && vol->dims[2] == 42 && vol->type == ISO_U8);
+    CHECK(vol->spacing[0] == 4 && vol->spacing[1] == 4 && vol->spacing[2] == 4);
+    FILE *f = fopen(raw, "rb");
+    CHECK(f != NULL);
+    if (f) {
+        unsigned char *bytes = malloc(iso_vol_count(vol) + 1);
+        CHECK(bytes && fread(bytes, 1, iso_vol_count(vol) + 1, f) == iso_vol_count(vol));
+        CHECK(bytes && memcmp(bytes, vol->data, iso_vol_count(vol)) == 0);
+        free(bytes);
+        fclose(f);
+    }
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_mricron_ch2bet);
@@ -340,6 +490,10 @@ int main(void)
     CHECK_RUN(test_nifti_pixdim_only);
     CHECK_RUN(test_nifti_hostile);
     CHECK_RUN(test_nrrd_space_directions);
+    CHECK_RUN(test_metaimage_local_compressed);
+    CHECK_RUN(test_metaimage_detached_big_endian);
+    CHECK_RUN(test_metaimage_hostile);
     CHECK_RUN(test_shared_nifti_twins);
+    CHECK_RUN(test_shared_metaimage);
     return check_finish();
 }
