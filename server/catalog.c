@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "loader.h"
+#include "sidecar.h"
 
 int srv_catalog_id_valid(const char *id)
 {
@@ -191,7 +192,7 @@ int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err)
         struct stat st;
         char id[256];
         id_of(ent->d_name, id, sizeof id);
-        if (stat(path, &st) || !S_ISREG(st.st_mode) || !iso_load_recognises(path))
+        if (stat(path, &st) || !S_ISREG(st.st_mode) || !srv_load_recognises(path))
             ; /* not a volume of its own */
         else if (!srv_catalog_id_valid(id) || has_id(out, id))
             fprintf(stderr, "isoserve: %s: id \"%s\" is %s; skipped\n", path, id,

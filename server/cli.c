@@ -13,6 +13,7 @@
 #include "clock.h"
 #include "loader.h"
 #include "resample.h"
+#include "sidecar.h"
 
 int srv_fail(const char *fmt, ...)
 {
@@ -74,7 +75,7 @@ int srv_open(const srv_open_options *opt, srv_subject *out)
     double start = iso_clock_ms();
     memset(out, 0, sizeof *out);
     out->name = opt->path;
-    if (iso_load(opt->path, NULL, &out->vol, &err))
+    if (srv_load_volume(opt->path, NULL, &out->vol, &err))
         return srv_fail("%s", err.message);
     if (opt->resample) {
         size_t dims[3];

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "cli.h"
+#include "normals.h"
 #include "encode.h"
 
 static int ends_with(const char *s, const char *suffix)
@@ -51,7 +52,7 @@ int srv_cmd_extract(int argc, char **argv)
     srv_open_options opt = {.want_tree = 1};
     iso_extract_params params = {0};
     const char *out = NULL;
-    int as_json = 0, have_level = 0, full_scan = 0;
+    int as_json = 0, have_level = 0, full_scan = 0, normals = 4; /* tricubic by default */
     for (int i = 0; i < argc; i++) {
         const char *a = argv[i], *value = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--json"))
@@ -68,6 +69,10 @@ int srv_cmd_extract(int argc, char **argv)
         } else if (!strcmp(a, "--tolerance") && value) {
             if (srv_parse_number(value, &params.tolerance) || params.tolerance < 0)
                 return srv_fail("extract: --tolerance '%s' must be a finite number >= 0", value);
+            i++;
+        } else if (!strcmp(a, "--normals") && value) {
+            if ((normals = iso_normals_order_from_name(value)) < 0)
+                return srv_fail("extract: --normals '%s': expected none, trilinear, triquadratic or tricubic", value);
             i++;
         } else if (!strcmp(a, "-o") && value)
             out = argv[++i];
@@ -92,6 +97,8 @@ int srv_cmd_extract(int argc, char **argv)
     iso_error err;
     int rc = full_scan ? iso_extract_full_scan(s.vol, params.level, params.space, &mesh, &st, &err)
                        : iso_extract(s.tree, &params, &mesh, &st, &err);
+    if (!rc && normals)
+        rc = iso_normals_compute(s.vol, &mesh, normals, params.space, &err);
     if (rc) {
         srv_close(&s);
         return srv_fail("%s: %s", opt.path, err.message);
@@ -100,7 +107,7 @@ int srv_cmd_extract(int argc, char **argv)
     if (as_json && status == 0) {
         size_t volume_bytes = iso_vol_count(s.vol) * iso_vol_type_size(s.vol->type);
         json_t *doc = json_pack(
-            "{s:s, s:f, s:f, s:I, s:I, s:I, s:I, s:I, s:f, s:f, s:f, s:f, s:I, s:I, s:s}",
+            "{s:s, s:f, s:f, s:I, s:I, s:I, s:I, s:I, s:f, s:f, s:f, s:f, s:I, s:I, s:s, s:s}",
             "volume", opt.path, "level", params.level, "tolerance", params.tolerance,
             "triangles", (json_int_t)st.triangles, "vertices", (json_int_t)st.vertices,
             "cells_visited", (json_int_t)st.cells_visited, "nodes_visited", (json_int_t)st.nodes_visited,
@@ -108,7 +115,7 @@ int srv_cmd_extract(int argc, char **argv)
             "build_ms", s.tree ? s.tree->build_ms : 0.0, "error_bound", st.error_bound,
             "area", iso_mesh_area(&mesh), "hierarchy_bytes", (json_int_t)(s.tree ? iso_tree_bytes(s.tree) : 0),
             "volume_bytes", (json_int_t)volume_bytes, "space",
-            params.space == ISO_SPACE_INDEX ? "index" : "world_mm");
+            params.space == ISO_SPACE_INDEX ? "index" : "world_mm", "normals", iso_normals_name(normals));
         char *text = doc ? json_dumps(doc, JSON_COMPACT | JSON_REAL_PRECISION(10)) : NULL;
         if (text)
             puts(text);

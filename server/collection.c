@@ -12,6 +12,7 @@
 #include "clock.h"
 #include "histogram.h"
 #include "loader.h"
+#include "sidecar.h"
 
 /* Bump when extraction or encoding changes what a mesh URL returns: it is part of every
  * volume's version, so ETags and caches in front of the server move on. */
@@ -104,7 +105,7 @@ static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload
     v->entry = e;
     double start = iso_clock_ms();
     iso_load_options lopt = {.max_bytes = opt->max_volume_bytes};
-    if (iso_load(e->path, &lopt, &v->vol, &err)) {
+    if (srv_load_volume(e->path, &lopt, &v->vol, &err)) {
         fprintf(stderr, "isoserve: volume \"%s\": %s; skipped\n", e->id, err.message);
         return 1;
     }

@@ -12,8 +12,9 @@ static const struct {
     {"info", srv_cmd_info, "info VOLUME [--json] [--resample WxHxD]"},
     {"build", srv_cmd_build, "build VOLUME -o FILE [--resample WxHxD]"},
     {"extract", srv_cmd_extract,
-     "extract VOLUME --level L [--tolerance T] [-o OUT.ply|OUT.obj] [--json] [--hierarchy FILE]\n"
-     "                 [--resample WxHxD] [--index-space] [--full-scan]"},
+     "extract VOLUME --level L [--tolerance T] [-o OUT.ply|.obj|.drc|.glb] [--json] [--hierarchy FILE]\n"
+     "                 [--normals none|trilinear|triquadratic|tricubic] [--resample WxHxD]\n"
+     "                 [--index-space] [--full-scan]"},
     {"serve", srv_cmd_serve,
      "serve [--catalog FILE | --volumes DIR] [--listen 127.0.0.1:8080] [--cache-dir DIR]\n"
      "                 [--threads N] [--queue N] [--cache-mb N] [--cors-origin ORIGIN]...\n"
@@ -27,7 +28,8 @@ static int usage(FILE *to)
     fprintf(to, "isoserve: iso-surfaces of volumes with a proven error bound\n\nusage:\n");
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
         fprintf(to, "  isoserve %s\n", commands[i].usage);
-    fprintf(to, "\nVOLUME is a file (.nrrd, .nhdr) or field:NAME[:WxHxD] "
+    fprintf(to, "\nVOLUME is a file (.nrrd, .nhdr, .nii, .nii.gz, .mhd, .mha, raw with a .json sidecar)\n"
+                "or field:NAME[:WxHxD] "
                 "(sphere, torus, ml, constant, spike, ijk).\n");
     return to == stdout ? 0 : 2;
 }

@@ -19,7 +19,7 @@ if $bin info field:sphere:32x30x28 --json > "$tmp/info.json" &&
    [ "$(json "$tmp/info.json" "d['type']")" = "f32" ]; then pass info; else fail info "$(cat "$tmp/info.json")"; fi
 
 # extract writes a binary PLY whose counts and size match the JSON report.
-if $bin extract field:sphere:40 --level 4 --tolerance 0.05 -o "$tmp/s.ply" --json > "$tmp/s.json"; then
+if $bin extract field:sphere:40 --level 4 --tolerance 0.05 --normals none -o "$tmp/s.ply" --json > "$tmp/s.json"; then
     v=$(json "$tmp/s.json" "d['vertices']"); t=$(json "$tmp/s.json" "d['triangles']")
     header=$(head -c 400 "$tmp/s.ply" | "$py" -c "import sys; h=sys.stdin.buffer.read().split(b'end_header\n')[0]; print(len(h)+11)")
     hv=$(head -c 400 "$tmp/s.ply" | grep -a '^element vertex' | cut -d' ' -f3)

@@ -546,10 +546,12 @@ def volumes_dir(tmp, blob):
     open(os.path.join(d, "broken.nrrd"), "wb").write(b"NRRD0004\ntype: float\n")
     open(os.path.join(d, ".hidden.nrrd"), "wb").write(b"")
     open(os.path.join(d, "notes.txt"), "w").write("not a volume")
+    open(os.path.join(d, "side.raw"), "wb").write(bytes(range(27)))
+    json.dump({"dims": [3, 3, 3], "type": "uint8"}, open(os.path.join(d, "side.raw.json"), "w"))
     s = Server(["--volumes", d, "--web-root", tmp])
     try:
         ids = [v["id"] for v in json.loads(s.get("/v1/volumes").body)["volumes"]]
-        assert ids == ["blob", "detached"], ids
+        assert ids == ["blob", "detached", "side"], ids
         assert "broken.nrrd" in s.log() and "skipped" in s.log()
     finally:
         s.stop()
