@@ -31,8 +31,8 @@ TEST_BIN   = $(TEST_SRC:tests/unit/%.c=$(BUILD)/tests/%)
 # Objects of the test support must survive between runs (they are not final targets).
 .SECONDARY:
 
-.PHONY: all setup test unit-tests bench run clean sanitize node-deps
-all: $(BUILD)/isoserve
+.PHONY: all setup test unit-tests bench run clean sanitize node-deps web
+all: $(BUILD)/isoserve web
 
 $(BUILD)/%.o: %.c
 	@mkdir -p $(dir $@)
@@ -68,6 +68,23 @@ web/node_modules/.package-lock.json: web/package-lock.json web/package.json
 	cd web && npm ci --no-audit --no-fund || { echo "npm ci failed in web/ (no network?)"; exit 1; }
 
 node-deps: web/node_modules/.package-lock.json
+
+# The web client: web/src plus the npm files it imports, copied into $(BUILD)/web, which
+# the server serves at / (nothing is loaded from another host). three.module.js imports
+# ./three.core.js; DRACOLoader's decoder (js + wasm) runs in a worker from libs/draco.
+WEB_SRC := $(sort $(wildcard web/src/*))
+THREE   := web/node_modules/three
+$(BUILD)/web/.stamp: $(WEB_SRC) web/node_modules/.package-lock.json
+	rm -rf $(BUILD)/web
+	mkdir -p $(BUILD)/web/three/addons/controls $(BUILD)/web/three/addons/loaders $(BUILD)/web/three/addons/libs
+	cp $(WEB_SRC) $(BUILD)/web/
+	cp $(THREE)/build/three.module.js $(THREE)/build/three.core.js $(BUILD)/web/three/
+	cp $(THREE)/examples/jsm/controls/OrbitControls.js $(BUILD)/web/three/addons/controls/
+	cp $(THREE)/examples/jsm/loaders/DRACOLoader.js $(BUILD)/web/three/addons/loaders/
+	cp -r $(THREE)/examples/jsm/libs/draco $(BUILD)/web/three/addons/libs/
+	touch $@
+
+web: $(BUILD)/web/.stamp
 
 test: setup
 	$(MAKE) node-deps

@@ -1,0 +1,48 @@
+// api.js: the isoserve HTTP API as the client uses it: documents, meshes (with the facts
+// their X-Iso headers carry) and errors turned into sentences (problem+json's detail).
+
+export class ApiError extends Error {}
+
+async function failure(response) {
+  let detail = `${response.status} ${response.statusText}`;
+  try {
+    const problem = await response.json();
+    if (problem.detail) detail = problem.detail;
+  } catch { /* not a problem body: the status line says it */ }
+  return new ApiError(detail);
+}
+
+export async function getJson(url, signal) {
+  const response = await fetch(url, { signal });
+  if (!response.ok) throw await failure(response);
+  return response.json();
+}
+
+export function meshUrl(volume, { level, tolerance, normals, format = 'draco' }) {
+  const q = new URLSearchParams({ level: String(level), tolerance: String(tolerance), normals, format });
+  return `v1/volumes/${encodeURIComponent(volume)}/mesh?${q}`;
+}
+
+const number = (h, name) => (h.get(name) === null ? null : Number(h.get(name)));
+
+// Fetches a Draco mesh; returns its bytes and what the headers say about it.
+export async function getMesh(volume, params, signal) {
+  const response = await fetch(meshUrl(volume, params), { signal });
+  if (!response.ok) throw await failure(response);
+  const bytes = await response.arrayBuffer();
+  const h = response.headers;
+  return {
+    bytes,
+    size: bytes.byteLength,
+    triangles: number(h, 'X-Iso-Triangles'),
+    vertices: number(h, 'X-Iso-Vertices'),
+    cellsVisited: number(h, 'X-Iso-Cells-Visited'),
+    extractMs: number(h, 'X-Iso-Extract-Ms'),
+    encodeMs: number(h, 'X-Iso-Encode-Ms'),
+    errorBound: number(h, 'X-Iso-Error-Bound'),
+    tolerance: number(h, 'X-Iso-Tolerance'),
+    areaMm2: number(h, 'X-Iso-Area-Mm2'),
+    volumeMm3: number(h, 'X-Iso-Volume-Mm3'),
+    cache: h.get('X-Iso-Cache'),
+  };
+}

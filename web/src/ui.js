@@ -1,0 +1,82 @@
+// ui.js: the panel's pieces that draw: the histogram behind the level slider, suggested
+// level chips, the stats table, the scale bar, the error line.
+
+export function drawHistogram(canvas, histogram, levels, onPick) {
+  const ctx = canvas.getContext('2d');
+  const { width, height } = canvas;
+  ctx.clearRect(0, 0, width, height);
+  const counts = histogram.counts;
+  const peak = Math.max(...counts.map((c) => Math.log1p(c)), 1);
+  ctx.fillStyle = getComputedStyle(canvas).color || '#888';
+  ctx.globalAlpha = 0.55;
+  const w = width / counts.length;
+  counts.forEach((c, i) => {
+    const h = (Math.log1p(c) / peak) * (height - 4); // log counts: the air peak would flatten the rest
+    ctx.fillRect(i * w, height - h, Math.max(w, 1), h);
+  });
+  ctx.globalAlpha = 1;
+  ctx.fillStyle = '#e0a040';
+  for (const level of levels) {
+    const x = ((level - histogram.min) / (histogram.max - histogram.min || 1)) * width;
+    ctx.fillRect(x - 1, 0, 2, height);
+  }
+  const chips = document.getElementById('suggested');
+  chips.replaceChildren(...levels.map((level) => {
+    const b = document.createElement('button');
+    b.textContent = formatNumber(level);
+    b.title = 'suggested level';
+    b.addEventListener('click', () => onPick(level));
+    return b;
+  }));
+}
+
+export function formatNumber(x, digits = 4) {
+  if (x === null || x === undefined || Number.isNaN(x)) return '–';
+  if (x !== 0 && (Math.abs(x) >= 1e6 || Math.abs(x) < 1e-3)) return x.toExponential(2);
+  return Number(x.toPrecision(digits)).toLocaleString('en-US');
+}
+
+const integer = (x) => (x === null ? '–' : Math.round(x).toLocaleString('en-US'));
+
+export function showStats(table, mesh, decodeMs) {
+  const rows = [
+    ['triangles', integer(mesh.triangles), 'stat-triangles'],
+    ['vertices', integer(mesh.vertices)],
+    ['bytes over the wire', `${integer(mesh.size)} B`],
+    ['server extract', `${formatNumber(mesh.extractMs, 3)} ms`],
+    ['server encode', `${formatNumber(mesh.encodeMs, 3)} ms`],
+    ['decode', `${formatNumber(decodeMs, 3)} ms`],
+    ['cells visited', integer(mesh.cellsVisited)],
+    ['error bound', formatNumber(mesh.errorBound)],
+    ['tolerance used', formatNumber(mesh.tolerance)],
+    ['area', mesh.areaMm2 === null ? '–' : `${formatNumber(mesh.areaMm2)} mm²`],
+    ['enclosed volume', mesh.volumeMm3 === null ? '– (open surface)' : `${formatNumber(mesh.volumeMm3)} mm³`],
+    ['server cache', mesh.cache ?? '–'],
+  ];
+  table.replaceChildren(...rows.map(([name, value, id]) => {
+    const tr = document.createElement('tr');
+    const a = document.createElement('td');
+    const b = document.createElement('td');
+    a.textContent = name;
+    b.textContent = value;
+    if (id) b.id = id;
+    tr.append(a, b);
+    return tr;
+  }));
+}
+
+// A bar of a round length (1, 2 or 5 times a power of ten mm) about 100 px long.
+export function showScale(mmPerPixel) {
+  if (!Number.isFinite(mmPerPixel) || mmPerPixel <= 0) return;
+  const target = mmPerPixel * 100;
+  const power = 10 ** Math.floor(Math.log10(target));
+  const length = [1, 2, 5, 10].map((m) => m * power).find((l) => l >= target * 0.7) ?? 10 * power;
+  document.getElementById('scale-bar').style.width = `${length / mmPerPixel}px`;
+  document.getElementById('scale-label').textContent = `${formatNumber(length)} mm`;
+}
+
+export function showError(message) {
+  const box = document.getElementById('error');
+  box.hidden = !message;
+  box.textContent = message || '';
+}
