@@ -2,14 +2,17 @@
  * Wilhelms and Van Gelder's min/max pruning), and the full-scan marching cubes baseline.
  *
  * PASS 1 (descend): from the root, skip every node whose [min, max] cannot hold the level;
- *   stop at the first node whose fit error is within the fit share of the tolerance and
- *   whose trilinear polygonizes within the rest (tets.c); below stored bricks the same
- *   rule runs on the brick's samples, read once into a scratch block; single cells are
- *   marching cubes on the data itself. Every piece is appended to a triangle soup in
- *   index space.
- * PASS 2 (weld): vertices with bit-identical positions merge (mesh.c). Shared edges are
- *   interpolated from the same end, so neighbours of equal size weld exactly.
- * PASS 3 (place): index space to world millimetres, if asked. */
+ *   stop at the first node of at least MIN_FAN_CELLS cells whose fit error is within the
+ *   fit share of the tolerance and whose face loops fan within the tolerance (fan.c);
+ *   below stored bricks the same rule runs on the brick's samples, read once into a
+ *   scratch block; single cells are marching cubes on the data itself. Every piece is
+ *   appended to a triangle soup in index space. Fans and cells compute identical
+ *   crossings on every shared face, so pieces of any size meet without cracks.
+ * PASS 2 (cap, if asked): the cells between the volume's border samples and a virtual
+ *   layer below every level around it, so the surface closes where it leaves the data.
+ * PASS 3 (weld): vertices with bit-identical positions merge (mesh.c). Crossings are
+ *   interpolated from the edge's low end by one function (mc.h), so they weld exactly.
+ * PASS 4 (place): index space to world millimetres, if asked. */
 #include "extract.h"
 
 #include <assert.h>
@@ -21,9 +24,15 @@
 #include "clock.h"
 #include "mc.h"
 #include "trilinear.h"
-#include "tets.h"
+#include "fan.h"
 
 #define BRICK_SAMPLES ((ISO_TREE_BRICK + 1) * (ISO_TREE_BRICK + 1) * (ISO_TREE_BRICK + 1))
+
+/* A fan emits about one triangle per loop vertex, marching cubes about two per crossed
+ * cell: below 2x2x2 cells fanning a node saves nothing. */
+#define MIN_FAN_CELLS 8
+/* Share of the tolerance a fan's centre may be off the level (Newton lands far closer). */
+#define CENTRE_SHARE (1.0 / 64)
 
 typedef struct walk {
     const iso_tree *tree;
@@ -32,6 +41,7 @@ typedef struct walk {
     int prune, exact;
     iso_mesh *soup;
     iso_extract_stats *stats;
+    iso_fan_scratch fan;
     /* The current brick's samples, x fastest, and where the brick starts. */
     double brick[BRICK_SAMPLES];
     uint32_t brick_lo[3], brick_n[3];
@@ -42,18 +52,28 @@ static int active(const walk *w, double min, double max)
     return !w->prune || (min <= w->level && w->level < max);
 }
 
-/* Emits box as one trilinear through its corners if it fits; 1 done, 0 not, <0 error. */
-static int try_trilinear(walk *w, const iso_box *box, const double c[8], double fit_error)
+static void raise_bound(iso_extract_stats *stats, double vertex_error)
 {
-    double delta;
-    size_t sub_boxes = 0;
-    int rc = iso_tets_polygonize(c, box, w->level, w->tolerance - fit_error, w->soup, &delta,
-                                 &sub_boxes);
+    if (vertex_error > stats->error_bound)
+        stats->error_bound = vertex_error;
+}
+
+/* Emits box as fans over its face loops if it may; 1 done, 0 not, <0 error. */
+static int try_fan(walk *w, const iso_box *box, double fit_error)
+{
+    if (iso_box_cells(box) < MIN_FAN_CELLS || !(fit_error <= w->fit_limit))
+        return 0;
+    iso_fan_result fan;
+    /* Centres must land on the surface, not merely within the tolerance of its level: a
+     * centre left in a flat background would meet that loosely and still be far off. */
+    double centre_limit = w->tolerance * CENTRE_SHARE;
+    int rc = iso_fan_polygonize(w->vol, box, w->level, centre_limit, &w->fan, w->soup, &fan);
     if (rc == 1) {
         w->stats->nodes_polygonized++;
         w->stats->cells_visited++;
-        if (fit_error + delta > w->stats->error_bound)
-            w->stats->error_bound = fit_error + delta;
+        raise_bound(w->stats, fan.vertex_error);
+        if (fit_error > w->stats->fit_error)
+            w->stats->fit_error = fit_error;
     }
     return rc;
 }
@@ -80,7 +100,7 @@ static int march_cell(walk *w, uint32_t x, uint32_t y, uint32_t z)
     for (int k = 0; k < 8; k++)
         v[k] = brick_at(w, x + (k & 1), y + ((k >> 1) & 1), z + ((k >> 2) & 1));
     w->stats->cells_visited++;
-    int rc = iso_mc_cell(v, w->level, origin, unit, w->soup);
+    int rc = iso_mc_cell(v, w->level, origin, unit, w->soup, &w->stats->error_bound);
     return rc < 0 ? rc : 0;
 }
 
@@ -105,6 +125,22 @@ static void scan_brick_box(const walk *w, const iso_box *b, const double c[8], d
     *mn = lo;
     *mx = hi;
     *er = worst;
+}
+
+/* Triangles marching cubes would give for the box's cells. */
+static size_t brick_mc_triangles(const walk *w, const iso_box *b)
+{
+    const iso_mc_case *cases = iso_mc_cases();
+    size_t count = 0;
+    for (uint32_t z = b->lo[2]; z < b->hi[2]; z++)
+        for (uint32_t y = b->lo[1]; y < b->hi[1]; y++)
+            for (uint32_t x = b->lo[0]; x < b->hi[0]; x++) {
+                double v[8];
+                for (int k = 0; k < 8; k++)
+                    v[k] = brick_at(w, x + (k & 1), y + ((k >> 1) & 1), z + ((k >> 2) & 1));
+                count += cases[iso_mc_case_index(v, w->level)].triangle_count;
+            }
+    return count;
 }
 
 static int visit_sub(walk *w, const iso_box *box);
@@ -135,11 +171,20 @@ static int visit_sub(walk *w, const iso_box *box)
     scan_brick_box(w, box, c, &mn, &mx, &er);
     if (!active(w, mn, mx))
         return 0;
-    if (er <= w->fit_limit) {
-        int rc = try_trilinear(w, box, c, er);
-        if (rc)
-            return rc < 0 ? rc : 0;
-    }
+    size_t triangles_before = w->soup->triangle_count, vertices_before = w->soup->vertex_count;
+    int rc = try_fan(w, box, er);
+    if (rc < 0)
+        return rc;
+    if (rc == 0)
+        return visit_sub_children(w, box);
+    /* A small node with a tangled surface can fan into more triangles than its cells
+     * would give: then march them instead, so no tolerance ever costs triangles. */
+    if (w->soup->triangle_count - triangles_before <= brick_mc_triangles(w, box))
+        return 0;
+    w->soup->triangle_count = triangles_before;
+    w->soup->vertex_count = vertices_before;
+    w->stats->nodes_polygonized--;
+    w->stats->cells_visited--;
     return visit_sub_children(w, box);
 }
 
@@ -168,23 +213,14 @@ static int visit_brick(walk *w, const iso_box *box)
 
 /* ---- stored nodes ---- */
 
-static void volume_corners(const iso_volume *vol, const iso_box *b, double c[8])
-{
-    for (int k = 0; k < 8; k++)
-        c[k] = iso_vol_get(vol, k & 1 ? b->hi[0] : b->lo[0], k & 2 ? b->hi[1] : b->lo[1],
-                           k & 4 ? b->hi[2] : b->lo[2]);
-}
-
 static int visit_node(walk *w, uint32_t index, const iso_box *box)
 {
     const iso_tree_node *node = &w->tree->nodes[index];
     w->stats->nodes_visited++;
     if (!active(w, node->min, node->max))
         return 0;
-    if (!w->exact && node->err <= w->fit_limit) {
-        double c[8];
-        volume_corners(w->vol, box, c);
-        int rc = try_trilinear(w, box, c, node->err);
+    if (!w->exact) {
+        int rc = try_fan(w, box, node->err);
         if (rc)
             return rc < 0 ? rc : 0;
     }
@@ -197,6 +233,41 @@ static int visit_node(walk *w, uint32_t index, const iso_box *box)
 }
 
 /* ---- the passes after descent ---- */
+
+/* The value of padded sample (i, j, k): the volume's inside it, below every level on the
+ * virtual layer one sample outside it. */
+static double padded_value(const iso_volume *vol, long i, long j, long k)
+{
+    long p[3] = {i, j, k};
+    for (int d = 0; d < 3; d++)
+        if (p[d] < 0 || p[d] >= (long)vol->dims[d])
+            return -INFINITY;
+    return iso_vol_get(vol, (size_t)i, (size_t)j, (size_t)k);
+}
+
+/* PASS 2: marching cubes on the padded grid's cells that touch the virtual layer, i.e.
+ * lower corners in -1..n-1 with some coordinate -1 or n-1: about two cells per border
+ * sample. Their faces on the border carry the same crossings as the cells and fans
+ * inside, their crossings toward the virtual layer sit 1/1024 voxel outside the border
+ * (iso_mc_edge_t), so the cap is flat against the border and seals the surface. The cap's
+ * own vertices are on the border, not on the level: they do not enter the error bound. */
+static int emit_caps(const iso_volume *vol, double level, iso_mesh *soup)
+{
+    static const double unit[3] = {1, 1, 1};
+    long n[3] = {(long)vol->dims[0], (long)vol->dims[1], (long)vol->dims[2]};
+    for (long k = -1; k < n[2]; k++)
+        for (long j = -1; j < n[1]; j++) {
+            int inner = k >= 0 && k < n[2] - 1 && j >= 0 && j < n[1] - 1;
+            for (long i = -1; i < n[0]; i += inner && i == -1 ? n[0] : 1) {
+                double v[8], origin[3] = {(double)i, (double)j, (double)k};
+                for (int c = 0; c < 8; c++)
+                    v[c] = padded_value(vol, i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
+                if (iso_mc_cell(v, level, origin, unit, soup, NULL) < 0)
+                    return ISO_E_NOMEM;
+            }
+        }
+    return 0;
+}
 
 static void to_world(const iso_volume *vol, iso_mesh *mesh)
 {
@@ -235,7 +306,7 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
         return iso_error_set(err, ISO_E_ARGUMENT, "level must be a finite number");
     if (!(params->tolerance >= 0) || !isfinite(params->tolerance))
         return iso_error_set(err, ISO_E_ARGUMENT, "tolerance must be a finite number >= 0");
-    double share = params->fit_share == 0 ? 0.5 : params->fit_share;
+    double share = params->fit_share == 0 ? 1.0 : params->fit_share;
     if (!(share > 0 && share <= 1))
         return iso_error_set(err, ISO_E_ARGUMENT, "fit share must be in (0, 1]");
 
@@ -255,6 +326,9 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
     iso_mesh_free(mesh);
     iso_box root = iso_box_root(tree->vol);
     int rc = visit_node(w, 0, &root);
+    if (!rc && params->cap)
+        rc = emit_caps(tree->vol, params->level, mesh);
+    iso_fan_scratch_free(&w->fan);
     free(w);
     if (rc) {
         iso_mesh_free(mesh);
@@ -289,7 +363,7 @@ int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,
                 double v[8], origin[3] = {(double)x, (double)y, (double)z};
                 for (int k = 0; k < 8; k++)
                     v[k] = slab[((size_t)((k >> 2) & 1) * ny + y + ((k >> 1) & 1)) * nx + x + (k & 1)];
-                rc = iso_mc_cell(v, level, origin, unit, mesh);
+                rc = iso_mc_cell(v, level, origin, unit, mesh, &stats->error_bound);
             }
     }
     free(slab);

@@ -1,8 +1,12 @@
 /* extract.h: iso-surface extraction from the hierarchy, with a proven error bound.
  *
- * The guarantee: every output vertex v satisfies |f(v) - level| <= error_bound <= tolerance
- * (plus float rounding), f the trilinear interpolant of the full-resolution samples.
- * Tolerance 0 gives marching cubes' surface of the full-resolution data.
+ * The guarantee: every output vertex v on the level satisfies |f(v) - level| <= error_bound
+ * (plus float rounding), f the trilinear interpolant of the full-resolution samples, and
+ * error_bound <= tolerance unless a sample sits exactly on the level, where crossings are
+ * moved ISO_MC_END_GAP of an edge off it (mc.h). Tolerance 0 gives marching cubes'
+ * surface of the full-resolution data. At every tolerance the welded mesh is watertight:
+ * open edges only on the volume's border (none with cap), two triangles per other edge in
+ * opposite directions, no zero-area triangle (census.h).
  *
  * Samples equal to the level count as below it (inside = value > level); NaN samples
  * count as below every level. */
@@ -20,18 +24,25 @@ typedef enum iso_space { ISO_SPACE_WORLD = 0, ISO_SPACE_INDEX = 1 } iso_space;
 typedef struct iso_extract_params {
     double level;
     double tolerance;  /* >= 0, in the volume's value units */
-    double fit_share;  /* share of the tolerance for the fit error, (0,1]; 0 = default 0.5 */
+    double fit_share;  /* a node may be fanned when its fit error is within this share of
+                        * the tolerance, (0,1]; 0 = default 1 */
     int no_minmax;     /* 1: do not prune by min/max (the paper's middle time column) */
+    int cap;           /* 1: close the surface at the volume's border, as if the volume were
+                        * surrounded by values below the level (a closed, printable mesh) */
     iso_space space;   /* output positions in world mm (default) or index space */
 } iso_extract_params;
 
 typedef struct iso_extract_stats {
     size_t triangles, vertices;
     size_t nodes_visited;   /* hierarchy nodes examined, stored and on the fly */
-    size_t cells_visited;   /* cells marched plus trilinear nodes polygonized (paper's column) */
-    size_t nodes_polygonized;/* nodes larger than a cell emitted as one trilinear */
+    size_t cells_visited;   /* cells marched plus nodes fanned (the paper's column) */
+    size_t nodes_polygonized;/* nodes larger than a cell emitted whole, as fans */
     double extract_ms;
-    double error_bound;     /* max over emitted pieces of fit error + polygonization error */
+    double error_bound;     /* max |f(v) - level| over the vertices on the level (all but
+                             * a cap's): fan centres as measured, crossings moved off a
+                             * tie by ISO_MC_END_GAP; 0 otherwise */
+    double fit_error;       /* max fit error of the nodes fanned: how far the data strays
+                             * from the trilinear of a node emitted whole */
 } iso_extract_stats;
 
 /* Extracts the iso-surface at params->level within params->tolerance into mesh (which is

@@ -62,6 +62,32 @@ static int triangulate(const int *v, int n, iso_mc_case *out)
     return 0;
 }
 
+int iso_mc_face_segments(const int inside[4], int from[2], int to[2])
+{
+    int entry[2], leave[2], entries = 0, leaves = 0;
+    for (int i = 0; i < 4; i++) {
+        int next = (i + 1) % 4;
+        if (!inside[i] && inside[next])
+            entry[entries++] = i;
+        else if (inside[i] && !inside[next])
+            leave[leaves++] = i;
+    }
+    for (int r = 0; r < entries; r++) {
+        /* The run that starts at entry[r] ends at the first leave after it. */
+        int best = -1, best_gap = 5;
+        for (int l = 0; l < leaves; l++) {
+            int gap = (leave[l] - entry[r] + 4) % 4;
+            if (gap < best_gap) {
+                best_gap = gap;
+                best = leave[l];
+            }
+        }
+        from[r] = best;
+        to[r] = entry[r];
+    }
+    return entries;
+}
+
 /* For every face, walking its corners counter-clockwise as seen from outside the cell, a
  * run of inside corners is entered through one crossing edge and left through another;
  * the iso-segment goes from the leaving edge back to the entering one. Each crossing edge
@@ -81,26 +107,13 @@ static void build_case(unsigned index, iso_mc_case *out)
                 int at = side ? i : 3 - i; /* (b,c,axis) is right-handed: reverse on the low side */
                 q[i] = (side << axis) | (bc[at][0] << b) | (bc[at][1] << c);
             }
-            int entry[2], leave[2], entries = 0, leaves = 0;
-            for (int i = 0; i < 4; i++) {
-                int from = q[i], to = q[(i + 1) % 4];
-                int in_from = (index >> from) & 1, in_to = (index >> to) & 1;
-                if (!in_from && in_to)
-                    entry[entries++] = i;
-                else if (in_from && !in_to)
-                    leave[leaves++] = i;
-            }
-            for (int r = 0; r < entries; r++) {
-                /* The run that starts at entry[r] ends at the first leave after it. */
-                int best = -1, best_gap = 5;
-                for (int l = 0; l < leaves; l++) {
-                    int gap = (leave[l] - entry[r] + 4) % 4;
-                    if (gap < best_gap) {
-                        best_gap = gap;
-                        best = leave[l];
-                    }
-                }
-                int e_in = edge_between(q[entry[r]], q[(entry[r] + 1) % 4]);
+            int inside[4], from[2], to[2];
+            for (int i = 0; i < 4; i++)
+                inside[i] = (index >> q[i]) & 1;
+            int segments = iso_mc_face_segments(inside, from, to);
+            for (int r = 0; r < segments; r++) {
+                int best = from[r];
+                int e_in = edge_between(q[to[r]], q[(to[r] + 1) % 4]);
                 int e_out = edge_between(q[best], q[(best + 1) % 4]);
                 next[e_out] = e_in;
             }
@@ -136,7 +149,7 @@ const iso_mc_case *iso_mc_cases(void)
 }
 
 int iso_mc_cell(const double v[8], double level, const double origin[3], const double size[3],
-                iso_mesh *soup)
+                iso_mesh *soup, double *vertex_error)
 {
     const iso_mc_case *cs = iso_mc_cases() + iso_mc_case_index(v, level);
     if (!cs->triangle_count)
@@ -150,9 +163,12 @@ int iso_mc_cell(const double v[8], double level, const double origin[3], const d
         int e = cs->edges[k], axis = e / 4;
         int lo = iso_mc_edge_corner[e][0];
         double a = v[lo], b = v[iso_mc_edge_corner[e][1]];
-        double t = (level - a) / (b - a);
-        if (!(t >= 0.0 && t <= 1.0)) /* a NaN end: the crossing is placed midway */
-            t = 0.5;
+        double t = iso_mc_edge_t(a, b, level);
+        if (vertex_error) {
+            double error = iso_mc_edge_error(a, b, level);
+            if (error > *vertex_error)
+                *vertex_error = error;
+        }
         for (int d = 0; d < 3; d++) {
             double x = origin[d] + (double)((lo >> d) & 1) * size[d];
             if (d == axis)

@@ -210,6 +210,12 @@ typedef struct edge_slot {
 
 int iso_mesh_count_edges(const iso_mesh *mesh, iso_mesh_edges *out)
 {
+    return iso_mesh_count_edges_excusing(mesh, NULL, NULL, out);
+}
+
+int iso_mesh_count_edges_excusing(const iso_mesh *mesh, iso_mesh_edge_excuse_fn excuse,
+                                  void *context, iso_mesh_edges *out)
+{
     size_t cap = 16;
     while (cap < 4 * mesh->triangle_count)
         cap *= 2;
@@ -238,9 +244,12 @@ int iso_mesh_count_edges(const iso_mesh *mesh, iso_mesh_edges *out)
         if (!uses)
             continue;
         out->edges++;
-        if (uses == 1)
-            out->open++;
-        else if (uses > 2)
+        if (uses == 1) {
+            if (excuse && excuse(context, slots[s].lo, slots[s].hi))
+                out->open_excused++;
+            else
+                out->open++;
+        } else if (uses > 2)
             out->nonmanifold++;
         else if (slots[s].forward != 1)
             out->misoriented++;

@@ -45,8 +45,14 @@ double iso_mesh_enclosed_volume(const iso_mesh *mesh);
  * two triangles in opposite directions. Allocates a temporary table. */
 typedef struct iso_mesh_edges {
     size_t edges, open, nonmanifold, misoriented;
+    size_t open_excused; /* open edges the classifier accepted (counted apart from open) */
 } iso_mesh_edges;
 int iso_mesh_count_edges(const iso_mesh *mesh, iso_mesh_edges *out);
+/* The same census, asking excuse(context, a, b) about every open edge (a, b): those it
+ * answers 1 for count in open_excused instead of open (a volume border, for example). */
+typedef int (*iso_mesh_edge_excuse_fn)(void *context, uint32_t a, uint32_t b);
+int iso_mesh_count_edges_excusing(const iso_mesh *mesh, iso_mesh_edge_excuse_fn excuse,
+                                  void *context, iso_mesh_edges *out);
 
 /* Axis-aligned bounds of the positions; min > max for an empty mesh. */
 void iso_mesh_bounds(const iso_mesh *mesh, float min[3], float max[3]);

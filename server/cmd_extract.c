@@ -1,9 +1,11 @@
 /* cmd_extract.c: `isoserve extract`: one iso-surface to a file and/or a JSON report. */
 #include <jansson.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "census.h"
 #include "cli.h"
 #include "normals.h"
 #include "encode.h"
@@ -61,6 +63,8 @@ int srv_cmd_extract(int argc, char **argv)
             params.space = ISO_SPACE_INDEX;
         else if (!strcmp(a, "--full-scan"))
             full_scan = 1;
+        else if (!strcmp(a, "--cap"))
+            params.cap = 1;
         else if (!strcmp(a, "--level") && value) {
             if (srv_parse_number(value, &params.level))
                 return srv_fail("extract: --level '%s' is not a finite number", value);
@@ -86,7 +90,10 @@ int srv_cmd_extract(int argc, char **argv)
             opt.path = a;
     }
     if (!opt.path || !have_level)
-        return srv_fail("extract: usage: isoserve extract VOLUME --level L [--tolerance T] [-o OUT.ply] [--json]");
+        return srv_fail("extract: usage: isoserve extract VOLUME --level L [--tolerance T] [--cap] "
+                        "[--normals none|trilinear|triquadratic|tricubic] [-o OUT.ply|.stl|.obj|.drc|.glb] [--json]");
+    if (full_scan && params.cap)
+        return srv_fail("extract: --cap needs the hierarchy; drop --full-scan");
     opt.want_tree = !full_scan;
     srv_subject s;
     if (srv_open(&opt, &s))
@@ -104,18 +111,40 @@ int srv_cmd_extract(int argc, char **argv)
         return srv_fail("%s: %s", opt.path, err.message);
     }
     int status = out ? write_mesh(&mesh, out) : 0;
+    iso_census census;
+    if (as_json && status == 0 && iso_census_compute(s.vol, &mesh, params.space, &census, &err))
+        status = srv_fail("%s: %s", opt.path, err.message);
     if (as_json && status == 0) {
         size_t volume_bytes = iso_vol_count(s.vol) * iso_vol_type_size(s.vol->type);
+        double area = iso_mesh_area(&mesh);
         json_t *doc = json_pack(
-            "{s:s, s:f, s:f, s:I, s:I, s:I, s:I, s:I, s:f, s:f, s:f, s:f, s:I, s:I, s:s, s:s}",
+            "{s:s, s:f, s:f, s:I, s:I, s:I, s:I, s:I, s:f, s:f, s:f, s:f, s:f, s:I, s:I, s:s, s:s}",
             "volume", opt.path, "level", params.level, "tolerance", params.tolerance,
             "triangles", (json_int_t)st.triangles, "vertices", (json_int_t)st.vertices,
             "cells_visited", (json_int_t)st.cells_visited, "nodes_visited", (json_int_t)st.nodes_visited,
             "nodes_polygonized", (json_int_t)st.nodes_polygonized, "extract_ms", st.extract_ms,
             "build_ms", s.tree ? s.tree->build_ms : 0.0, "error_bound", st.error_bound,
-            "area", iso_mesh_area(&mesh), "hierarchy_bytes", (json_int_t)(s.tree ? iso_tree_bytes(s.tree) : 0),
+            "area", area, "area_mm2", area, "hierarchy_bytes", (json_int_t)(s.tree ? iso_tree_bytes(s.tree) : 0),
             "volume_bytes", (json_int_t)volume_bytes, "space",
             params.space == ISO_SPACE_INDEX ? "index" : "world_mm", "normals", iso_normals_name(normals));
+        json_t *watertight = json_pack("{s:I, s:I, s:I, s:I, s:I, s:b}",
+            "open_edges", (json_int_t)census.open_edges,
+            "boundary_edges", (json_int_t)census.boundary_edges,
+            "nonmanifold_edges", (json_int_t)census.nonmanifold_edges,
+            "misoriented_edges", (json_int_t)census.misoriented_edges,
+            "degenerate_triangles", (json_int_t)census.degenerate_triangles,
+            "closed", census.closed);
+        if (doc)
+            json_object_set_new(doc, "fit_error", json_real(st.fit_error));
+        if (doc && watertight)
+            json_object_update(doc, watertight);
+        json_decref(watertight);
+        /* Only a closed surface encloses anything; index space has no millimetres. */
+        if (doc)
+            json_object_set_new(doc, "enclosed_volume_mm3",
+                                census.closed && params.space == ISO_SPACE_WORLD
+                                    ? json_real(fabs(iso_mesh_enclosed_volume(&mesh)))
+                                    : json_null());
         char *text = doc ? json_dumps(doc, JSON_COMPACT | JSON_REAL_PRECISION(10)) : NULL;
         if (text)
             puts(text);

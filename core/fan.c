@@ -1,0 +1,366 @@
+/* fan.c: a node's surface as fans over the marching-squares loops of its faces (fan.h). */
+#include "fan.h"
+
+#include <assert.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "mc.h"
+
+/* A directed iso-segment on a face, from the crossing it starts at to the one it ends at;
+ * a crossing is named by its grid edge: ((z * ny + y) * nx + x) * 3 + axis, (x, y, z)
+ * the edge's low end. */
+struct iso_fan_segment {
+    uint64_t from, to;
+    float from_position[3];
+    double from_error;
+    int used;
+};
+
+void iso_fan_scratch_free(iso_fan_scratch *s)
+{
+    free(s->face);
+    free(s->segments);
+    free(s->slots);
+    free(s->loop);
+    memset(s, 0, sizeof *s);
+}
+
+static int grow(void **array, size_t *capacity, size_t needed, size_t item)
+{
+    if (needed <= *capacity)
+        return 0;
+    size_t n = *capacity ? *capacity : 64;
+    while (n < needed)
+        n *= 2;
+    void *p = realloc(*array, n * item);
+    if (!p)
+        return ISO_E_NOMEM;
+    *array = p;
+    *capacity = n;
+    return 0;
+}
+
+/* ---- PASS 1: marching squares on the faces ---- */
+
+typedef struct face {
+    const iso_volume *vol;
+    double level;
+    int axis, b, c;          /* the face is normal to axis; b, c span it, (b, c, axis) right-handed */
+    uint32_t fixed;          /* the face's coordinate along axis */
+    uint32_t lo[3], n[3];    /* its sample box: origin and sample counts (n[axis] = 1) */
+    const double *samples;   /* x fastest */
+} face;
+
+static double face_value(const face *f, const uint32_t p[3])
+{
+    return f->samples[((size_t)(p[2] - f->lo[2]) * f->n[1] + (p[1] - f->lo[1])) * f->n[0] +
+                      (p[0] - f->lo[0])];
+}
+
+/* The crossing on the grid edge between neighbouring samples p and q. */
+static void crossing(const face *f, const uint32_t p[3], const uint32_t q[3], uint64_t *key,
+                     float position[3], double *error)
+{
+    int d = p[f->b] != q[f->b] ? f->b : f->c;
+    const uint32_t *low = p[d] < q[d] ? p : q, *high = p[d] < q[d] ? q : p;
+    double a = face_value(f, low), b = face_value(f, high);
+    double t = iso_mc_edge_t(a, b, f->level);
+    for (int k = 0; k < 3; k++)
+        position[k] = (float)((double)low[k] + (k == d ? t : 0.0));
+    *error = iso_mc_edge_error(a, b, f->level);
+    if (!(*error >= 0))
+        *error = 0; /* a NaN end: no level to be off from */
+    const size_t *dims = f->vol->dims;
+    *key = (((uint64_t)low[2] * dims[1] + low[1]) * dims[0] + low[0]) * 3 + (uint64_t)d;
+}
+
+static int add_segment(iso_fan_scratch *s, const face *f, const uint32_t from[2][3],
+                       const uint32_t to[2][3])
+{
+    if (grow((void **)&s->segments, &s->segment_capacity, s->segment_count + 1, sizeof *s->segments))
+        return ISO_E_NOMEM;
+    iso_fan_segment *g = s->segments + s->segment_count++;
+    float unused[3];
+    double unused_error;
+    crossing(f, from[0], from[1], &g->from, g->from_position, &g->from_error);
+    crossing(f, to[0], to[1], &g->to, unused, &unused_error);
+    g->used = 0;
+    return 0;
+}
+
+/* One data cell of the face with corner (ib, ic), its corners walked counter-clockwise
+ * seen from outside the node: marching cubes' own face rule, so the cell on the other
+ * side of the face, of any size, produces the same segments reversed. */
+static int march_square(iso_fan_scratch *s, const face *f, int high_side, uint32_t ib, uint32_t ic)
+{
+    static const int bc[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+    uint32_t q[4][3];
+    int inside[4];
+    for (int i = 0; i < 4; i++) {
+        int at = high_side ? i : 3 - i;
+        q[i][f->axis] = f->fixed;
+        q[i][f->b] = ib + (uint32_t)bc[at][0];
+        q[i][f->c] = ic + (uint32_t)bc[at][1];
+        inside[i] = face_value(f, q[i]) > f->level;
+    }
+    int from_side[2], to_side[2];
+    int segments = iso_mc_face_segments(inside, from_side, to_side);
+    for (int r = 0; r < segments; r++) {
+        int best = from_side[r], entered = to_side[r];
+        uint32_t from[2][3], to[2][3];
+        memcpy(from[0], q[best], sizeof from[0]);
+        memcpy(from[1], q[(best + 1) % 4], sizeof from[1]);
+        memcpy(to[0], q[entered], sizeof to[0]);
+        memcpy(to[1], q[(entered + 1) % 4], sizeof to[1]);
+        if (add_segment(s, f, from, to))
+            return ISO_E_NOMEM;
+    }
+    return 0;
+}
+
+static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *box,
+                      double level, int axis, int high_side)
+{
+    face f = {.vol = vol, .level = level, .axis = axis, .b = (axis + 1) % 3, .c = (axis + 2) % 3};
+    f.fixed = high_side ? box->hi[axis] : box->lo[axis];
+    size_t lo[3], hi[3], count = 1;
+    for (int d = 0; d < 3; d++) {
+        lo[d] = d == axis ? f.fixed : box->lo[d];
+        hi[d] = d == axis ? f.fixed : box->hi[d];
+        f.lo[d] = (uint32_t)lo[d];
+        f.n[d] = (uint32_t)(hi[d] - lo[d] + 1);
+        count *= f.n[d];
+    }
+    if (grow((void **)&s->face, &s->face_capacity, count, sizeof *s->face))
+        return ISO_E_NOMEM;
+    iso_vol_read_box(vol, lo, hi, s->face);
+    f.samples = s->face;
+    for (uint32_t ic = box->lo[f.c]; ic < box->hi[f.c]; ic++)
+        for (uint32_t ib = box->lo[f.b]; ib < box->hi[f.b]; ib++)
+            if (march_square(s, &f, high_side, ib, ic))
+                return ISO_E_NOMEM;
+    return 0;
+}
+
+/* ---- PASS 2: linking segments into loops ---- */
+
+static size_t slot_of(uint64_t key, size_t capacity)
+{
+    uint64_t h = key * 0x9E3779B97F4A7C15ull;
+    return (size_t)(h ^ (h >> 29)) & (capacity - 1);
+}
+
+static int index_segments(iso_fan_scratch *s)
+{
+    size_t capacity = 16;
+    while (capacity < 2 * s->segment_count)
+        capacity *= 2;
+    if (grow((void **)&s->slots, &s->slot_capacity, capacity, sizeof *s->slots))
+        return ISO_E_NOMEM;
+    memset(s->slots, 0, capacity * sizeof *s->slots);
+    for (size_t i = 0; i < s->segment_count; i++) {
+        size_t k = slot_of(s->segments[i].from, capacity);
+        while (s->slots[k])
+            k = (k + 1) & (capacity - 1);
+        s->slots[k] = (uint32_t)(i + 1);
+    }
+    return 0;
+}
+
+static long find_segment(const iso_fan_scratch *s, uint64_t from)
+{
+    size_t capacity = 16;
+    while (capacity < 2 * s->segment_count)
+        capacity *= 2;
+    for (size_t k = slot_of(from, capacity); s->slots[k]; k = (k + 1) & (capacity - 1))
+        if (s->segments[s->slots[k] - 1].from == from)
+            return (long)s->slots[k] - 1;
+    return -1;
+}
+
+/* Collects the loop starting at segment first into s->loop; returns its length, or 0 when
+ * the chain does not close (cannot happen for a consistent face rule; refused anyway). */
+static size_t collect_loop(iso_fan_scratch *s, size_t first)
+{
+    size_t n = 0;
+    long at = (long)first;
+    while (at >= 0 && !s->segments[at].used) {
+        if (grow((void **)&s->loop, &s->loop_capacity, n + 1, sizeof *s->loop))
+            return 0;
+        s->segments[at].used = 1;
+        s->loop[n++] = (uint32_t)at;
+        at = find_segment(s, s->segments[at].to);
+    }
+    return at == (long)first ? n : 0;
+}
+
+/* ---- PASS 3: fans ---- */
+
+/* f and its gradient at index-space point p (the trilinear of the cell holding p). */
+static double field_at(const iso_volume *vol, const double p[3], double gradient[3])
+{
+    size_t cell[3];
+    double u[3], c[8];
+    for (int d = 0; d < 3; d++) {
+        double x = floor(p[d]);
+        if (x > (double)vol->dims[d] - 2)
+            x = (double)vol->dims[d] - 2;
+        if (x < 0)
+            x = 0;
+        cell[d] = (size_t)x;
+        u[d] = p[d] - x;
+    }
+    for (int k = 0; k < 8; k++)
+        c[k] = iso_vol_get(vol, cell[0] + (k & 1), cell[1] + ((k >> 1) & 1), cell[2] + ((k >> 2) & 1));
+    double x00 = c[0] + (c[1] - c[0]) * u[0], x10 = c[2] + (c[3] - c[2]) * u[0];
+    double x01 = c[4] + (c[5] - c[4]) * u[0], x11 = c[6] + (c[7] - c[6]) * u[0];
+    double y0 = x00 + (x10 - x00) * u[1], y1 = x01 + (x11 - x01) * u[1];
+    /* d/dx: the same interpolation in y, z of the x differences. */
+    double d00 = c[1] - c[0], d10 = c[3] - c[2], d01 = c[5] - c[4], d11 = c[7] - c[6];
+    double dy0 = d00 + (d10 - d00) * u[1], dy1 = d01 + (d11 - d01) * u[1];
+    gradient[0] = dy0 + (dy1 - dy0) * u[2];
+    double e0 = x10 - x00, e1 = x11 - x01;
+    gradient[1] = e0 + (e1 - e0) * u[2];
+    gradient[2] = y1 - y0;
+    return y0 + (y1 - y0) * u[2];
+}
+
+/* The loop's centroid, moved by Newton steps on f toward the level, kept inside box.
+ * Returns |f(centre) - level| (NaN when f is NaN there). */
+static double place_centre(const iso_volume *vol, const iso_box *box, double level,
+                           const iso_fan_scratch *s, size_t n, double centre[3])
+{
+    for (int d = 0; d < 3; d++)
+        centre[d] = 0;
+    for (size_t i = 0; i < n; i++)
+        for (int d = 0; d < 3; d++)
+            centre[d] += s->segments[s->loop[i]].from_position[d];
+    for (int d = 0; d < 3; d++)
+        centre[d] /= (double)n;
+    double g[3], r = field_at(vol, centre, g) - level;
+    for (int step = 0; step < 12 && fabs(r) > 1e-12 * (1 + fabs(level)); step++) {
+        double gg = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+        if (!(gg > 0))
+            break;
+        for (int d = 0; d < 3; d++) {
+            centre[d] -= r * g[d] / gg;
+            if (centre[d] < box->lo[d])
+                centre[d] = box->lo[d];
+            if (centre[d] > box->hi[d])
+                centre[d] = box->hi[d];
+        }
+        r = field_at(vol, centre, g) - level;
+    }
+    return fabs(r);
+}
+
+/* 1 if the triangle has area and faces down the gradient of f (normals point toward lower
+ * values, as marching cubes' do); a fan over a loop that folds fails this somewhere. */
+static int sound_triangle(const iso_volume *vol, const float *a, const float *b, const float *c)
+{
+    double u[3], v[3], m[3], g[3];
+    for (int d = 0; d < 3; d++) {
+        u[d] = (double)b[d] - a[d];
+        v[d] = (double)c[d] - a[d];
+        m[d] = ((double)a[d] + b[d] + c[d]) / 3;
+    }
+    double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+    if (n[0] == 0 && n[1] == 0 && n[2] == 0)
+        return 0;
+    field_at(vol, m, g);
+    return n[0] * g[0] + n[1] * g[1] + n[2] * g[2] < 0;
+}
+
+static int emit_triangle(iso_mesh *soup, const float *a, const float *b, const float *c)
+{
+    if (iso_mesh_reserve(soup, soup->vertex_count + 3, soup->triangle_count + 1))
+        return ISO_E_NOMEM;
+    float *p = soup->positions + 3 * soup->vertex_count;
+    memcpy(p, a, 12);
+    memcpy(p + 3, b, 12);
+    memcpy(p + 6, c, 12);
+    uint32_t *t = soup->indices + 3 * soup->triangle_count;
+    for (int k = 0; k < 3; k++)
+        t[k] = (uint32_t)(soup->vertex_count + (size_t)k);
+    soup->vertex_count += 3;
+    soup->triangle_count++;
+    return 0;
+}
+
+/* Emits the loop in s->loop (n vertices): 1 done, 0 refused, ISO_E_NOMEM. Triangles are
+ * (centre, next, this): each face segment this -> next is then used as next -> this, the
+ * direction marching cubes' own triangles give it. */
+static int fan_loop(const iso_volume *vol, const iso_box *box, double level, double vertex_limit,
+                    const iso_fan_scratch *s, size_t n, iso_mesh *soup, iso_fan_result *result)
+{
+    if (n < 3)
+        return 0;
+    for (size_t i = 0; i < n; i++)
+        if (s->segments[s->loop[i]].from_error > result->vertex_error)
+            result->vertex_error = s->segments[s->loop[i]].from_error;
+    if (n == 3) {
+        const float *a = s->segments[s->loop[0]].from_position, *b = s->segments[s->loop[1]].from_position,
+                    *c = s->segments[s->loop[2]].from_position;
+        if (!sound_triangle(vol, c, b, a))
+            return 0;
+        result->triangles++;
+        return emit_triangle(soup, c, b, a) ? ISO_E_NOMEM : 1;
+    }
+    double centre[3];
+    double error = place_centre(vol, box, level, s, n, centre);
+    if (!(error <= vertex_limit))
+        return 0;
+    if (error > result->vertex_error)
+        result->vertex_error = error;
+    float c[3] = {(float)centre[0], (float)centre[1], (float)centre[2]};
+    for (size_t i = 0; i < n; i++) {
+        const float *here = s->segments[s->loop[i]].from_position;
+        const float *next = s->segments[s->loop[(i + 1) % n]].from_position;
+        if (!sound_triangle(vol, c, next, here))
+            return 0;
+    }
+    for (size_t i = 0; i < n; i++) {
+        const float *here = s->segments[s->loop[i]].from_position;
+        const float *next = s->segments[s->loop[(i + 1) % n]].from_position;
+        if (emit_triangle(soup, c, next, here))
+            return ISO_E_NOMEM;
+    }
+    result->triangles += n;
+    return 1;
+}
+
+int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
+                       double vertex_limit, iso_fan_scratch *s, iso_mesh *soup,
+                       iso_fan_result *result)
+{
+    assert(iso_box_cells(box) >= 2);
+    memset(result, 0, sizeof *result);
+    s->segment_count = 0;
+    for (int axis = 0; axis < 3; axis++)
+        for (int side = 0; side < 2; side++)
+            if (march_face(s, vol, box, level, axis, side))
+                return ISO_E_NOMEM;
+    if (index_segments(s))
+        return ISO_E_NOMEM;
+    size_t vertices_before = soup->vertex_count, triangles_before = soup->triangle_count;
+    int rc = 1;
+    for (size_t i = 0; i < s->segment_count && rc == 1; i++) {
+        if (s->segments[i].used)
+            continue;
+        size_t n = collect_loop(s, i);
+        rc = fan_loop(vol, box, level, vertex_limit, s, n, soup, result);
+        result->loops++;
+    }
+    /* The node holds the level (the caller checked its range) but no face crosses it: the
+     * surface is a closed piece inside, which a fan cannot show. */
+    if (rc == 1 && result->loops == 0)
+        rc = 0;
+    if (rc != 1) {
+        soup->vertex_count = vertices_before;
+        soup->triangle_count = triangles_before;
+        memset(result, 0, sizeof *result);
+    }
+    return rc;
+}

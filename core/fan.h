@@ -1,0 +1,61 @@
+/* fan.h: one hierarchy node's surface as fans over its face loops: coarse, yet crack-free.
+ *
+ * A node the tolerance lets extraction keep whole is polygonized from its six faces, not
+ * from its interior (docs/watertight.md):
+ *
+ * PASS 1 (faces): marching squares over every data cell of the node's faces, with the
+ *   face rule of mc.h and the same vertex placement (iso_mc_edge_t). A neighbouring node,
+ *   fine or coarse, computes the very same segments on the shared face, with
+ *   bit-identical vertices, whatever its own size: that is what closes every crack and
+ *   leaves no T-junction, at any difference of depth (Cubical Marching Squares, Ho et al.
+ *   2005, taken to the data's own resolution on every face).
+ * PASS 2 (link): every crossing starts one segment and ends one, so the segments chain
+ *   into closed loops, oriented like marching cubes' (normals toward lower values).
+ * PASS 3 (fan): a loop of three is one triangle; a longer loop is fanned around a centre
+ *   vertex, the loop's centroid moved by Newton steps onto f = level inside the node (f
+ *   the data's trilinear interpolant). The node is refused, and the caller descends, when
+ *   no face crosses the level (the surface is a closed piece inside), a loop has fewer
+ *   than three vertices, the centre cannot get within vertex_limit of the level, or a fan
+ *   triangle would be degenerate or face up the gradient (a fold).
+ *
+ * The loop vertices are marching cubes' own, so the vertex guarantee of extract.h holds
+ * with the centres' measured |f(c) - level|. A closed part of the surface that touches no
+ * face of the node (a bubble smaller than the node) is dropped: the tolerance allowed it. */
+#ifndef ISO_FAN_H
+#define ISO_FAN_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "mesh.h"
+#include "tree.h"
+#include "volume.h"
+
+/* Reusable working memory, owned by the caller; grows as needed, never shrinks. Start it
+ * zeroed; iso_fan_scratch_free releases it. */
+typedef struct iso_fan_segment iso_fan_segment;
+typedef struct iso_fan_scratch {
+    double *face;                 /* one face's samples */
+    size_t face_capacity;
+    iso_fan_segment *segments;
+    size_t segment_count, segment_capacity;
+    uint32_t *slots;              /* open addressing: segment by its start vertex's edge */
+    size_t slot_capacity;
+    uint32_t *loop;               /* the segments of the loop at hand, in order */
+    size_t loop_capacity;
+} iso_fan_scratch;
+
+void iso_fan_scratch_free(iso_fan_scratch *scratch);
+
+typedef struct iso_fan_result {
+    size_t triangles, loops;
+    double vertex_error; /* largest |f(v) - level| over the vertices emitted */
+} iso_fan_result;
+
+/* Appends box's surface to soup in index space. Returns 1 when emitted, 0 when refused
+ * (nothing appended), ISO_E_NOMEM. The box must hold at least two cells. */
+int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
+                       double vertex_limit, iso_fan_scratch *scratch, iso_mesh *soup,
+                       iso_fan_result *result);
+
+#endif

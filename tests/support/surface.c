@@ -1,0 +1,84 @@
+/* surface.c: helpers for tests that check extracted surfaces (surface.h). */
+#include "surface.h"
+
+#include <math.h>
+#include <stdint.h>
+
+#include "check.h"
+#include "mc.h"
+#include "trilinear.h"
+
+static uint64_t rng_state = 0x2545F4914F6CDD1Dull;
+
+double surface_uniform(void)
+{
+    rng_state ^= rng_state >> 12;
+    rng_state ^= rng_state << 25;
+    rng_state ^= rng_state >> 27;
+    return (double)((rng_state * 0x2545F4914F6CDD1Dull) >> 11) / 9007199254740992.0;
+}
+
+iso_volume *surface_make_volume(size_t nx, size_t ny, size_t nz, iso_voxel_type type)
+{
+    size_t dims[3] = {nx, ny, nz};
+    iso_error err;
+    iso_volume *vol = iso_vol_create(dims, type, 0, &err);
+    CHECKF(vol != NULL, "iso_vol_create: %s", err.message);
+    return vol;
+}
+
+iso_tree *surface_build(const iso_volume *vol)
+{
+    iso_tree *tree = NULL;
+    iso_error err;
+    CHECK_OK(iso_tree_build(vol, NULL, NULL, &tree, &err), &err);
+    return tree;
+}
+
+double surface_interpolate(const iso_volume *vol, const float p[3])
+{
+    size_t base[3];
+    double t[3];
+    for (int d = 0; d < 3; d++) {
+        double x = p[d];
+        if (x < 0) x = 0;
+        if (x > (double)(vol->dims[d] - 1)) x = (double)(vol->dims[d] - 1);
+        size_t b = (size_t)floor(x);
+        if (b >= vol->dims[d] - 1)
+            b = vol->dims[d] - 2;
+        base[d] = b;
+        t[d] = x - (double)b;
+    }
+    double c[8];
+    for (int k = 0; k < 8; k++)
+        c[k] = iso_vol_get(vol, base[0] + (k & 1), base[1] + ((k >> 1) & 1), base[2] + ((k >> 2) & 1));
+    return iso_tri_eval(c, t[0], t[1], t[2]);
+}
+
+double surface_worst_vertex_error(const iso_volume *vol, const iso_mesh *m, double level)
+{
+    double worst = 0;
+    for (size_t v = 0; v < m->vertex_count; v++) {
+        const float *p = m->positions + 3 * v;
+        int outside = 0;
+        for (int d = 0; d < 3; d++)
+            outside |= p[d] < 0 || p[d] > (float)(vol->dims[d] - 1);
+        if (outside)
+            continue;
+        double e = fabs(surface_interpolate(vol, p) - level);
+        if (e > worst)
+            worst = e;
+    }
+    return worst;
+}
+
+double surface_rounding_slack(const iso_volume *vol)
+{
+    double extent = (double)(vol->dims[0] + vol->dims[1] + vol->dims[2]);
+    return 3.0 * extent * ldexp(1.0, -23) * (vol->value_max - vol->value_min) + 1e-9;
+}
+
+double surface_tie_allowance(const iso_volume *vol)
+{
+    return ISO_MC_END_GAP * (vol->value_max - vol->value_min);
+}

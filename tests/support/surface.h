@@ -1,0 +1,30 @@
+/* surface.h: helpers for tests that check extracted surfaces against their volume. */
+#ifndef TEST_SURFACE_H
+#define TEST_SURFACE_H
+
+#include <stddef.h>
+
+#include "extract.h"
+#include "mesh.h"
+#include "tree.h"
+#include "volume.h"
+
+/* Uniform in [0, 1) from xorshift64* with a fixed seed: failures reproduce. */
+double surface_uniform(void);
+/* A zeroed volume (the check fails if it cannot be made). */
+iso_volume *surface_make_volume(size_t nx, size_t ny, size_t nz, iso_voxel_type type);
+/* The volume's hierarchy (the check fails if it cannot be built). */
+iso_tree *surface_build(const iso_volume *vol);
+/* f(p): the data's own trilinear interpolant at index-space point p. */
+double surface_interpolate(const iso_volume *vol, const float p[3]);
+/* Largest |f(v) - level| over the vertices inside the volume (index space); a cap's
+ * vertices, just outside the border, are not on the level and are skipped. */
+double surface_worst_vertex_error(const iso_volume *vol, const iso_mesh *m, double level);
+/* Float positions carry ~2^-17 relative rounding; through the steepest sample difference
+ * that is the slack a vertex may show beyond the bound. */
+double surface_rounding_slack(const iso_volume *vol);
+/* Integer levels on integer data put samples exactly on the level; their crossings are
+ * moved ISO_MC_END_GAP of an edge off (mc.h), which costs at most this much. */
+double surface_tie_allowance(const iso_volume *vol);
+
+#endif
