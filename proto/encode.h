@@ -1,5 +1,5 @@
-/* encode.h: mesh encoders for the wire (binary PLY, OBJ text, Draco, glTF binary with
- * KHR_draco_mesh_compression) and the Draco decoder that tests and fuzzers check them with.
+/* encode.h: mesh encoders for the wire (binary PLY, OBJ text, binary STL, Draco, glTF
+ * binary with KHR_draco_mesh_compression) and the Draco decoder that tests and fuzzers check them with.
  *
  * Every encoder takes an iso_mesh (core/mesh.h) and returns a malloc'd byte buffer that the
  * caller frees with free(). Functions return 0 or a negative ISO_E_* code (core/error.h) and
@@ -66,6 +66,13 @@ int proto_encode_ply(const iso_mesh *mesh, unsigned char **out, size_t *out_size
  * float32), `vn` lines when the mesh has normals, `f` lines with 1-based indices
  * (`f a//a b//b c//c` with normals). Lossless, keeps order. */
 int proto_encode_obj(const iso_mesh *mesh, unsigned char **out, size_t *out_size,
+                     iso_error *err);
+
+/* Binary STL, for 3D printing: an 80-byte header (not starting with "solid"), a uint32
+ * triangle count, then per triangle its unit facet normal from the winding, its three
+ * corners and a zero uint16: 84 + 50 T bytes, little endian. Lossless positions; the
+ * vertices are repeated per triangle, as STL has no index. Print a closed mesh (cap). */
+int proto_encode_stl(const iso_mesh *mesh, unsigned char **out, size_t *out_size,
                      iso_error *err);
 
 /* A Draco mesh bitstream (libdraco 1.5.5, readable by draco3d 1.5.x). opt NULL means the

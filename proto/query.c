@@ -84,17 +84,17 @@ static int parse_count(const char *key, const char *value, unsigned long min, un
     return 0;
 }
 
-static const char *const format_names[] = {"draco", "glb", "ply"};
-static const char *const format_types[] = {"application/x-draco", "model/gltf-binary",
-                                           "application/x-ply"};
+static const char *const format_names[PROTO_FORMAT_COUNT] = {"draco", "glb", "ply", "stl"};
+static const char *const format_types[PROTO_FORMAT_COUNT] = {
+    "application/x-draco", "model/gltf-binary", "application/x-ply", "model/stl"};
 
 const char *proto_format_name(proto_format format) { return format_names[format]; }
 const char *proto_format_content_type(proto_format format) { return format_types[format]; }
 
 /* The parameters, in the order the key lists them. */
-enum { P_LEVEL, P_TOLERANCE, P_NORMALS, P_FORMAT, P_QP, P_QN, P_BUDGET, P_COUNT };
+enum { P_LEVEL, P_TOLERANCE, P_NORMALS, P_FORMAT, P_QP, P_QN, P_BUDGET, P_CAP, P_COUNT };
 static const char *const param_names[P_COUNT] = {"level", "tolerance", "normals", "format",
-                                                 "qp", "qn", "budget"};
+                                                 "qp", "qn", "budget", "cap"};
 
 static int parse_one(int which, const char *value, proto_mesh_request *out, proto_problem *problem)
 {
@@ -125,12 +125,19 @@ static int parse_one(int which, const char *value, proto_mesh_request *out, prot
                                      shown(value ? value : "", buf, sizeof buf));
         return 0;
     case P_FORMAT:
-        for (int f = 0; f < 3; f++)
+        for (int f = 0; f < PROTO_FORMAT_COUNT; f++)
             if (value && !strcmp(value, format_names[f])) {
                 out->format = (proto_format)f;
                 return 0;
             }
-        return proto_problem_set(problem, 400, key, "format must be draco, glb or ply, not \"%s\"",
+        return proto_problem_set(problem, 400, key, "format must be draco, glb, ply or stl, not \"%s\"",
+                                 shown(value ? value : "", buf, sizeof buf));
+    case P_CAP:
+        if (value && (!strcmp(value, "true") || !strcmp(value, "false"))) {
+            out->cap = value[0] == 't';
+            return 0;
+        }
+        return proto_problem_set(problem, 400, key, "cap must be true or false, not \"%s\"",
                                  shown(value ? value : "", buf, sizeof buf));
     case P_QP:
         if (parse_count(key, value, PROTO_POSITION_BITS_MIN, PROTO_POSITION_BITS_MAX, &n, problem))
@@ -142,6 +149,7 @@ static int parse_one(int which, const char *value, proto_mesh_request *out, prot
             return -1;
         out->normal_bits = (int)n;
         return 0;
+    case P_BUDGET:
     default:
         if (parse_count(key, value, 1, PROTO_BUDGET_MAX, &n, problem))
             return -1;
@@ -167,7 +175,7 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
         if (which == P_COUNT)
             return proto_problem_set(problem, 400, NULL,
                                      "unknown parameter \"%s\"; the mesh takes level, tolerance, "
-                                     "normals, format, qp, qn and budget",
+                                     "normals, format, qp, qn, budget and cap",
                                      shown(key, buf, sizeof buf));
         if (seen[which]++)
             return proto_problem_set(problem, 400, key, "%s is given more than once", key);
@@ -181,9 +189,10 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
 
 size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t size)
 {
-    int n = snprintf(buf, size, "level=%.17g&tolerance=%.17g&normals=%s&format=%s&qp=%d&qn=%d&budget=%u",
+    int n = snprintf(buf, size,
+                     "level=%.17g&tolerance=%.17g&normals=%s&format=%s&qp=%d&qn=%d&budget=%u&cap=%s",
                      req->level, req->tolerance, iso_normals_name(req->normals),
                      format_names[req->format], req->position_bits,
-                     req->normals ? req->normal_bits : 0, req->budget);
+                     req->normals ? req->normal_bits : 0, req->budget, req->cap ? "true" : "false");
     return n < 0 ? 0 : (size_t)n;
 }

@@ -12,7 +12,13 @@
 #include <stddef.h>
 #include <stdint.h>
 
-typedef enum proto_format { PROTO_FORMAT_DRACO, PROTO_FORMAT_GLB, PROTO_FORMAT_PLY } proto_format;
+typedef enum proto_format {
+    PROTO_FORMAT_DRACO,
+    PROTO_FORMAT_GLB,
+    PROTO_FORMAT_PLY,
+    PROTO_FORMAT_STL,
+    PROTO_FORMAT_COUNT
+} proto_format;
 
 /* One query parameter; value is NULL for a bare key ("?level"). */
 typedef struct proto_param {
@@ -33,6 +39,7 @@ typedef struct proto_mesh_request {
     int position_bits;     /* qp, default 14 */
     int normal_bits;       /* qn, default 10 */
     uint32_t budget;       /* triangles; 0 = no budget */
+    int cap;               /* cap=true: closed at the volume's border; default false */
 } proto_mesh_request;
 
 /* What went wrong with a request, for an application/problem+json body (RFC 9457). */

@@ -32,8 +32,10 @@ static int write_mesh(const iso_mesh *mesh, const char *path)
         rc = proto_encode_draco(mesh, NULL, &bytes, &size, &err);
     else if (ends_with(path, ".glb"))
         rc = proto_encode_glb(mesh, NULL, &bytes, &size, &err);
+    else if (ends_with(path, ".stl"))
+        rc = proto_encode_stl(mesh, &bytes, &size, &err);
     else
-        return srv_fail("%s: unknown output format (use .ply, .obj, .drc or .glb)", path);
+        return srv_fail("%s: unknown output format (use .ply, .stl, .obj, .drc or .glb)", path);
     if (rc)
         return srv_fail("%s: %s", path, err.message);
     size_t len = strlen(path) + 8;

@@ -1,9 +1,11 @@
 /* mesh_job.c: extract, add normals, measure, encode (see mesh_job.h). */
 #include "mesh_job.h"
 
+#include <math.h>
 #include <stdlib.h>
 
 #include "budget.h"
+#include "census.h"
 #include "clock.h"
 #include "encode.h"
 #include "extract.h"
@@ -22,7 +24,7 @@ static int extract(const srv_mesh_job *job, iso_mesh *mesh, iso_extract_stats *s
                    srv_body *facts, iso_error *err)
 {
     const proto_mesh_request *r = &job->request;
-    iso_extract_params params = {.level = r->level, .tolerance = r->tolerance,
+    iso_extract_params params = {.level = r->level, .tolerance = r->tolerance, .cap = r->cap,
                                  .space = ISO_SPACE_WORLD};
     facts->tolerance = r->tolerance;
     if (!r->budget)
@@ -44,6 +46,7 @@ static int encode(const proto_mesh_request *r, const iso_mesh *mesh, unsigned ch
     switch (r->format) {
     case PROTO_FORMAT_GLB: return proto_encode_glb(mesh, &opt, out, size, err);
     case PROTO_FORMAT_PLY: return proto_encode_ply(mesh, out, size, err);
+    case PROTO_FORMAT_STL: return proto_encode_stl(mesh, out, size, err);
     default: return proto_encode_draco(mesh, &opt, out, size, err);
     }
 }
@@ -64,9 +67,9 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     int rc = extract(job, &mesh, &stats, &facts, &err);
     if (!rc && r->normals && mesh.vertex_count)
         rc = iso_normals_compute(job->volume->vol, &mesh, r->normals, ISO_SPACE_WORLD, &err);
-    iso_mesh_edges edges = {0};
+    iso_census census = {0};
     if (!rc)
-        rc = iso_mesh_count_edges(&mesh, &edges);
+        rc = iso_census_compute(job->volume->vol, &mesh, ISO_SPACE_WORLD, &census, &err);
     double extract_ms = iso_clock_ms() - start;
     start = iso_clock_ms();
     if (!rc)
@@ -94,8 +97,8 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     body->tolerance = facts.tolerance;
     body->budget_fits = facts.budget_fits;
     body->area_mm2 = iso_mesh_area(&mesh);
-    body->closed = mesh.triangle_count > 0 && edges.open == 0 && edges.nonmanifold == 0;
-    body->volume_mm3 = body->closed ? iso_mesh_enclosed_volume(&mesh) : 0;
+    body->closed = census.closed;
+    body->volume_mm3 = body->closed ? fabs(iso_mesh_enclosed_volume(&mesh)) : 0;
     iso_mesh_free(&mesh);
     if (job->cache)
         srv_cache_put(job->cache, job->key, body);

@@ -44,6 +44,17 @@ if ! $bin extract field:torus:40 --level 1 --hierarchy "$tmp/t.isotree" 2> "$tmp
    grep -q "t.isotree" "$tmp/err"; then pass hierarchy_other_volume; else fail hierarchy_other_volume "$(cat "$tmp/err")"; fi
 
 # Bad input: a clear message and a non-zero status, never a crash.
+# A sphere of radius R + 2 in a cube of half-side R is cut open by the faces: the census
+# says where (border edges only); --cap closes it, and only then is there a volume to report.
+if $bin extract field:sphere:32 --level -2 --tolerance 0.2 --normals none --json > "$tmp/o.json" &&
+   $bin extract field:sphere:32 --level -2 --tolerance 0.2 --normals none --cap -o "$tmp/c.stl" --json > "$tmp/c.json"; then
+    open_ok=$(json "$tmp/o.json" "d['open_edges'] == 0 and d['boundary_edges'] > 0 and d['nonmanifold_edges'] == 0 and not d['closed'] and d['enclosed_volume_mm3'] is None")
+    cap_ok=$(json "$tmp/c.json" "d['open_edges'] == 0 and d['boundary_edges'] == 0 and d['closed'] and 0 < d['enclosed_volume_mm3'] < 31**3 and d['area_mm2'] > 0")
+    t=$(json "$tmp/c.json" "d['triangles']"); size=$(stat -c %s "$tmp/c.stl")
+    if [ "$open_ok" = True ] && [ "$cap_ok" = True ] && [ "$size" = $((84 + 50 * t)) ]; then pass cap_stl
+    else fail cap_stl "open $open_ok, capped $cap_ok, stl $size bytes for $t triangles"; fi
+else fail cap_stl "extract failed"; fi
+
 check_refusal() { # name, expected text, command...
     local name=$1 want=$2; shift 2
     "$@" > /dev/null 2> "$tmp/err"; local rc=$?
@@ -54,7 +65,8 @@ check_refusal bad_level "--level" $bin extract field:sphere:16 --level abc
 check_refusal nan_level "--level" $bin extract field:sphere:16 --level nan
 check_refusal negative_tolerance "--tolerance" $bin extract field:sphere:16 --level 1 --tolerance -1
 check_refusal unknown_field "sphere" $bin info field:nosuchfield
-check_refusal unknown_format "unknown output format" $bin extract field:sphere:16 --level 1 -o "$tmp/x.stl"
+check_refusal unknown_format "unknown output format" $bin extract field:sphere:16 --level 1 -o "$tmp/x.xyz"
+check_refusal cap_full_scan "--cap needs the hierarchy" $bin extract field:sphere:16 --level 1 --cap --full-scan
 printf 'NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n\nshort' > "$tmp/short.nrrd"
 check_refusal truncated_nrrd "short.nrrd" $bin extract "$tmp/short.nrrd" --level 1
 

@@ -353,6 +353,29 @@ draco3d.createDecoderModule({}).then(m => {
         assert float(r.getheader("X-Iso-Tolerance")) > 0 and r.getheader("X-Iso-Budget-Fits") == "true"
     check("budget_picks_tolerance", budget)
 
+    # cap=true&format=stl: a printable file. Its triangles weld into a closed surface (every
+    # edge twice, in opposite directions) whose enclosed volume is the header's.
+    def capped_stl():
+        r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&cap=true&format=stl&normals=none")
+        assert r.status == 200 and r.getheader("Content-Type") == "model/stl", r.status
+        assert not r.body.startswith(b"solid")
+        nt = struct.unpack_from("<I", r.body, 80)[0]
+        assert nt == int(r.getheader("X-Iso-Triangles")) and len(r.body) == 84 + 50 * nt
+        rec = np.frombuffer(r.body[84:], dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]))
+        corners = rec["v"].reshape(-1, 3)
+        _, ids = np.unique(corners, axis=0, return_inverse=True)
+        tri = ids.reshape(-1, 3)
+        directed = {(int(a), int(b)) for t in tri for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+        assert len(directed) == 3 * nt, "an edge is used twice in one direction"
+        assert all((b, a) in directed for a, b in directed), "an edge has no opposite twin: open"
+        v = rec["v"].astype(np.float64)
+        enclosed = abs(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6)
+        header = float(r.getheader("X-Iso-Volume-Mm3"))
+        assert abs(enclosed - header) <= 1e-4 * header, (enclosed, header)
+        plain = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=stl&normals=none")
+        assert plain.status == 200 and plain.getheader("ETag") != r.getheader("ETag")
+    check("mesh_cap_stl_closed", capped_stl)
+
     def empty_mesh():
         r = s.get("/v1/volumes/blob/mesh?level=1e6")
         assert r.status == 200 and r.getheader("X-Iso-Triangles") == "0" and len(r.body) > 0
@@ -367,7 +390,8 @@ draco3d.createDecoderModule({}).then(m => {
             ("/v1/volumes/blob/mesh?level=1&tolerance=-2", 400, "tolerance", "from 0"),
             ("/v1/volumes/blob/mesh?level=1&qp=30", 400, "qp", "from 8 to 24"),
             ("/v1/volumes/blob/mesh?level=1&normals=flat", 400, "normals", "tricubic"),
-            ("/v1/volumes/blob/mesh?level=1&format=stl", 400, "format", "draco"),
+            ("/v1/volumes/blob/mesh?level=1&format=obj", 400, "format", "stl"),
+            ("/v1/volumes/blob/mesh?level=1&cap=yes", 400, "cap", "true or false"),
             ("/v1/volumes/blob/mesh?level=1&level=2", 400, "level", "more than once"),
             ("/v1/volumes/blob/mesh?level=1&colour=red", 400, None, "unknown parameter"),
             ("/v1/volumes/nope/mesh?level=1", 404, None, "nope"),

@@ -1,4 +1,4 @@
-/* test_proto_encode.c: the mesh encoders (PLY, OBJ, Draco, glb) on hand-built meshes with
+/* test_proto_encode.c: the mesh encoders (PLY, OBJ, STL, Draco, glb) on hand-built meshes with
  * exact expected bytes, Draco round trips through our decoder and Debian's draco_decoder,
  * the glb container read back, garbage and truncated Draco input, and empty meshes. */
 #include <math.h>
@@ -255,6 +255,47 @@ static void test_obj_triangle_exact(void)
                                "f 1 2 3\n";
     CHECKF(size == sizeof want - 1 && memcmp(buf, want, size) == 0, "got \"%.*s\"", (int)size,
            (const char *)buf);
+    free(buf);
+    iso_mesh_free(&m);
+}
+
+/* ---- STL ---- */
+
+/* The octahedron: 84 + 8 * 50 bytes, every corner read back bit-exact, every facet
+ * normal the outward unit normal (1,1,1)/sqrt(3) up to signs. */
+static void test_stl_octahedron_exact(void)
+{
+    iso_mesh m;
+    iso_error err;
+    unsigned char *buf;
+    size_t size;
+    make_mesh(&m, oct_pos, NULL, 6, oct_idx, 8);
+    CHECK_OK(proto_encode_stl(&m, &buf, &size, &err), &err);
+    if (!buf) {
+        iso_mesh_free(&m);
+        return;
+    }
+    CHECK_EQ(size, 84 + 8 * 50);
+    CHECK(memcmp(buf, "solid", 5) != 0);
+    CHECK_EQ(get_u32(buf + 80), 8);
+    for (size_t t = 0; t < 8; t++) {
+        const unsigned char *rec = buf + 84 + 50 * t;
+        double centroid[3] = {0, 0, 0};
+        for (int c = 0; c < 3; c++)
+            for (int k = 0; k < 3; k++) {
+                float x = get_f32(rec + 12 + 12 * c + 4 * k);
+                CHECK(x == oct_pos[3 * oct_idx[3 * t + c] + k]);
+                centroid[k] += x;
+            }
+        double dot = 0;
+        for (int k = 0; k < 3; k++) {
+            float n = get_f32(rec + 4 * k);
+            CHECK(fabsf(fabsf(n) - 0.57735027f) < 1e-6f);
+            dot += n * centroid[k];
+        }
+        CHECK(dot > 0);
+        CHECK(rec[48] == 0 && rec[49] == 0);
+    }
     free(buf);
     iso_mesh_free(&m);
 }
@@ -1031,6 +1072,7 @@ int main(void)
     CHECK_RUN(test_ply_normals_header_and_payload);
     CHECK_RUN(test_ply_100k_triangles_read_back);
     CHECK_RUN(test_obj_triangle_exact);
+    CHECK_RUN(test_stl_octahedron_exact);
     CHECK_RUN(test_obj_normals_round_trip);
     CHECK_RUN(test_draco_round_trip_small_meshes);
     CHECK_RUN(test_draco_round_trip_bits_and_speeds);

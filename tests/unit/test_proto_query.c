@@ -40,7 +40,14 @@ static void test_query_defaults_and_values(void)
     CHECK(r.position_bits == 11 && r.normal_bits == 8 && r.budget == 20000);
     proto_param tri[] = {P("level", "1"), P("normals", "trilinear"), P("format", "ply")};
     CHECK_EQ(parse(tri, COUNT(tri), &r, &pr), 0);
-    CHECK(r.normals == 2 && r.format == PROTO_FORMAT_PLY);
+    CHECK(r.normals == 2 && r.format == PROTO_FORMAT_PLY && r.cap == 0);
+    proto_param printable[] = {P("level", "1"), P("cap", "true"), P("format", "stl")};
+    CHECK_EQ(parse(printable, COUNT(printable), &r, &pr), 0);
+    CHECK(r.cap == 1 && r.format == PROTO_FORMAT_STL);
+    CHECK(!strcmp(proto_format_content_type(r.format), "model/stl"));
+    proto_param open_again[] = {P("level", "1"), P("cap", "false")};
+    CHECK_EQ(parse(open_again, COUNT(open_again), &r, &pr), 0);
+    CHECK(r.cap == 0);
 }
 
 /* Each bad request names the parameter and says why. */
@@ -66,7 +73,9 @@ static void test_query_rejections(void)
         {{{"level", "1"}, {"tolerance", "-1"}}, 2, "tolerance", "from 0"},
         {{{"level", "1"}, {"tolerance", "1e31"}}, 2, "tolerance", "from 0"},
         {{{"level", "1"}, {"normals", "phong"}}, 2, "normals", "tricubic"},
-        {{{"level", "1"}, {"format", "stl"}}, 2, "format", "draco, glb or ply"},
+        {{{"level", "1"}, {"format", "obj"}}, 2, "format", "draco, glb, ply or stl"},
+        {{{"level", "1"}, {"cap", "yes"}}, 2, "cap", "true or false"},
+        {{{"level", "1"}, {"cap", NULL}}, 2, "cap", "true or false"},
         {{{"level", "1"}, {"qp", "7"}}, 2, "qp", "from 8 to 24"},
         {{{"level", "1"}, {"qp", "25"}}, 2, "qp", "from 8 to 24"},
         {{{"level", "1"}, {"qp", "12.5"}}, 2, "qp", "whole number"},
@@ -134,10 +143,15 @@ static void test_query_key_normalises(void)
     CHECKF(!strcmp(ka, kb) && !strcmp(ka, kc), "%s | %s | %s", ka, kb, kc);
     CHECK(strcmp(ka, kd) != 0);
     CHECKF(!strcmp(ke, kf), "normal bits do not matter without normals: %s | %s", ke, kf);
-    CHECK(!strcmp(ka, "level=700&tolerance=0&normals=tricubic&format=draco&qp=14&qn=10&budget=0"));
+    CHECK(!strcmp(ka, "level=700&tolerance=0&normals=tricubic&format=draco&qp=14&qn=10&budget=0&cap=false"));
     char small[8];
     CHECK_EQ(proto_mesh_request_key(&r, small, sizeof small), strlen(kf));
     CHECK_EQ(strlen(small), 7);
+    proto_param g[] = {P("level", "700"), P("cap", "true")};
+    char kg[256];
+    CHECK_EQ(parse(g, COUNT(g), &r, &pr), 0);
+    proto_mesh_request_key(&r, kg, sizeof kg);
+    CHECK(strcmp(ka, kg) != 0);
 }
 
 /* The volume document parses back with every field the API promises. */
