@@ -219,10 +219,11 @@ static int plan_shard(const serve_options *o, const srv_catalog *catalog, srv_sh
         return 0;
     if (srv_shard_ring_init(ring, o->shard_peers, &err))
         return srv_fail("%s", err.message);
-    if (ring->peer_count != (size_t)o->shard_count) {
+    size_t peers = ring->peer_count;
+    if (peers != (size_t)o->shard_count) {
         srv_shard_ring_free(ring);
         return srv_fail("--shard %ld/%ld: --shard-peers names %zu replicas, not %ld", o->shard_self,
-                        o->shard_count, ring->peer_count, o->shard_count);
+                        o->shard_count, peers, o->shard_count);
     }
     if (!(*skip = calloc(catalog->count ? catalog->count : 1, 1))) {
         srv_shard_ring_free(ring);

@@ -227,6 +227,7 @@ static enum MHD_Result route_metrics(srv_server *s, struct MHD_Connection *c, sr
     g.rejected_total = atomic_load(&s->pool->rejected);
     g.hierarchy_bytes = srv_collection_hierarchy_bytes(s->collection);
     g.volumes = atomic_load(&s->collection->count);
+    g.volumes_on_demand = atomic_load(&s->collection->on_demand);
     g.volumes_total = s->collection->total;
     g.ready = atomic_load(&s->collection->ready);
     size_t size;
