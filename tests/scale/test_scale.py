@@ -26,6 +26,9 @@ import sys
 import tempfile
 import time
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from results import Results, Skip  # noqa: E402 - found through the path just set
+
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", os.path.join(ROOT, "build/isoserve")))
 NGINX = shutil.which("nginx") or "/usr/sbin/nginx"
@@ -33,35 +36,9 @@ CONF = os.path.join(ROOT, "docker/nginx.conf")
 WEB = os.path.join(ROOT, "build/web")
 MRICRON = "/usr/share/mricron/templates"
 REPLICAS = 3
-failures = 0
+RESULTS = Results("scale")
+report, check = RESULTS.report, RESULTS.check
 cache_status = {"HIT": 0, "MISS": 0}
-
-
-def report(name, ok, why=""):
-    global failures
-    if ok:
-        print(f"PASS scale.{name}", flush=True)
-    else:
-        failures += 1
-        print(f"FAIL scale.{name}: {why}", flush=True)
-
-
-class Skip(Exception):
-    """Raised by a test that cannot run here; it says why."""
-
-
-def check(name, fn):
-    """Runs one test; an exception is its failure, never a crash of the suite."""
-    try:
-        fn()
-    except Skip as e:
-        print(f"SKIP scale.{name}: {e}", flush=True)
-    except AssertionError as e:
-        report(name, False, str(e) or "assertion failed")
-    except Exception as e:  # noqa: BLE001 - any error is this test's failure
-        report(name, False, f"{type(e).__name__}: {e}")
-    else:
-        report(name, True)
 
 
 def free_ports(n):
@@ -432,14 +409,14 @@ def main():
     check("shard_option_errors", lambda: bad_options(tmp))
     check("flag_beats_environment", lambda: flag_beats_environment(tmp, pid_file))
     print(f"INFO scale.seconds: {time.time() - start:.1f}", flush=True)
-    if failures:
+    if RESULTS.failures:
         for name in ("replica0.log", "replica1.log", "replica2.log", "nginx.log"):
             path = os.path.join(tmp, name)
             if os.path.exists(path):
                 print(f"--- {name} (last lines)")
                 print("".join(open(path).readlines()[-15:]), flush=True)
     shutil.rmtree(tmp, ignore_errors=True)
-    return 1 if failures else 0
+    return 1 if RESULTS.failures else 0
 
 
 if __name__ == "__main__":
