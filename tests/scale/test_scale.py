@@ -36,7 +36,7 @@ CONF = os.path.join(ROOT, "docker/nginx.conf")
 WEB = os.path.join(ROOT, "build/web")
 MRICRON = "/usr/share/mricron/templates"
 REPLICAS = 3
-RESULTS = Results("scale")
+RESULTS = Results(os.environ.get("ISO_TEST_LABEL", "scale"))  # the sanitizer run says scale-san
 report, check = RESULTS.report, RESULTS.check
 cache_status = {"HIT": 0, "MISS": 0}
 
@@ -232,7 +232,7 @@ def run(d):
             assert v["shard"] in d.peers, v
             owner[vid] = v["shard"]
         counts = {p: sum(1 for o in owner.values() if o == p) for p in d.peers}
-        print(f"INFO scale.shards: {len(owner)} volumes over {REPLICAS} replicas: "
+        print(f"INFO {RESULTS.label}.shards: {len(owner)} volumes over {REPLICAS} replicas: "
               f"{sorted(counts.values(), reverse=True)}", flush=True)
     check("catalog_lists_every_volume_with_its_shard", catalog_through_nginx)
 
@@ -278,7 +278,7 @@ def run(d):
             bodies[t] = (first.getheader("ETag"), first.body)
         nbytes = sum(len(b) for _, b in bodies.values())
         size, miss, hit = max(timing)
-        print(f"INFO scale.meshes: {len(bodies)} meshes, {nbytes} bytes cached at nginx; the largest "
+        print(f"INFO {RESULTS.label}.meshes: {len(bodies)} meshes, {nbytes} bytes cached at nginx; the largest "
               f"({size} bytes): {miss:.0f} ms through nginx to its replica, {hit:.1f} ms from nginx's cache",
               flush=True)
     check("repeated_mesh_is_nginx_cache_hit_with_same_bytes", mesh_cached)
@@ -313,7 +313,7 @@ def run(d):
     def kill_one():
         d.replicas[victim].stop(signal.SIGKILL)
         assert not d.replicas[victim].alive()
-        print(f"INFO scale.killed: replica {victim} ({d.peers[victim]}), which preloaded "
+        print(f"INFO {RESULTS.label}.killed: replica {victim} ({d.peers[victim]}), which preloaded "
               f"{len(lost)} volumes", flush=True)
     check("kill_one_replica_by_pid", kill_one)
 
@@ -389,10 +389,10 @@ def flag_beats_environment(tmp, pid_file):
 
 def main():
     if not os.access(BIN, os.X_OK):
-        print(f"FAIL scale.binary: {BIN} missing (run make)")
+        print(f"FAIL {RESULTS.label}.binary: {BIN} missing (run make)")
         return 1
     if not os.access(NGINX, os.X_OK):
-        print("SKIP scale.nginx: Debian's nginx is not installed (scripts/setup.sh installs it)")
+        print(f"SKIP {RESULTS.label}.nginx: Debian's nginx is not installed (scripts/setup.sh installs it)")
         return 0
     tmp = tempfile.mkdtemp(prefix="isoserve-scale-")
     pid_file = os.environ.get("ISO_SCALE_PIDS", os.path.join(tmp, "pids"))
@@ -411,11 +411,11 @@ def main():
                    all(rc == 0 for rc in survivors.values()) and rcs["nginx"] == 0, str(rcs))
             total = cache_status["HIT"] + cache_status["MISS"]
             if total:
-                print(f"INFO scale.nginx_cache: {cache_status['HIT']} HIT, {cache_status['MISS']} MISS "
+                print(f"INFO {RESULTS.label}.nginx_cache: {cache_status['HIT']} HIT, {cache_status['MISS']} MISS "
                       f"({100.0 * cache_status['HIT'] / total:.0f}% of mesh requests)", flush=True)
     check("shard_option_errors", lambda: bad_options(tmp))
     check("flag_beats_environment", lambda: flag_beats_environment(tmp, pid_file))
-    print(f"INFO scale.seconds: {time.time() - start:.1f}", flush=True)
+    print(f"INFO {RESULTS.label}.seconds: {time.time() - start:.1f}", flush=True)
     if RESULTS.failures:
         for name in ("replica0.log", "replica1.log", "replica2.log", "nginx.log"):
             path = os.path.join(tmp, name)
