@@ -7,8 +7,8 @@ would trip on first, checked from the files.
   earlier stage, every `make X` it runs is a Makefile target (`make -n X` succeeds);
 - the server stage runs as a non-root user, exposes its port and checks /healthz;
 - the shard ring's three copies agree: ISOSERVE_SHARD_PEERS in compose, the `server` lines
-  of both upstream blocks in nginx.conf (same names, same order), and the replicas'
-  ISOSERVE_SHARD K/N cover 0..N-1 once each.
+  of both upstream blocks in nginx.conf (same names, same order, weight 1), and the
+  replicas' ISOSERVE_SHARD K/N cover 0..N-1 once each.
 Prints PASS/FAIL/SKIP lines; exit status 1 on failure."""
 
 import os
@@ -132,6 +132,9 @@ def ring_agrees():
     blocks = re.findall(r"upstream\s+(\S+)\s*\{(.*?)\}", conf, re.S)
     assert blocks, "nginx.conf has no upstream block"
     lists = {name: re.findall(r"^\s*server\s+(\S+)", body, re.M) for name, body in blocks}
+    # isoserve's ring gives every peer weight 1 (160 points), and a backup is not on it.
+    odd = re.findall(r"^\s*server\s.*\b(weight=\d+|backup)\b", conf, re.M)
+    assert not odd, f"nginx.conf upstream servers with {odd}: --shard-peers assumes weight 1, no backup"
     replicas = {n: s for n, s in compose["services"].items() if "ISOSERVE_SHARD" in (s.get("environment") or {})}
     peers = {tuple(s["environment"]["ISOSERVE_SHARD_PEERS"].split(",")) for s in replicas.values()}
     assert len(peers) == 1, f"replicas disagree on ISOSERVE_SHARD_PEERS: {peers}"
