@@ -158,12 +158,12 @@ static proto_volume_doc doc_of(const srv_server *s, const srv_volume *v)
 static enum MHD_Result route_catalog(srv_server *s, struct MHD_Connection *c, srv_request *req)
 {
     const srv_catalog *catalog = s->collection->catalog;
+    const srv_shard_ring *ring = s->config.shard_ring;
     proto_volume_doc *docs = calloc(catalog->count ? catalog->count : 1, sizeof *docs);
     if (!docs)
         return MHD_NO;
     for (size_t i = 0; i < catalog->count; i++) {
         const srv_catalog_entry *e = &catalog->entries[i];
-        const srv_shard_ring *ring = s->config.shard_ring;
         docs[i] = (proto_volume_doc){.id = e->id, .name = e->name, .modality = e->modality,
                                      .levels = e->levels, .level_count = e->level_count,
                                      .shard = ring->peers[srv_shard_owner(ring, e->id)]};
