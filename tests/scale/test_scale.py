@@ -9,7 +9,8 @@ addresses, web root), all on 127.0.0.1. Checks:
 - a repeated mesh request is an nginx cache HIT with the same bytes and ETag, and
   If-None-Match gets 304 through nginx;
 - after one replica is killed (SIGKILL, by PID) every volume is still served (on demand,
-  hierarchy read from the shared cache dir) and the cached meshes are still HITs.
+  hierarchy read from the shared cache dir; concurrent first requests share one load) and
+  the cached meshes are still HITs.
 Prints PASS/FAIL/SKIP lines (and INFO lines with numbers); exit status 1 on failure. Every
 process is stopped by its PID at the end, and listed in $ISO_SCALE_PIDS for the caller's
 trap."""
@@ -24,6 +25,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
@@ -316,6 +318,28 @@ def run(d):
         print(f"INFO {RESULTS.label}.killed: replica {victim} ({d.peers[victim]}), which preloaded "
               f"{len(lost)} volumes", flush=True)
     check("kill_one_replica_by_pid", kill_one)
+
+    def concurrent_first_requests_load_once():
+        """Requests racing for a lost volume (its document: not cached, so nginx passes every
+        one on) all wait for one load on the replica nginx fails over to."""
+        vid = max(lost, key=lambda v: (v.startswith("ch2"), v.endswith("40")))  # slowest to load
+        results = []
+        start = threading.Barrier(6)
+
+        def one():
+            start.wait(timeout=10)
+            r = d.get(f"/v1/volumes/{vid}")
+            results.append((r.status, r.getheader("X-Iso-Load")))
+        threads = [threading.Thread(target=one) for _ in range(6)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(timeout=60)
+        assert results == [(200, "on-demand")] * 6, results
+        loads = sum(len(re.findall(rf"\] {re.escape(vid)}: \d+x", r.log()))
+                    for k, r in enumerate(d.replicas) if k != victim)
+        assert loads == 1, f"{vid} loaded {loads} times"
+    check("concurrent_first_requests_load_once", concurrent_first_requests_load_once)
 
     def all_reachable():
         wrong = []
