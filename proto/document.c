@@ -60,6 +60,15 @@ static json_t *volume_object(const proto_volume_doc *doc, int detail)
     json_t *levels = json_array();
     for (size_t i = 0; i < doc->level_count; i++)
         json_array_append_new(levels, json_real(doc->levels[i]));
+    if (!vol) {
+        json_t *summary = json_pack("{s:s, s:s, s:s, s:o}", "id", doc->id,
+                                    "name", doc->name ? doc->name : doc->id,
+                                    "modality", doc->modality ? doc->modality : "",
+                                    "suggested_levels", levels);
+        if (summary && doc->shard)
+            json_object_set_new(summary, "shard", json_string(doc->shard));
+        return summary;
+    }
     json_t *o = json_pack("{s:s, s:s, s:s, s:[III], s:o, s:o, s:o, s:s, s:[ff], s:o, s:s}",
                           "id", doc->id, "name", doc->name ? doc->name : doc->id,
                           "modality", doc->modality ? doc->modality : "",
@@ -70,6 +79,8 @@ static json_t *volume_object(const proto_volume_doc *doc, int detail)
                           "value_type", proto_value_type_name(vol->type),
                           "value_range", vol->value_min, vol->value_max,
                           "suggested_levels", levels, "version", doc->version);
+    if (o && doc->shard)
+        json_object_set_new(o, "shard", json_string(doc->shard));
     if (!o || !detail)
         return o;
     json_t *counts = json_array();

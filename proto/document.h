@@ -14,7 +14,9 @@
 typedef struct proto_volume_doc {
     const char *id, *name, *modality;
     const char *version;          /* changes whenever the samples do (ETag base) */
-    const iso_volume *vol;        /* dims, type, range, geometry */
+    const iso_volume *vol;        /* dims, type, range, geometry; NULL: a catalog entry not
+                                     loaded here (a summary: id, name, modality, levels, shard) */
+    const char *shard;            /* the replica that preloads it (sharded), or NULL */
     const double *levels;         /* suggested levels */
     size_t level_count;
     /* Detail only (proto_json_volume with detail set): */
@@ -29,7 +31,7 @@ typedef struct proto_volume_doc {
  * LPS mm), value_type, value_range, suggested_levels, version; with detail also histogram
  * {min, max, counts} and hierarchy {nodes, bytes, ms, from_file}. */
 char *proto_json_volume(const proto_volume_doc *doc, int detail);
-/* {"volumes": [...]} of the summaries. */
+/* {"volumes": [...]} of the summaries (catalog summaries for docs without vol). */
 char *proto_json_volume_list(const proto_volume_doc *docs, size_t count);
 /* {"status": "ready", "volumes": loaded, "in_catalog": total} or
  * {"status": "loading", "loaded": entries tried, "total": total}. */

@@ -1,9 +1,11 @@
 /* cmd_serve.c: `isoserve serve`: options, start-up, preloading, and graceful shutdown.
  *
- * Order of events: parse options, read the catalog, start the pool and the HTTP server
- * (healthz answers 503 while loading), preload in a thread, then wait for SIGINT or
- * SIGTERM. On a signal: stop accepting, let requests in flight finish (bounded by
- * --drain-seconds), stop, free, exit 0. */
+ * Order of events: parse options (each may also come from the environment, ISOSERVE_ and
+ * the option's name in capitals, `--cache-dir` from ISOSERVE_CACHE_DIR; a flag wins), read
+ * the catalog, with --shard work out which entries are this replica's, start the pool and
+ * the HTTP server (healthz answers 503 while loading), preload in a thread, then wait for
+ * SIGINT or SIGTERM. On a signal: stop accepting, let requests in flight finish (bounded
+ * by --drain-seconds), stop, free, exit 0. */
 #include <errno.h>
 #include <limits.h>
 #include <pthread.h>
@@ -18,6 +20,7 @@
 #include "collection.h"
 #include "http.h"
 #include "pool.h"
+#include "shard.h"
 
 #define MAX_ORIGINS 16
 
@@ -28,6 +31,9 @@ typedef struct serve_options {
     long threads, queue, cache_mb, drain_seconds, max_connections, max_volume_mb;
     const char *origins[MAX_ORIGINS];
     size_t origin_count;
+    long shard_self, shard_count;     /* --shard K/N; shard_count 0: not sharded */
+    const char *shard_peers, *replica_name;
+    int collection_from_env;          /* catalog or volumes came from the environment */
 } serve_options;
 
 static int parse_count(const char *option, const char *text, long min, long max, long *out)
@@ -61,40 +67,99 @@ static int parse_listen(const char *text, serve_options *o)
     return 0;
 }
 
+/* "K/N" with 0 <= K < N. */
+static int parse_shard(const char *text, serve_options *o)
+{
+    char *end;
+    errno = 0;
+    long k = strtol(text, &end, 10), n = -1;
+    if (!errno && end != text && *end == '/' && end[1]) {
+        const char *rest = end + 1;
+        n = strtol(rest, &end, 10);
+        if (errno || *end || end == rest)
+            n = -1;
+    }
+    if (n < 1 || n > SRV_SHARD_PEERS_MAX || k < 0 || k >= n)
+        return srv_fail("--shard %s: expected K/N with 0 <= K < N <= %d, e.g. 0/3", text,
+                        SRV_SHARD_PEERS_MAX);
+    o->shard_self = k;
+    o->shard_count = n;
+    return 0;
+}
+
+/* One option and its value; 0, or 1 reported. from_env: it came from the environment. */
+static int set_option(serve_options *o, const char *a, const char *v, int from_env)
+{
+    if (!strcmp(a, "--catalog") || !strcmp(a, "--volumes")) {
+        if (!from_env && o->collection_from_env) /* a flag replaces the environment's choice */
+            o->catalog = o->volumes = NULL;
+        o->collection_from_env = from_env;
+        if (!strcmp(a, "--catalog"))
+            o->catalog = v;
+        else
+            o->volumes = v;
+        return 0;
+    }
+    if (!strcmp(a, "--cache-dir")) o->cache_dir = v;
+    else if (!strcmp(a, "--web-root")) o->web_root = v;
+    else if (!strcmp(a, "--shard-peers")) o->shard_peers = v;
+    else if (!strcmp(a, "--replica-name")) o->replica_name = v;
+    else if (!strcmp(a, "--shard")) return parse_shard(v, o);
+    else if (!strcmp(a, "--listen")) return parse_listen(v, o);
+    else if (!strcmp(a, "--threads")) return parse_count(a, v, 1, 256, &o->threads);
+    else if (!strcmp(a, "--queue")) return parse_count(a, v, 0, 100000, &o->queue);
+    else if (!strcmp(a, "--cache-mb")) return parse_count(a, v, 0, 1 << 20, &o->cache_mb);
+    else if (!strcmp(a, "--drain-seconds")) return parse_count(a, v, 0, 3600, &o->drain_seconds);
+    else if (!strcmp(a, "--max-connections")) return parse_count(a, v, 1, 65536, &o->max_connections);
+    else if (!strcmp(a, "--max-volume-mb")) return parse_count(a, v, 1, 1 << 24, &o->max_volume_mb);
+    else if (!strcmp(a, "--cors-origin")) {
+        if (o->origin_count == MAX_ORIGINS)
+            return srv_fail("--cors-origin: at most %d origins", MAX_ORIGINS);
+        o->origins[o->origin_count++] = v;
+    } else
+        return srv_fail("serve: unknown option '%s'", a);
+    return 0;
+}
+
+/* Every option of serve; each may come from ISOSERVE_<NAME> (see the file's comment). */
+static const char *const option_names[] = {
+    "--catalog", "--volumes", "--cache-dir", "--web-root", "--listen", "--threads", "--queue",
+    "--cache-mb", "--drain-seconds", "--max-connections", "--max-volume-mb", "--cors-origin",
+    "--shard", "--shard-peers", "--replica-name"};
+
+static int options_from_env(serve_options *o)
+{
+    for (size_t i = 0; i < sizeof option_names / sizeof option_names[0]; i++) {
+        char var[64] = "ISOSERVE_";
+        size_t n = strlen(var);
+        for (const char *p = option_names[i] + 2; *p && n + 1 < sizeof var; p++)
+            var[n++] = *p == '-' ? '_' : (char)(*p - 'a' + 'A');
+        var[n] = '\0';
+        const char *v = getenv(var);
+        if (v && *v && set_option(o, option_names[i], v, 1))
+            return srv_fail("(from the environment variable %s)", var);
+    }
+    return 0;
+}
+
 static int parse_options(int argc, char **argv, serve_options *o)
 {
     long cores = sysconf(_SC_NPROCESSORS_ONLN);
     *o = (serve_options){.host = "127.0.0.1", .port = 8080, .threads = cores > 0 ? cores : 1,
                          .queue = 64, .cache_mb = 256, .drain_seconds = 10,
                          .max_connections = 256, .max_volume_mb = 8192};
-    for (int i = 0; i < argc; i++) {
-        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        int rc = 0;
-        if (!v)
-            return srv_fail("serve: %s needs a value (or is not an option)", a);
-        if (!strcmp(a, "--catalog")) o->catalog = v;
-        else if (!strcmp(a, "--volumes")) o->volumes = v;
-        else if (!strcmp(a, "--cache-dir")) o->cache_dir = v;
-        else if (!strcmp(a, "--web-root")) o->web_root = v;
-        else if (!strcmp(a, "--listen")) rc = parse_listen(v, o);
-        else if (!strcmp(a, "--threads")) rc = parse_count(a, v, 1, 256, &o->threads);
-        else if (!strcmp(a, "--queue")) rc = parse_count(a, v, 0, 100000, &o->queue);
-        else if (!strcmp(a, "--cache-mb")) rc = parse_count(a, v, 0, 1 << 20, &o->cache_mb);
-        else if (!strcmp(a, "--drain-seconds")) rc = parse_count(a, v, 0, 3600, &o->drain_seconds);
-        else if (!strcmp(a, "--max-connections")) rc = parse_count(a, v, 1, 65536, &o->max_connections);
-        else if (!strcmp(a, "--max-volume-mb")) rc = parse_count(a, v, 1, 1 << 24, &o->max_volume_mb);
-        else if (!strcmp(a, "--cors-origin")) {
-            if (o->origin_count == MAX_ORIGINS)
-                return srv_fail("--cors-origin: at most %d origins", MAX_ORIGINS);
-            o->origins[o->origin_count++] = v;
-        } else
-            return srv_fail("serve: unknown option '%s'", a);
-        if (rc)
-            return rc;
-        i++;
+    if (options_from_env(o))
+        return 1;
+    for (int i = 0; i < argc; i += 2) {
+        if (i + 1 >= argc)
+            return srv_fail("serve: %s needs a value (or is not an option)", argv[i]);
+        if (set_option(o, argv[i], argv[i + 1], 0))
+            return 1;
     }
     if (o->catalog && o->volumes)
         return srv_fail("serve: give --catalog or --volumes, not both");
+    if (!o->shard_count != !o->shard_peers)
+        return srv_fail("serve: --shard K/N and --shard-peers HOST:PORT,... go together");
     return 0;
 }
 
@@ -132,20 +197,47 @@ static char *web_root(const char *given)
     return realpath(guess, NULL);
 }
 
-typedef struct preload_task {
-    srv_collection *collection;
-    const srv_catalog *catalog;
-    srv_preload_options options;
-} preload_task;
-
 static void *preload_main(void *arg)
 {
-    preload_task *t = arg;
-    srv_collection_preload(t->collection, t->catalog, &t->options);
-    if (!atomic_load(&t->collection->stop))
-        fprintf(stderr, "isoserve: ready: %zu of %zu volumes\n",
-                atomic_load(&t->collection->count), t->collection->total);
+    srv_collection *c = arg;
+    srv_collection_preload(c);
+    if (!atomic_load(&c->stop))
+        fprintf(stderr, "isoserve: ready: %zu of %zu volumes%s\n", atomic_load(&c->count),
+                c->total, c->options.skip ? " (the others load on demand)" : "");
     return NULL;
+}
+
+/* With --shard K/N: the ring of --shard-peers and, per catalog entry, whether another
+ * replica owns it (skip[i] = 1). Without: nothing. 0, or 1 reported. */
+static int plan_shard(const serve_options *o, const srv_catalog *catalog, srv_shard_ring *ring,
+                      unsigned char **skip)
+{
+    iso_error err;
+    memset(ring, 0, sizeof *ring);
+    *skip = NULL;
+    if (!o->shard_count)
+        return 0;
+    if (srv_shard_ring_init(ring, o->shard_peers, &err))
+        return srv_fail("%s", err.message);
+    size_t peers = ring->peer_count;
+    if (peers != (size_t)o->shard_count) {
+        srv_shard_ring_free(ring);
+        return srv_fail("--shard %ld/%ld: --shard-peers names %zu replicas, not %ld", o->shard_self,
+                        o->shard_count, peers, o->shard_count);
+    }
+    if (!(*skip = calloc(catalog->count ? catalog->count : 1, 1))) {
+        srv_shard_ring_free(ring);
+        return srv_fail("serve: out of memory at start-up");
+    }
+    size_t own = 0;
+    for (size_t i = 0; i < catalog->count; i++) {
+        (*skip)[i] = srv_shard_owner(ring, catalog->entries[i].id) != (size_t)o->shard_self;
+        own += !(*skip)[i];
+    }
+    fprintf(stderr, "isoserve: shard %ld/%ld (%s): preloads %zu of %zu volumes; loads the others "
+            "on demand\n", o->shard_self, o->shard_count, ring->peers[o->shard_self], own,
+            catalog->count);
+    return 0;
 }
 
 static int is_loopback(const char *host)
@@ -160,15 +252,34 @@ static int serve(const serve_options *o, srv_catalog *catalog)
     srv_cache cache;
     srv_pool pool;
     srv_server server = {0};
+    srv_shard_ring ring;
+    unsigned char *skip;
     iso_error err;
+    if (plan_shard(o, catalog, &ring, &skip))
+        return 1;
+    /* The replica's name in X-Iso-Replica: given, else its peer name, else the host's. */
+    char host_name[256] = "isoserve";
+    const char *replica = o->replica_name ? o->replica_name
+                          : o->shard_count ? ring.peers[o->shard_self] : host_name;
+    if (!o->replica_name && !o->shard_count && gethostname(host_name, sizeof host_name))
+        snprintf(host_name, sizeof host_name, "isoserve");
+    host_name[sizeof host_name - 1] = '\0';
     char *root = web_root(o->web_root);
-    if (srv_collection_init(&collection, catalog) || srv_cache_init(&cache, (size_t)o->cache_mb << 20) ||
-        srv_pool_init(&pool, (size_t)o->threads, (size_t)o->queue))
+    srv_preload_options preload = {.cache_dir = o->cache_dir, .skip = skip,
+                                   .max_volume_bytes = (uint64_t)o->max_volume_mb << 20};
+    if (srv_collection_init(&collection, catalog, &preload) ||
+        srv_cache_init(&cache, (size_t)o->cache_mb << 20) ||
+        srv_pool_init(&pool, (size_t)o->threads, (size_t)o->queue)) {
+        srv_shard_ring_free(&ring);
+        free(skip);
+        free(root);
         return srv_fail("serve: out of memory or threads at start-up");
+    }
     server.config = (srv_http_config){
         .host = o->host, .port = o->port, .web_root = root, .cors_origins = o->origins,
         .cors_origin_count = o->origin_count, .max_connections = (unsigned)o->max_connections,
-        .connection_timeout_s = 30, .retry_after_s = 1};
+        .connection_timeout_s = 30, .retry_after_s = 1, .replica_name = replica,
+        .shard_ring = o->shard_count ? &ring : NULL};
     server.collection = &collection;
     server.cache = &cache;
     server.pool = &pool;
@@ -183,11 +294,8 @@ static int serve(const serve_options *o, srv_catalog *catalog)
     if (!root)
         fprintf(stderr, "isoserve: no web client found (build it with make, or give --web-root)\n");
 
-    preload_task task = {&collection, catalog,
-                         {.cache_dir = o->cache_dir,
-                          .max_volume_bytes = (uint64_t)o->max_volume_mb << 20}};
     pthread_t preloader;
-    if (pthread_create(&preloader, NULL, preload_main, &task)) {
+    if (pthread_create(&preloader, NULL, preload_main, &collection)) {
         srv_http_stop(&server);
         status = srv_fail("serve: cannot start the preloading thread");
         goto done;
@@ -213,6 +321,8 @@ done:
     srv_pool_destroy(&pool);
     srv_cache_destroy(&cache);
     srv_collection_free(&collection);
+    srv_shard_ring_free(&ring);
+    free(skip);
     free(root);
     return status;
 }

@@ -18,22 +18,42 @@
  * volume's version, so ETags and caches in front of the server move on. */
 #define SRV_MESH_ALGORITHM_VERSION 1
 
-int srv_collection_init(srv_collection *c, const srv_catalog *catalog)
+int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
+                        const srv_preload_options *options)
 {
     memset(c, 0, sizeof *c);
     c->total = catalog->count;
+    c->catalog = catalog;
+    c->options = *options;
     c->volumes = calloc(catalog->count ? catalog->count : 1, sizeof *c->volumes);
-    return c->volumes ? 0 : -1;
+    c->state = calloc(catalog->count ? catalog->count : 1, 1);
+    if (!c->volumes || !c->state || pthread_mutex_init(&c->lock, NULL))
+        goto err;
+    if (pthread_cond_init(&c->changed, NULL)) {
+        pthread_mutex_destroy(&c->lock);
+        goto err;
+    }
+    return 0;
+err:
+    free(c->volumes);
+    free(c->state);
+    memset(c, 0, sizeof *c);
+    return -1;
 }
 
 void srv_collection_free(srv_collection *c)
 {
+    if (!c->volumes)
+        return;
     size_t n = atomic_load(&c->count);
     for (size_t i = 0; i < n; i++) {
         iso_tree_destroy(c->volumes[i].tree);
         iso_vol_destroy(c->volumes[i].vol);
     }
     free(c->volumes);
+    free(c->state);
+    pthread_cond_destroy(&c->changed);
+    pthread_mutex_destroy(&c->lock);
     memset(c, 0, sizeof *c);
 }
 
@@ -133,17 +153,64 @@ static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload
     return 0;
 }
 
-void srv_collection_preload(srv_collection *c, const srv_catalog *catalog,
-                            const srv_preload_options *opt)
+/* Loads catalog entry i unless another thread has it or had it: claims it, loads it
+ * without the lock, then publishes it (or marks it failed) and wakes the waiters. */
+static void load_entry(srv_collection *c, size_t i, int on_demand)
 {
-    if (opt->cache_dir && mkdir(opt->cache_dir, 0755) && errno != EEXIST)
-        fprintf(stderr, "isoserve: --cache-dir %s: %s; hierarchies will not be cached\n",
-                opt->cache_dir, strerror(errno));
-    for (size_t i = 0; i < catalog->count && !atomic_load(&c->stop); i++) {
+    pthread_mutex_lock(&c->lock);
+    if (c->state[i] != SRV_ENTRY_IDLE) {
+        pthread_mutex_unlock(&c->lock);
+        return;
+    }
+    c->state[i] = SRV_ENTRY_LOADING;
+    pthread_mutex_unlock(&c->lock);
+
+    srv_volume v;
+    int failed = load_one(&v, &c->catalog->entries[i], &c->options, i, c->total);
+    v.on_demand = on_demand;
+
+    pthread_mutex_lock(&c->lock);
+    if (!failed) {
         size_t n = atomic_load(&c->count);
-        if (!load_one(&c->volumes[n], &catalog->entries[i], opt, i, catalog->count))
-            atomic_store_explicit(&c->count, n + 1, memory_order_release);
+        c->volumes[n] = v;
+        atomic_store_explicit(&c->count, n + 1, memory_order_release);
+        if (on_demand)
+            atomic_fetch_add(&c->on_demand, 1);
+    }
+    c->state[i] = failed ? SRV_ENTRY_FAILED : SRV_ENTRY_LOADED;
+    pthread_cond_broadcast(&c->changed);
+    pthread_mutex_unlock(&c->lock);
+}
+
+void srv_collection_preload(srv_collection *c)
+{
+    const char *dir = c->options.cache_dir;
+    if (dir && mkdir(dir, 0755) && errno != EEXIST)
+        fprintf(stderr, "isoserve: --cache-dir %s: %s; hierarchies will not be cached\n", dir,
+                strerror(errno));
+    for (size_t i = 0; i < c->total && !atomic_load(&c->stop); i++) {
+        if (!c->options.skip || !c->options.skip[i])
+            load_entry(c, i, 0);
         atomic_store(&c->attempted, i + 1);
     }
     atomic_store(&c->ready, 1);
+}
+
+int srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out)
+{
+    if ((*out = srv_collection_find(c, id)))
+        return 0;
+    size_t i = 0;
+    while (i < c->total && strcmp(c->catalog->entries[i].id, id))
+        i++;
+    if (i == c->total)
+        return 404;
+    load_entry(c, i, 1);
+    pthread_mutex_lock(&c->lock);
+    while (c->state[i] == SRV_ENTRY_LOADING) /* another request's load of the same entry */
+        pthread_cond_wait(&c->changed, &c->lock);
+    int loaded = c->state[i] == SRV_ENTRY_LOADED;
+    pthread_mutex_unlock(&c->lock);
+    *out = loaded ? srv_collection_find(c, id) : NULL;
+    return *out ? 0 : 500;
 }

@@ -2,10 +2,14 @@
  *
  * Preloading runs in its own thread while the HTTP server already answers (healthz says
  * 503 until it is done). Volumes are published one by one: readers see a prefix of the
- * array that is complete and never changes again, so lookups need no lock. */
+ * array that is complete and never changes again, so lookups need no lock. A replica of a
+ * sharded deployment preloads only its share of the catalog and loads any other entry on
+ * demand, at its first request (so that failover works), through the same loader and
+ * hierarchy cache; loads are serialised per entry by a lock, publication by the same lock. */
 #ifndef SRV_COLLECTION_H
 #define SRV_COLLECTION_H
 
+#include <pthread.h>
 #include <stdatomic.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -25,7 +29,15 @@ typedef struct srv_volume {
     double levels[SRV_LEVELS_MAX];    /* the catalog's, else Otsu's */
     size_t level_count;
     int tree_from_file;               /* 1: read from the cache dir */
+    int on_demand;                    /* 1: loaded at a request, not preloaded */
 } srv_volume;
+
+typedef struct srv_preload_options {
+    const char *cache_dir;            /* hierarchy files; NULL: always build */
+    uint64_t max_volume_bytes;        /* 0: the core's default */
+    const unsigned char *skip;        /* per catalog entry, 1: not preloaded here (another
+                                         replica's shard); NULL: preload every entry */
+} srv_preload_options;
 
 typedef struct srv_collection {
     srv_volume *volumes;              /* capacity: the catalog's count */
@@ -34,24 +46,33 @@ typedef struct srv_collection {
     size_t total;                     /* catalog entries */
     _Atomic int ready;                /* every entry tried */
     _Atomic int stop;                 /* set on shutdown: preloading ends after the volume at hand */
+    _Atomic size_t on_demand;         /* volumes loaded at a request */
+    const srv_catalog *catalog;
+    srv_preload_options options;      /* also for loads on demand */
+    pthread_mutex_t lock;             /* guards state and publication */
+    pthread_cond_t changed;           /* an entry's state changed */
+    unsigned char *state;             /* per catalog entry: SRV_ENTRY_* */
 } srv_collection;
 
-typedef struct srv_preload_options {
-    const char *cache_dir;            /* hierarchy files; NULL: always build */
-    uint64_t max_volume_bytes;        /* 0: the core's default */
-} srv_preload_options;
+enum { SRV_ENTRY_IDLE, SRV_ENTRY_LOADING, SRV_ENTRY_LOADED, SRV_ENTRY_FAILED };
 
-/* Prepares an empty collection for the catalog (which must outlive it). */
-int srv_collection_init(srv_collection *c, const srv_catalog *catalog);
-/* Loads every entry of the catalog in order: the volume, then its hierarchy from the cache
- * dir when that file is valid and newer than the volume, else built (progress on the
- * terminal) and written there atomically. A volume that fails to load is reported and
- * skipped. Sets ready at the end. Blocking: run it in a thread; setting c->stop ends it
- * after the volume at hand. */
-void srv_collection_preload(srv_collection *c, const srv_catalog *catalog,
-                            const srv_preload_options *opt);
+/* Prepares an empty collection for the catalog (which must outlive it); options are
+ * copied (their strings and skip array must outlive it too). 0 or -1 (no memory). */
+int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
+                        const srv_preload_options *options);
+/* Loads every entry of the catalog in order (but those the options skip): the volume,
+ * then its hierarchy from the cache dir when that file is valid and newer than the volume,
+ * else built (progress on the terminal) and written there atomically. A volume that fails
+ * to load is reported and skipped. Sets ready at the end. Blocking: run it in a thread;
+ * setting c->stop ends it after the volume at hand. */
+void srv_collection_preload(srv_collection *c);
 /* The published volume with this id, or NULL. Lock-free. */
 const srv_volume *srv_collection_find(const srv_collection *c, const char *id);
+/* The volume with this id, loaded now (as preloading would) if the catalog names it and
+ * it is not loaded yet; concurrent callers for one id wait for one load. Blocking for as
+ * long as the load takes. Returns 0 with *out set, 404 when the catalog has no such id,
+ * 500 when loading it failed (reported on stderr once; later calls fail at once). */
+int srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out);
 /* Bytes of all published hierarchies. */
 size_t srv_collection_hierarchy_bytes(const srv_collection *c);
 void srv_collection_free(srv_collection *c);

@@ -28,6 +28,7 @@ typedef struct srv_request {
     srv_route route;
     int status;
     size_t bytes;
+    const srv_volume *volume;      /* the volume a response concerns (X-Iso-Load), or NULL */
     char method[16];
     char path[256];
 } srv_request;
@@ -35,7 +36,7 @@ typedef struct srv_request {
 static const char expose_headers[] =
     "ETag, X-Iso-Triangles, X-Iso-Vertices, X-Iso-Cells-Visited, X-Iso-Extract-Ms, "
     "X-Iso-Encode-Ms, X-Iso-Error-Bound, X-Iso-Tolerance, X-Iso-Area-Mm2, X-Iso-Volume-Mm3, "
-    "X-Iso-Budget-Fits, X-Iso-Cache";
+    "X-Iso-Budget-Fits, X-Iso-Cache, X-Iso-Replica, X-Iso-Load";
 
 /* ---------------------------------------------------------------- responses */
 
@@ -60,6 +61,12 @@ static enum MHD_Result send_response(srv_server *s, struct MHD_Connection *c, sr
     if (!r)
         return MHD_NO;
     add_cors(s, c, r);
+    /* Which replica answered, and whether it had the volume preloaded (its shard) or
+     * loaded it on demand (a failover): what a deployment behind nginx is checked by. */
+    if (s->config.replica_name)
+        MHD_add_response_header(r, "X-Iso-Replica", s->config.replica_name);
+    if (req->volume)
+        MHD_add_response_header(r, "X-Iso-Load", req->volume->on_demand ? "on-demand" : "preloaded");
     req->status = status;
     req->bytes = bytes;
     enum MHD_Result ok = MHD_queue_response(c, (unsigned)status, r);
@@ -134,9 +141,11 @@ static enum MHD_Result fail(srv_server *s, struct MHD_Connection *c, srv_request
 
 /* ---------------------------------------------------------------- documents */
 
-static proto_volume_doc doc_of(const srv_volume *v)
+static proto_volume_doc doc_of(const srv_server *s, const srv_volume *v)
 {
+    const srv_shard_ring *ring = s->config.shard_ring;
     return (proto_volume_doc){
+        .shard = ring ? ring->peers[srv_shard_owner(ring, v->entry->id)] : NULL,
         .id = v->entry->id, .name = v->entry->name, .modality = v->entry->modality,
         .version = v->version, .vol = v->vol, .levels = v->levels, .level_count = v->level_count,
         .histogram = v->histogram, .histogram_bins = SRV_HISTOGRAM_BINS,
@@ -144,14 +153,36 @@ static proto_volume_doc doc_of(const srv_volume *v)
         .hierarchy_ms = v->tree->build_ms, .hierarchy_from_file = v->tree_from_file};
 }
 
+/* Sharded: the catalog, the same on every replica whatever it has loaded; each entry
+ * names its shard. The volume's own document (routed to that shard) has the rest. */
+static enum MHD_Result route_catalog(srv_server *s, struct MHD_Connection *c, srv_request *req)
+{
+    const srv_catalog *catalog = s->collection->catalog;
+    const srv_shard_ring *ring = s->config.shard_ring;
+    proto_volume_doc *docs = calloc(catalog->count ? catalog->count : 1, sizeof *docs);
+    if (!docs)
+        return MHD_NO;
+    for (size_t i = 0; i < catalog->count; i++) {
+        const srv_catalog_entry *e = &catalog->entries[i];
+        docs[i] = (proto_volume_doc){.id = e->id, .name = e->name, .modality = e->modality,
+                                     .levels = e->levels, .level_count = e->level_count,
+                                     .shard = ring->peers[srv_shard_owner(ring, e->id)]};
+    }
+    char *text = proto_json_volume_list(docs, catalog->count);
+    free(docs);
+    return send_text(s, c, req, 200, text, "application/json", "no-cache");
+}
+
 static enum MHD_Result route_volumes(srv_server *s, struct MHD_Connection *c, srv_request *req)
 {
+    if (s->config.shard_ring)
+        return route_catalog(s, c, req);
     size_t n = atomic_load(&s->collection->count);
     proto_volume_doc *docs = calloc(n ? n : 1, sizeof *docs);
     if (!docs)
         return MHD_NO;
     for (size_t i = 0; i < n; i++)
-        docs[i] = doc_of(&s->collection->volumes[i]);
+        docs[i] = doc_of(s, &s->collection->volumes[i]);
     char *text = proto_json_volume_list(docs, n);
     free(docs);
     return send_text(s, c, req, 200, text, "application/json", "no-cache");
@@ -160,7 +191,7 @@ static enum MHD_Result route_volumes(srv_server *s, struct MHD_Connection *c, sr
 static enum MHD_Result route_volume(srv_server *s, struct MHD_Connection *c, srv_request *req,
                                     const srv_volume *v)
 {
-    proto_volume_doc doc = doc_of(v);
+    proto_volume_doc doc = doc_of(s, v);
     return send_text(s, c, req, 200, proto_json_volume(&doc, 1), "application/json", "no-cache");
 }
 
@@ -196,6 +227,7 @@ static enum MHD_Result route_metrics(srv_server *s, struct MHD_Connection *c, sr
     g.rejected_total = atomic_load(&s->pool->rejected);
     g.hierarchy_bytes = srv_collection_hierarchy_bytes(s->collection);
     g.volumes = atomic_load(&s->collection->count);
+    g.volumes_on_demand = atomic_load(&s->collection->on_demand);
     g.volumes_total = s->collection->total;
     g.ready = atomic_load(&s->collection->ready);
     size_t size;
@@ -444,10 +476,16 @@ static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_reques
         return fail(s, c, req, path, 404, "no such resource; the API is /v1/volumes, "
                     "/v1/volumes/{id} and /v1/volumes/{id}/mesh");
     req->route = kind == 1 ? SRV_ROUTE_VOLUME : SRV_ROUTE_MESH;
-    const srv_volume *v = srv_catalog_id_valid(id) ? srv_collection_find(s->collection, id) : NULL;
-    if (!v)
-        return fail(s, c, req, path, 404, "no volume \"%s\"; /v1/volumes lists them",
-                    srv_catalog_id_valid(id) ? id : "(not a valid id)");
+    if (!srv_catalog_id_valid(id))
+        return fail(s, c, req, path, 404, "no volume \"(not a valid id)\"; /v1/volumes lists them");
+    const srv_volume *v;
+    int found = srv_collection_acquire(s->collection, id, &v); /* loads another shard's volume */
+    if (found == 404)
+        return fail(s, c, req, path, 404, "no volume \"%s\"; /v1/volumes lists them", id);
+    if (found)
+        return fail(s, c, req, path, 500, "volume \"%s\" could not be loaded; the server's log "
+                    "says why", id);
+    req->volume = v;
     return kind == 1 ? route_volume(s, c, req, v) : route_mesh(s, c, req, v, path);
 }
 

@@ -16,6 +16,7 @@
 #include "error.h"
 #include "metrics.h"
 #include "pool.h"
+#include "shard.h"
 
 /* Longest request target (path plus query) accepted; longer ones get 414. */
 #define SRV_URI_MAX 4096
@@ -28,6 +29,9 @@ typedef struct srv_http_config {
     size_t cors_origin_count;
     unsigned max_connections, connection_timeout_s;
     unsigned retry_after_s;        /* in 503 answers */
+    const char *replica_name;      /* X-Iso-Replica on every response */
+    const srv_shard_ring *shard_ring; /* sharded: /v1/volumes lists the catalog with each
+                                         volume's shard; NULL: the loaded volumes in full */
 } srv_http_config;
 
 struct MHD_Daemon;

@@ -18,7 +18,9 @@ static const struct {
     {"serve", srv_cmd_serve,
      "serve [--catalog FILE | --volumes DIR] [--listen 127.0.0.1:8080] [--cache-dir DIR]\n"
      "                 [--threads N] [--queue N] [--cache-mb N] [--cors-origin ORIGIN]...\n"
-     "                 [--web-root DIR] [--drain-seconds N] [--max-connections N] [--max-volume-mb N]"},
+     "                 [--web-root DIR] [--drain-seconds N] [--max-connections N] [--max-volume-mb N]\n"
+     "                 [--shard K/N --shard-peers HOST:PORT,...] [--replica-name NAME]\n"
+     "                 (each option also from ISOSERVE_<OPTION>, e.g. ISOSERVE_CACHE_DIR)"},
     {"bench", srv_cmd_bench,
      "bench VOLUME --level L [--tolerances 0,6,10,...] [--json FILE] [--repeat N] [--resample WxHxD]"},
 };

@@ -122,6 +122,8 @@ char *srv_metrics_render(srv_metrics *m, const srv_metrics_gauges *g, size_t *si
     metric(f, "isoserve_hierarchy_bytes", "gauge", "Bytes of all loaded hierarchies.",
            (double)g->hierarchy_bytes);
     metric(f, "isoserve_volumes_loaded", "gauge", "Volumes being served.", (double)g->volumes);
+    metric(f, "isoserve_volumes_loaded_on_demand", "gauge",
+           "Of those, volumes of another shard loaded at a request.", (double)g->volumes_on_demand);
     metric(f, "isoserve_volumes_in_catalog", "gauge", "Volumes the catalog names.",
            (double)g->volumes_total);
     metric(f, "isoserve_ready", "gauge", "1 once preloading is done.", g->ready);

@@ -21,37 +21,13 @@ import time
 
 import numpy as np
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from results import Results, Skip  # noqa: E402 - found through the path just set
+
 BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", "build/isoserve"))
 LABEL = os.environ.get("ISO_TEST_LABEL", "http")  # the sanitizer run says http-san
-failures = 0
-
-
-def report(name, ok, why=""):
-    global failures
-    if ok:
-        print(f"PASS {LABEL}.{name}", flush=True)
-    else:
-        failures += 1
-        print(f"FAIL {LABEL}.{name}: {why}", flush=True)
-
-
-class Skip(Exception):
-    """Raised by a test that cannot run here; it says why."""
-
-
-def check(name, fn):
-    """Runs one test; an exception is a failure with its message, never a crash of the suite."""
-    try:
-        fn()
-    except Skip as e:
-        print(f"SKIP {LABEL}.{name}: {e}", flush=True)
-        return
-    except AssertionError as e:
-        report(name, False, str(e) or "assertion failed")
-    except Exception as e:  # noqa: BLE001 - any error is this test's failure
-        report(name, False, f"{type(e).__name__}: {e}")
-    else:
-        report(name, True)
+RESULTS = Results(LABEL)
+report, check = RESULTS.report, RESULTS.check
 
 
 # ---------------------------------------------------------------- volumes written here
@@ -654,7 +630,7 @@ def main():
         check("bad_options", bad_options)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return 1 if failures else 0
+    return 1 if RESULTS.failures else 0
 
 
 if __name__ == "__main__":

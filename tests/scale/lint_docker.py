@@ -1,0 +1,161 @@
+"""Lint of docker/ without a Docker engine: what `docker build` and `docker compose up`
+would trip on first, checked from the files.
+
+- compose.yaml is valid YAML (Debian's python3-yaml), its build contexts, Dockerfiles and
+  targets exist, its bind-mounted paths exist;
+- every COPY source of the Dockerfile exists in the build context, every `--from` names an
+  earlier stage, every `make X` it runs is a Makefile target (`make -n X` succeeds);
+- the server stage runs as a non-root user, exposes its port and checks /healthz;
+- the shard ring's three copies agree: ISOSERVE_SHARD_PEERS in compose, the `server` lines
+  of both upstream blocks in nginx.conf (same names, same order, weight 1), and the
+  replicas' ISOSERVE_SHARD K/N cover 0..N-1 once each.
+Prints PASS/FAIL/SKIP lines; exit status 1 on failure."""
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from results import Results, Skip  # noqa: E402 - found through the path just set
+
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+DOCKER = os.path.join(ROOT, "docker")
+RESULTS = Results("docker-lint")
+
+
+def default_of(value):
+    """Compose's ${VAR:-default} (or ${VAR}) reduced to what it is when VAR is unset."""
+    return re.sub(r"\$\{[A-Za-z_][A-Za-z0-9_]*(?::?-([^}]*))?\}", lambda m: m.group(1) or "", value)
+
+
+def dockerfile_instructions(path):
+    """(stage, instruction, arguments) per instruction, continuation lines joined."""
+    text = open(path).read().replace("\\\n", " ")
+    stage, out = None, []
+    for line in text.splitlines():
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        word, _, rest = line.partition(" ")
+        word = word.upper()
+        if word == "FROM":
+            m = re.search(r"\bAS\s+(\S+)", rest, re.I)
+            stage = m.group(1) if m else None
+        out.append((stage, word, rest.strip()))
+    return out
+
+
+def load_compose():
+    try:
+        import yaml
+    except ImportError:
+        raise Skip("python3-yaml is not installed (scripts/setup.sh installs it)")
+    with open(os.path.join(DOCKER, "compose.yaml")) as f:
+        compose = yaml.safe_load(f)
+    assert isinstance(compose, dict) and isinstance(compose.get("services"), dict), "no services"
+    return compose
+
+
+def compose_paths():
+    compose = load_compose()
+    stages = {}
+    for name, service in compose["services"].items():
+        build = service.get("build")
+        if build:
+            context = os.path.normpath(os.path.join(DOCKER, build["context"]))
+            dockerfile = os.path.join(context, build.get("dockerfile", "Dockerfile"))
+            assert os.path.isdir(context), (name, context)
+            assert os.path.isfile(dockerfile), (name, dockerfile)
+            if dockerfile not in stages:
+                stages[dockerfile] = {s for s, w, _ in dockerfile_instructions(dockerfile) if w == "FROM"}
+            assert build.get("target") in stages[dockerfile] | {None}, (name, build.get("target"))
+        for volume in service.get("volumes", []):
+            source = default_of(volume).split(":")[0] if isinstance(volume, str) else volume["source"]
+            if source.startswith((".", "/")):
+                assert os.path.exists(os.path.join(DOCKER, source)), (name, volume, "missing")
+            else:
+                assert source in (compose.get("volumes") or {}), (name, volume, "undeclared volume")
+
+
+def dockerfile_sources():
+    path = os.path.join(DOCKER, "Dockerfile")
+    stages_so_far, makes = set(), []  # makes: the RUN lines
+    for stage, word, rest in dockerfile_instructions(path):
+        if word == "FROM":
+            stages_so_far.add(stage)
+        elif word == "COPY":
+            args = shlex.split(rest)
+            source_from = [a for a in args if a.startswith("--from=")]
+            paths = [a for a in args if not a.startswith("--")][:-1]
+            if source_from:
+                assert source_from[0][7:] in stages_so_far, ("COPY", rest, "no such earlier stage")
+                continue
+            for p in paths:
+                assert os.path.exists(os.path.join(ROOT, p)), ("COPY", p, "not in the repository")
+        elif word == "RUN":
+            makes.append(rest)
+    targets = []
+    for run in makes:  # the words after `make` up to the end of its command, options aside
+        words = run.split()
+        for i, w in enumerate(words):
+            if w != "make":
+                continue
+            for t in words[i + 1:]:
+                if t in ("&&", "||", ";", "|"):
+                    break
+                if not t.startswith("-") and "=" not in t and "$" not in t:
+                    targets.append(t)
+    assert targets, "the Dockerfile runs no make target"
+    for t in targets:
+        p = subprocess.run(["make", "-n", t], cwd=ROOT, capture_output=True, text=True, timeout=60)
+        assert p.returncode == 0, (t, p.stderr.strip()[-300:])
+    print(f"INFO docker-lint.make_targets: {' '.join(targets)}", flush=True)
+
+
+def server_stage():
+    steps = dockerfile_instructions(os.path.join(DOCKER, "Dockerfile"))
+    last = steps[-1][0]
+    mine = [(w, r) for s, w, r in steps if s == last]
+    assert re.match(r"debian:bookworm-slim\b", next(r for w, r in mine if w == "FROM")), "not bookworm-slim"
+    users = [r for w, r in mine if w == "USER"]
+    assert users and users[-1] not in ("root", "0"), users
+    assert any(w == "EXPOSE" for w, _ in mine), "no EXPOSE"
+    assert any(w == "HEALTHCHECK" and "/healthz" in r for w, r in mine), "no HEALTHCHECK on /healthz"
+    assert any(w == "VOLUME" for w, _ in mine), "no VOLUME"
+
+
+def ring_agrees():
+    compose = load_compose()
+    conf = open(os.path.join(DOCKER, "nginx.conf")).read()
+    blocks = re.findall(r"upstream\s+(\S+)\s*\{(.*?)\}", conf, re.S)
+    assert blocks, "nginx.conf has no upstream block"
+    lists = {name: re.findall(r"^\s*server\s+(\S+)", body, re.M) for name, body in blocks}
+    # isoserve's ring gives every peer weight 1 (160 points), and a backup is not on it.
+    odd = re.findall(r"^\s*server\s.*\b(weight=\d+|backup)\b", conf, re.M)
+    assert not odd, f"nginx.conf upstream servers with {odd}: --shard-peers assumes weight 1, no backup"
+    replicas = {n: s for n, s in compose["services"].items() if "ISOSERVE_SHARD" in (s.get("environment") or {})}
+    peers = {tuple(s["environment"]["ISOSERVE_SHARD_PEERS"].split(",")) for s in replicas.values()}
+    assert len(peers) == 1, f"replicas disagree on ISOSERVE_SHARD_PEERS: {peers}"
+    peers = list(peers.pop())
+    for name, servers in lists.items():
+        assert servers == peers, f"upstream {name} lists {servers}, compose's peers are {peers}"
+    shards = sorted(s["environment"]["ISOSERVE_SHARD"] for s in replicas.values())
+    n = len(peers)
+    assert shards == sorted(f"{k}/{n}" for k in range(n)), shards
+    for name, s in replicas.items():
+        k = int(s["environment"]["ISOSERVE_SHARD"].split("/")[0])
+        assert peers[k].split(":")[0] in (name, s.get("hostname")), (name, "is not", peers[k])
+
+
+def main():
+    RESULTS.check("compose_yaml_paths_and_targets", compose_paths)
+    RESULTS.check("dockerfile_copy_sources_and_make_targets", dockerfile_sources)
+    RESULTS.check("server_image_nonroot_healthcheck", server_stage)
+    RESULTS.check("shard_peers_match_nginx_upstreams", ring_agrees)
+    return 1 if RESULTS.failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
