@@ -297,8 +297,10 @@ static void test_mricron_brain(void)
 static void test_shared_scans(void)
 {
     const char *dir = check_shared_volumes();
-    if (!dir)
+    if (!dir) {
+        check_skip("needs ../shared/volumes");
         return;
+    }
     static const struct {
         const char *file;
         double levels[2];
@@ -319,8 +321,10 @@ static void test_shared_scans(void)
 static void test_cranium_enclosed_volumes(void)
 {
     const char *dir = check_shared_volumes();
-    if (!dir)
+    if (!dir) {
+        check_skip("needs ../shared/volumes");
         return;
+    }
     char path[1024];
     snprintf(path, sizeof path, "%s/cranium_256x256x108_i16le.nhdr", dir);
     iso_volume *vol = load_or_skip(path);
