@@ -58,8 +58,13 @@ static void raise_bound(iso_extract_stats *stats, double vertex_error)
         stats->error_bound = vertex_error;
 }
 
-/* Emits box as fans over its face loops if it may; 1 done, 0 not, <0 error. */
-static int try_fan(walk *w, const iso_box *box, double fit_error)
+static size_t brick_mc_triangles(const walk *w, const iso_box *b);
+
+/* Emits box as fans over its face loops if it may; 1 done, 0 not, <0 error. Inside a
+ * brick, where counting is cheap, a small node with a tangled surface can fan into more
+ * triangles than its cells would give: it is refused then, so no tolerance ever costs
+ * triangles. */
+static int try_fan(walk *w, const iso_box *box, double fit_error, int in_brick)
 {
     if (iso_box_cells(box) < MIN_FAN_CELLS || !(fit_error <= w->fit_limit))
         return 0;
@@ -67,7 +72,9 @@ static int try_fan(walk *w, const iso_box *box, double fit_error)
     /* Centres must land on the surface, not merely within the tolerance of its level: a
      * centre left in a flat background would meet that loosely and still be far off. */
     double centre_limit = w->tolerance * CENTRE_SHARE;
-    int rc = iso_fan_polygonize(w->vol, box, w->level, centre_limit, &w->fan, w->soup, &fan);
+    size_t max_triangles = in_brick ? brick_mc_triangles(w, box) : SIZE_MAX;
+    int rc = iso_fan_polygonize(w->vol, box, w->level, centre_limit, max_triangles, &w->fan,
+                                w->soup, &fan);
     if (rc == 1) {
         w->stats->nodes_polygonized++;
         w->stats->cells_visited++;
@@ -171,20 +178,9 @@ static int visit_sub(walk *w, const iso_box *box)
     scan_brick_box(w, box, c, &mn, &mx, &er);
     if (!active(w, mn, mx))
         return 0;
-    size_t triangles_before = w->soup->triangle_count, vertices_before = w->soup->vertex_count;
-    int rc = try_fan(w, box, er);
-    if (rc < 0)
-        return rc;
-    if (rc == 0)
-        return visit_sub_children(w, box);
-    /* A small node with a tangled surface can fan into more triangles than its cells
-     * would give: then march them instead, so no tolerance ever costs triangles. */
-    if (w->soup->triangle_count - triangles_before <= brick_mc_triangles(w, box))
-        return 0;
-    w->soup->triangle_count = triangles_before;
-    w->soup->vertex_count = vertices_before;
-    w->stats->nodes_polygonized--;
-    w->stats->cells_visited--;
+    int rc = try_fan(w, box, er, 1);
+    if (rc)
+        return rc < 0 ? rc : 0;
     return visit_sub_children(w, box);
 }
 
@@ -220,7 +216,7 @@ static int visit_node(walk *w, uint32_t index, const iso_box *box)
     if (!active(w, node->min, node->max))
         return 0;
     if (!w->exact) {
-        int rc = try_fan(w, box, node->err);
+        int rc = try_fan(w, box, node->err, 0);
         if (rc)
             return rc < 0 ? rc : 0;
     }

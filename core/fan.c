@@ -69,7 +69,7 @@ static void crossing(const face *f, const uint32_t p[3], const uint32_t q[3], ui
     double t = iso_mc_edge_t(a, b, f->level);
     for (int k = 0; k < 3; k++)
         position[k] = (float)((double)low[k] + (k == d ? t : 0.0));
-    *error = iso_mc_edge_error(a, b, f->level);
+    *error = iso_mc_edge_error(a, b, t, f->level);
     if (!(*error >= 0))
         *error = 0; /* a NaN end: no level to be off from */
     const size_t *dims = f->vol->dims;
@@ -146,10 +146,10 @@ static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *
 
 /* ---- PASS 2: linking segments into loops ---- */
 
-static size_t slot_of(uint64_t key, size_t capacity)
+static size_t slot_of(uint64_t key, size_t mask)
 {
     uint64_t h = key * 0x9E3779B97F4A7C15ull;
-    return (size_t)(h ^ (h >> 29)) & (capacity - 1);
+    return (size_t)(h ^ (h >> 29)) & mask;
 }
 
 static int index_segments(iso_fan_scratch *s)
@@ -160,10 +160,11 @@ static int index_segments(iso_fan_scratch *s)
     if (grow((void **)&s->slots, &s->slot_capacity, capacity, sizeof *s->slots))
         return ISO_E_NOMEM;
     memset(s->slots, 0, capacity * sizeof *s->slots);
+    s->slot_mask = capacity - 1;
     for (size_t i = 0; i < s->segment_count; i++) {
-        size_t k = slot_of(s->segments[i].from, capacity);
+        size_t k = slot_of(s->segments[i].from, s->slot_mask);
         while (s->slots[k])
-            k = (k + 1) & (capacity - 1);
+            k = (k + 1) & s->slot_mask;
         s->slots[k] = (uint32_t)(i + 1);
     }
     return 0;
@@ -171,10 +172,7 @@ static int index_segments(iso_fan_scratch *s)
 
 static long find_segment(const iso_fan_scratch *s, uint64_t from)
 {
-    size_t capacity = 16;
-    while (capacity < 2 * s->segment_count)
-        capacity *= 2;
-    for (size_t k = slot_of(from, capacity); s->slots[k]; k = (k + 1) & (capacity - 1))
+    for (size_t k = slot_of(from, s->slot_mask); s->slots[k]; k = (k + 1) & s->slot_mask)
         if (s->segments[s->slots[k] - 1].from == from)
             return (long)s->slots[k] - 1;
     return -1;
@@ -332,8 +330,8 @@ static int fan_loop(const iso_volume *vol, const iso_box *box, double level, dou
 }
 
 int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
-                       double vertex_limit, iso_fan_scratch *s, iso_mesh *soup,
-                       iso_fan_result *result)
+                       double vertex_limit, size_t max_triangles, iso_fan_scratch *s,
+                       iso_mesh *soup, iso_fan_result *result)
 {
     assert(iso_box_cells(box) >= 2);
     memset(result, 0, sizeof *result);
@@ -352,6 +350,8 @@ int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
         size_t n = collect_loop(s, i);
         rc = fan_loop(vol, box, level, vertex_limit, s, n, soup, result);
         result->loops++;
+        if (rc == 1 && result->triangles > max_triangles)
+            rc = 0;
     }
     /* The node holds the level (the caller checked its range) but no face crosses it: the
      * surface is a closed piece inside, which a fan cannot show. */

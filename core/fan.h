@@ -40,7 +40,7 @@ typedef struct iso_fan_scratch {
     iso_fan_segment *segments;
     size_t segment_count, segment_capacity;
     uint32_t *slots;              /* open addressing: segment by its start vertex's edge */
-    size_t slot_capacity;
+    size_t slot_capacity, slot_mask; /* allocated; in use for the node at hand */
     uint32_t *loop;               /* the segments of the loop at hand, in order */
     size_t loop_capacity;
 } iso_fan_scratch;
@@ -53,9 +53,10 @@ typedef struct iso_fan_result {
 } iso_fan_result;
 
 /* Appends box's surface to soup in index space. Returns 1 when emitted, 0 when refused
- * (nothing appended), ISO_E_NOMEM. The box must hold at least two cells. */
+ * (nothing appended; also when it would take more than max_triangles), ISO_E_NOMEM. The
+ * box must hold at least two cells. */
 int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
-                       double vertex_limit, iso_fan_scratch *scratch, iso_mesh *soup,
-                       iso_fan_result *result);
+                       double vertex_limit, size_t max_triangles, iso_fan_scratch *scratch,
+                       iso_mesh *soup, iso_fan_result *result);
 
 #endif

@@ -165,7 +165,7 @@ int iso_mc_cell(const double v[8], double level, const double origin[3], const d
         double a = v[lo], b = v[iso_mc_edge_corner[e][1]];
         double t = iso_mc_edge_t(a, b, level);
         if (vertex_error) {
-            double error = iso_mc_edge_error(a, b, level);
+            double error = iso_mc_edge_error(a, b, t, level);
             if (error > *vertex_error)
                 *vertex_error = error;
         }

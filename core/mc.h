@@ -69,11 +69,10 @@ static inline double iso_mc_edge_t(double a, double b, double level)
     return t;
 }
 
-/* |value at the crossing - level| for a crossing placed by iso_mc_edge_t: nonzero only
- * where the gap moved it (or an end is NaN, where it is NaN). */
-static inline double iso_mc_edge_error(double a, double b, double level)
+/* |value at the crossing - level| for the crossing t = iso_mc_edge_t(a, b, level): nonzero
+ * only where the gap moved it (NaN where an end is NaN or infinite). */
+static inline double iso_mc_edge_error(double a, double b, double t, double level)
 {
-    double t = iso_mc_edge_t(a, b, level);
     double e = a + t * (b - a) - level;
     return e < 0 ? -e : e;
 }
