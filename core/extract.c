@@ -1,6 +1,10 @@
 /* extract.c: iso-surface extraction over the hierarchy (Elber and Malzbender, with
  * Wilhelms and Van Gelder's min/max pruning), and the full-scan marching cubes baseline.
  *
+ * Tolerance 0 takes the exact path instead (march.c): marching cubes over the bricks of
+ * the regular min/max grid that hold the level, every crossing computed once and
+ * indexed directly, on several threads; PASS 2 and 3 below then run only with a cap.
+ *
  * PASS 1 (descend): from the root, skip every node whose [min, max] cannot hold the level;
  *   stop at the first node of at least MIN_FAN_CELLS cells whose fit error is within the
  *   fit share of the tolerance and whose face loops fan within the tolerance (fan.c);
@@ -22,6 +26,7 @@
 #include <time.h>
 
 #include "clock.h"
+#include "march.h"
 #include "mc.h"
 #include "trilinear.h"
 #include "fan.h"
@@ -38,7 +43,7 @@ typedef struct walk {
     const iso_tree *tree;
     const iso_volume *vol;
     double level, tolerance, fit_limit;
-    int prune, exact;
+    int prune;
     iso_mesh *soup;
     iso_extract_stats *stats;
     iso_fan_scratch fan;
@@ -194,17 +199,7 @@ static int visit_brick(walk *w, const iso_box *box)
         w->brick_n[d] = box->hi[d] - box->lo[d] + 1;
     }
     iso_vol_read_box(w->vol, lo, hi, w->brick);
-    if (!w->exact)
-        return visit_sub_children(w, box);
-    /* Tolerance 0: no trilinear above a cell can be used, so march every cell. */
-    for (uint32_t z = box->lo[2]; z < box->hi[2]; z++)
-        for (uint32_t y = box->lo[1]; y < box->hi[1]; y++)
-            for (uint32_t x = box->lo[0]; x < box->hi[0]; x++) {
-                int rc = march_cell(w, x, y, z);
-                if (rc)
-                    return rc;
-            }
-    return 0;
+    return visit_sub_children(w, box);
 }
 
 /* ---- stored nodes ---- */
@@ -215,16 +210,14 @@ static int visit_node(walk *w, uint32_t index, const iso_box *box)
     w->stats->nodes_visited++;
     if (!active(w, node->min, node->max))
         return 0;
-    if (!w->exact) {
-        int rc = try_fan(w, box, node->err, 0);
-        if (rc)
-            return rc < 0 ? rc : 0;
-    }
+    int rc = try_fan(w, box, node->err, 0);
+    if (rc)
+        return rc < 0 ? rc : 0;
     if (!node->first_child)
         return visit_brick(w, box);
     iso_box left, right;
     iso_box_split(box, &left, &right);
-    int rc = visit_node(w, node->first_child, &left);
+    rc = visit_node(w, node->first_child, &left);
     return rc ? rc : visit_node(w, node->first_child + 1, &right);
 }
 
@@ -276,10 +269,10 @@ static void to_world(const iso_volume *vol, iso_mesh *mesh)
     }
 }
 
-static int finish(const iso_volume *vol, iso_space space, iso_mesh *mesh,
+static int finish(const iso_volume *vol, iso_space space, int weld, iso_mesh *mesh,
                   iso_extract_stats *stats, double start, iso_error *err)
 {
-    if (iso_mesh_weld(mesh))
+    if (weld && iso_mesh_weld(mesh))
         return iso_error_set(err, ISO_E_NOMEM, "out of memory welding the mesh");
     if (space == ISO_SPACE_WORLD)
         to_world(vol, mesh);
@@ -287,6 +280,36 @@ static int finish(const iso_volume *vol, iso_space space, iso_mesh *mesh,
     stats->vertices = mesh->vertex_count;
     stats->extract_ms = iso_clock_ms() - start;
     return 0;
+}
+
+/* Tolerance 0: the exact path, then the cap's cells welded onto it if asked. */
+static int extract_exact(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
+                         iso_extract_stats *stats, double start, iso_error *err)
+{
+    /* The root's bounds answer a level outside the data with one node, as the descent does. */
+    const iso_tree_node *root = &tree->nodes[0];
+    stats->nodes_visited = 1;
+    if (!params->no_minmax && !(root->min <= params->level && params->level < root->max) &&
+        !params->cap) {
+        iso_mesh_free(mesh);
+        return finish(tree->vol, params->space, 0, mesh, stats, start, err);
+    }
+    iso_march_stats ms;
+    /* With a cap the march stays in index space, so that the cap's vertices weld to it. */
+    int world = params->space == ISO_SPACE_WORLD && !params->cap;
+    int rc = iso_march_bricks(tree->vol, &tree->bricks, params->level, !params->no_minmax, world,
+                              params->threads, mesh, &ms, err);
+    if (rc)
+        return rc;
+    stats->nodes_visited += iso_bricks_total(&tree->bricks);
+    stats->cells_visited = ms.cells_visited;
+    stats->error_bound = ms.error_bound;
+    if (params->cap && emit_caps(tree->vol, params->level, mesh)) {
+        iso_mesh_free(mesh);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory capping the surface");
+    }
+    /* Positions the march placed in world mm already are left as they are. */
+    return finish(tree->vol, world ? ISO_SPACE_INDEX : params->space, params->cap, mesh, stats, start, err);
 }
 
 int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
@@ -306,6 +329,8 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
     if (!(share > 0 && share <= 1))
         return iso_error_set(err, ISO_E_ARGUMENT, "fit share must be in (0, 1]");
 
+    if (params->tolerance == 0)
+        return extract_exact(tree, params, mesh, stats, start, err);
     walk *w = malloc(sizeof *w);
     if (!w)
         return iso_error_set(err, ISO_E_NOMEM, "out of memory");
@@ -315,7 +340,6 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
     w->level = params->level;
     w->tolerance = params->tolerance;
     w->fit_limit = share * params->tolerance;
-    w->exact = params->tolerance == 0;
     w->prune = !params->no_minmax;
     w->soup = mesh;
     w->stats = stats;
@@ -330,7 +354,7 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
         iso_mesh_free(mesh);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
     }
-    return finish(tree->vol, params->space, mesh, stats, start, err);
+    return finish(tree->vol, params->space, 1, mesh, stats, start, err);
 }
 
 int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,
@@ -368,5 +392,5 @@ int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,
         iso_mesh_free(mesh);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
     }
-    return finish(vol, space, mesh, stats, start, err);
+    return finish(vol, space, 1, mesh, stats, start, err);
 }

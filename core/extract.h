@@ -30,6 +30,8 @@ typedef struct iso_extract_params {
     int cap;           /* 1: close the surface at the volume's border, as if the volume were
                         * surrounded by values below the level (a closed, printable mesh) */
     iso_space space;   /* output positions in world mm (default) or index space */
+    int threads;       /* threads for the exact path (march.h); 0 = all cores. The mesh
+                        * does not depend on it. */
 } iso_extract_params;
 
 typedef struct iso_extract_stats {

@@ -24,6 +24,8 @@
 #include <zlib.h>
 
 #include "clock.h"
+#include "parallel.h"
+#include "round.h"
 #include "trilinear.h"
 
 /* ---- boxes ---- */
@@ -130,19 +132,6 @@ void iso_tree_scan_box(const iso_volume *vol, const iso_box *box, double *min, d
     }
 }
 
-/* Outward rounding keeps "min <= level < max" and "err <= tolerance" conservative. */
-static float float_down(double x)
-{
-    float f = (float)x;
-    return (double)f > x ? nextafterf(f, -INFINITY) : f;
-}
-
-static float float_up(double x)
-{
-    float f = (float)x;
-    return (double)f < x ? nextafterf(f, INFINITY) : f;
-}
-
 /* ---- PASS 1: layout ---- */
 
 typedef struct layout {
@@ -216,22 +205,16 @@ static void *fit_worker(void *arg)
             double mn, mx, er;
             iso_tree_scan_box(job->vol, &job->l->boxes[n], &mn, &mx, &er);
             iso_tree_node *node = &job->l->nodes[n];
-            node->min = mn <= mx ? float_down(mn) : INFINITY; /* all-NaN box: never active */
-            node->max = mn <= mx ? float_up(mx) : -INFINITY;
-            node->err = float_up(er);
+            node->min = mn <= mx ? iso_float_down(mn) : INFINITY; /* all-NaN box: never active */
+            node->max = mn <= mx ? iso_float_up(mx) : -INFINITY;
+            node->err = iso_float_up(er);
             scanned += box_samples(&job->l->boxes[n]);
         }
         atomic_fetch_add(&job->samples, (size_t)scanned);
     }
 }
 
-static int worker_count(void)
-{
-    long n = sysconf(_SC_NPROCESSORS_ONLN);
-    return n < 1 ? 1 : n > 64 ? 64 : (int)n;
-}
-
-int iso_tree_build(const iso_volume *vol, iso_progress_fn progress, void *context,
+int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress, void *context,
                    iso_tree **out, iso_error *err)
 {
     double start = iso_clock_ms();
@@ -252,8 +235,9 @@ int iso_tree_build(const iso_volume *vol, iso_progress_fn progress, void *contex
     uint64_t total = 0;
     for (size_t n = 0; n < l.count; n++)
         total += box_samples(&l.boxes[n]);
-    /* All cores fit; the calling thread only reports progress, then joins. */
-    int threads = worker_count(), started = 0;
+    /* `threads` workers fit; the calling thread only reports progress, then joins. */
+    int started = 0;
+    threads = iso_parallel_threads(threads);
     pthread_t tid[64];
     for (; started < threads; started++)
         if (pthread_create(&tid[started], NULL, fit_worker, &job) != 0)
@@ -276,6 +260,13 @@ int iso_tree_build(const iso_volume *vol, iso_progress_fn progress, void *contex
     tree->nodes = l.nodes;
     tree->node_count = l.count;
     tree->volume_crc = iso_tree_volume_crc(vol);
+    l.nodes = NULL;
+    int rc = iso_bricks_build(vol, threads, &tree->bricks, err);
+    if (rc) {
+        iso_tree_destroy(tree);
+        free(l.boxes);
+        return rc;
+    }
     tree->build_ms = iso_clock_ms() - start;
     free(l.boxes);
     *out = tree;
@@ -294,12 +285,18 @@ void iso_tree_destroy(iso_tree *tree)
         munmap(tree->mapping, tree->mapping_bytes);
     else
         free(tree->nodes);
+    iso_bricks_free(&tree->bricks);
     free(tree);
 }
 
 size_t iso_tree_bytes(const iso_tree *tree)
 {
     return tree->node_count * sizeof(iso_tree_node);
+}
+
+size_t iso_tree_memory(const iso_tree *tree)
+{
+    return iso_tree_bytes(tree) + iso_bricks_total(&tree->bricks) * 2 * sizeof(float);
 }
 
 uint32_t iso_tree_volume_crc(const iso_volume *vol)
@@ -491,6 +488,10 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
     tree->volume_crc = h.volume_crc;
     tree->mapping = map;
     tree->mapping_bytes = bytes;
+    if ((rc = iso_bricks_build(vol, 0, &tree->bricks, err))) {
+        iso_tree_destroy(tree);
+        return rc;
+    }
     tree->build_ms = iso_clock_ms() - start;
     *out = tree;
     return 0;

@@ -23,6 +23,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "bricks.h"
 #include "error.h"
 #include "volume.h"
 
@@ -43,6 +44,7 @@ typedef struct iso_tree {
     size_t node_count;
     uint32_t volume_crc;    /* CRC-32 of dims, type and samples: ties a file to its volume */
     double build_ms;        /* time to build (or to load and verify the file) */
+    iso_bricks bricks;      /* regular min/max grid for exact extraction; computed, not saved */
     void *mapping;          /* file mapping when loaded with iso_tree_load, else NULL */
     size_t mapping_bytes;
 } iso_tree;
@@ -50,14 +52,16 @@ typedef struct iso_tree {
 /* Called during long builds with the fraction done, 0..1. */
 typedef void (*iso_progress_fn)(void *context, double fraction);
 
-/* Builds the hierarchy of vol. O(N log(N / brick^3)) time (each level scans its samples
- * once), O(N / brick^3) memory. progress may be NULL. */
-int iso_tree_build(const iso_volume *vol, iso_progress_fn progress, void *context,
+/* Builds the hierarchy of vol on `threads` threads (0 = all cores). O(N log(N / brick^3))
+ * time (each level scans its samples once), O(N / brick^3) memory. progress may be NULL. */
+int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress, void *context,
                    iso_tree **out, iso_error *err);
 /* Frees the tree (or unmaps its file). NULL is allowed. */
 void iso_tree_destroy(iso_tree *tree);
-/* Bytes the tree's nodes occupy. */
+/* Bytes the tree's nodes occupy (what its file holds after the header). */
 size_t iso_tree_bytes(const iso_tree *tree);
+/* Bytes the tree occupies in memory: its nodes and its brick grid. */
+size_t iso_tree_memory(const iso_tree *tree);
 
 /* CRC-32 identifying the volume's dims, type and samples (the hierarchy file's key). O(N). */
 uint32_t iso_tree_volume_crc(const iso_volume *vol);

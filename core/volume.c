@@ -135,19 +135,7 @@ static size_t checked_index(const iso_volume *vol, size_t i, size_t j, size_t k)
 
 double iso_vol_get(const iso_volume *vol, size_t i, size_t j, size_t k)
 {
-    size_t at = checked_index(vol, i, j, k);
-    switch (vol->type) {
-    case ISO_U8: return ((const uint8_t *)vol->data)[at];
-    case ISO_I8: return ((const int8_t *)vol->data)[at];
-    case ISO_U16: return ((const uint16_t *)vol->data)[at];
-    case ISO_I16: return ((const int16_t *)vol->data)[at];
-    case ISO_U32: return ((const uint32_t *)vol->data)[at];
-    case ISO_I32: return ((const int32_t *)vol->data)[at];
-    case ISO_F32: return ((const float *)vol->data)[at];
-    case ISO_F64: return ((const double *)vol->data)[at];
-    }
-    assert(!"invalid voxel type");
-    return 0;
+    return iso_vol_sample(vol, checked_index(vol, i, j, k));
 }
 
 /* Rounds to the nearest integer and clamps into [lo, hi]; NaN becomes 0 because an integer

@@ -50,6 +50,17 @@ int srv_parse_number(const char *text, double *out)
     return 0;
 }
 
+int srv_parse_threads(const char *command, const char *text, int *threads)
+{
+    char *end;
+    errno = 0;
+    long n = strtol(text, &end, 10);
+    if (!*text || *end || errno || n < 1 || n > 256)
+        return srv_fail("%s: --threads '%s': expected a whole number from 1 to 256", command, text);
+    *threads = (int)n;
+    return 0;
+}
+
 int srv_parse_dims(const char *text, size_t dims[3])
 {
     unsigned long long v[3];
@@ -91,7 +102,7 @@ int srv_open(const srv_open_options *opt, srv_subject *out)
     if (!opt->want_tree)
         return 0;
     int rc = opt->hierarchy ? iso_tree_load(out->vol, opt->hierarchy, &out->tree, &err)
-                            : iso_tree_build(out->vol, srv_progress, (void *)"building hierarchy", &out->tree, &err);
+                            : iso_tree_build(out->vol, opt->threads, srv_progress, (void *)"building hierarchy", &out->tree, &err);
     if (rc) {
         srv_close(out);
         return srv_fail("%s", err.message);

@@ -23,7 +23,11 @@ typedef struct srv_open_options {
     const char *resample;  /* "WxHxD" or NULL */
     const char *hierarchy; /* file written by `isoserve build`, or NULL */
     int want_tree;
+    int threads;           /* for the hierarchy build; 0 = all cores */
 } srv_open_options;
+
+/* "--threads N": N in 1..256 into *threads; 0, or prints the problem and returns 1. */
+int srv_parse_threads(const char *command, const char *text, int *threads);
 
 /* Returns 0, or prints "isoserve: <what>" on stderr and returns 1. */
 int srv_open(const srv_open_options *opt, srv_subject *out);

@@ -67,6 +67,11 @@ int srv_cmd_extract(int argc, char **argv)
             full_scan = 1;
         else if (!strcmp(a, "--cap"))
             params.cap = 1;
+        else if (!strcmp(a, "--threads") && value) {
+            if (srv_parse_threads("extract", argv[++i], &params.threads))
+                return 1;
+            opt.threads = params.threads;
+        }
         else if (!strcmp(a, "--level") && value) {
             if (srv_parse_number(value, &params.level))
                 return srv_fail("extract: --level '%s' is not a finite number", value);
@@ -92,7 +97,7 @@ int srv_cmd_extract(int argc, char **argv)
             opt.path = a;
     }
     if (!opt.path || !have_level)
-        return srv_fail("extract: usage: isoserve extract VOLUME --level L [--tolerance T] [--cap] "
+        return srv_fail("extract: usage: isoserve extract VOLUME --level L [--tolerance T] [--cap] [--threads N] "
                         "[--normals none|trilinear|triquadratic|tricubic] [-o OUT.ply|.stl|.obj|.drc|.glb] [--json]");
     if (full_scan && params.cap)
         return srv_fail("extract: --cap needs the hierarchy; drop --full-scan");
@@ -126,7 +131,7 @@ int srv_cmd_extract(int argc, char **argv)
             "cells_visited", (json_int_t)st.cells_visited, "nodes_visited", (json_int_t)st.nodes_visited,
             "nodes_polygonized", (json_int_t)st.nodes_polygonized, "extract_ms", st.extract_ms,
             "build_ms", s.tree ? s.tree->build_ms : 0.0, "error_bound", st.error_bound,
-            "area", area, "area_mm2", area, "hierarchy_bytes", (json_int_t)(s.tree ? iso_tree_bytes(s.tree) : 0),
+            "area", area, "area_mm2", area, "hierarchy_bytes", (json_int_t)(s.tree ? iso_tree_memory(s.tree) : 0),
             "volume_bytes", (json_int_t)volume_bytes, "space",
             params.space == ISO_SPACE_INDEX ? "index" : "world_mm", "normals", iso_normals_name(normals));
         json_t *watertight = json_pack("{s:I, s:I, s:I, s:I, s:I, s:b}",

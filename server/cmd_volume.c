@@ -64,7 +64,10 @@ int srv_cmd_build(int argc, char **argv)
             out = argv[++i];
         else if (!strcmp(argv[i], "--resample") && i + 1 < argc)
             opt.resample = argv[++i];
-        else if (argv[i][0] == '-' || opt.path)
+        else if (!strcmp(argv[i], "--threads") && i + 1 < argc) {
+            if (srv_parse_threads("build", argv[++i], &opt.threads))
+                return 1;
+        } else if (argv[i][0] == '-' || opt.path)
             return srv_fail("build: unexpected argument '%s'", argv[i]);
         else
             opt.path = argv[i];

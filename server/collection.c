@@ -70,7 +70,7 @@ size_t srv_collection_hierarchy_bytes(const srv_collection *c)
 {
     size_t n = atomic_load_explicit(&c->count, memory_order_acquire), bytes = 0;
     for (size_t i = 0; i < n; i++)
-        bytes += iso_tree_bytes(c->volumes[i].tree);
+        bytes += iso_tree_memory(c->volumes[i].tree);
     return bytes;
 }
 
@@ -106,7 +106,7 @@ static int load_tree(srv_volume *v, const srv_preload_options *opt, char *label)
         if (newer)
             fprintf(stderr, "isoserve: %s: %s; rebuilding\n", v->entry->id, err.message);
     }
-    if (iso_tree_build(v->vol, srv_progress, label, &v->tree, &err)) {
+    if (iso_tree_build(v->vol, 0, srv_progress, label, &v->tree, &err)) {
         fprintf(stderr, "isoserve: %s: building the hierarchy: %s; skipped\n", v->entry->id,
                 err.message);
         return 1;
@@ -149,7 +149,7 @@ static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload
     fprintf(stderr, "isoserve: [%zu/%zu] %s: %zux%zux%zu %s, hierarchy %s in %.0f ms (%zu KB)\n",
             index + 1, total, e->id, v->vol->dims[0], v->vol->dims[1], v->vol->dims[2],
             iso_vol_type_name(v->vol->type), v->tree_from_file ? "read" : "built",
-            iso_clock_ms() - start, iso_tree_bytes(v->tree) / 1024);
+            iso_clock_ms() - start, iso_tree_memory(v->tree) / 1024);
     return 0;
 }
 

@@ -149,7 +149,7 @@ static proto_volume_doc doc_of(const srv_server *s, const srv_volume *v)
         .id = v->entry->id, .name = v->entry->name, .modality = v->entry->modality,
         .version = v->version, .vol = v->vol, .levels = v->levels, .level_count = v->level_count,
         .histogram = v->histogram, .histogram_bins = SRV_HISTOGRAM_BINS,
-        .hierarchy_nodes = v->tree->node_count, .hierarchy_bytes = iso_tree_bytes(v->tree),
+        .hierarchy_nodes = v->tree->node_count, .hierarchy_bytes = iso_tree_memory(v->tree),
         .hierarchy_ms = v->tree->build_ms, .hierarchy_from_file = v->tree_from_file};
 }
 

@@ -10,11 +10,12 @@ static const struct {
     const char *usage;
 } commands[] = {
     {"info", srv_cmd_info, "info VOLUME [--json] [--resample WxHxD]"},
-    {"build", srv_cmd_build, "build VOLUME -o FILE [--resample WxHxD]"},
+    {"build", srv_cmd_build, "build VOLUME -o FILE [--resample WxHxD] [--threads N]"},
     {"extract", srv_cmd_extract,
      "extract VOLUME --level L [--tolerance T] [-o OUT.ply|.obj|.drc|.glb] [--json] [--hierarchy FILE]\n"
      "                 [--normals none|trilinear|triquadratic|tricubic] [--resample WxHxD]\n"
-     "                 [--index-space] [--full-scan]"},
+     "                 [--index-space] [--full-scan] [--cap] [--threads N]\n"
+     "                 (--threads: build and exact extraction; default all cores)"},
     {"serve", srv_cmd_serve,
      "serve [--catalog FILE | --volumes DIR] [--listen 127.0.0.1:8080] [--cache-dir DIR]\n"
      "                 [--threads N] [--queue N] [--cache-mb N] [--cors-origin ORIGIN]...\n"
@@ -22,7 +23,8 @@ static const struct {
      "                 [--shard K/N --shard-peers HOST:PORT,...] [--replica-name NAME]\n"
      "                 (each option also from ISOSERVE_<OPTION>, e.g. ISOSERVE_CACHE_DIR)"},
     {"bench", srv_cmd_bench,
-     "bench VOLUME --level L [--tolerances 0,6,10,...] [--json FILE] [--repeat N] [--resample WxHxD]"},
+     "bench VOLUME --level L [--tolerances 0,6,10,...] [--json FILE] [--repeat N] [--resample WxHxD]\n"
+     "                 [--threads N] [--no-baselines]"},
 };
 
 static int usage(FILE *to)

@@ -3,8 +3,10 @@
 
 #include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 
 #include "check.h"
+#include "loader.h"
 #include "mc.h"
 #include "trilinear.h"
 
@@ -27,11 +29,26 @@ iso_volume *surface_make_volume(size_t nx, size_t ny, size_t nz, iso_voxel_type 
     return vol;
 }
 
+iso_volume *surface_load_shared(const char *file)
+{
+    const char *dir = check_shared_volumes();
+    if (!dir) {
+        check_skip("needs ../shared/volumes (%s)", file);
+        return NULL;
+    }
+    char path[4096];
+    snprintf(path, sizeof path, "%s/%s", dir, file);
+    iso_volume *vol = NULL;
+    iso_error err;
+    CHECK_OK(iso_load(path, NULL, &vol, &err), &err);
+    return vol;
+}
+
 iso_tree *surface_build(const iso_volume *vol)
 {
     iso_tree *tree = NULL;
     iso_error err;
-    CHECK_OK(iso_tree_build(vol, NULL, NULL, &tree, &err), &err);
+    CHECK_OK(iso_tree_build(vol, 0, NULL, NULL, &tree, &err), &err);
     return tree;
 }
 

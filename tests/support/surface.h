@@ -13,6 +13,9 @@
 double surface_uniform(void);
 /* A zeroed volume (the check fails if it cannot be made). */
 iso_volume *surface_make_volume(size_t nx, size_t ny, size_t nz, iso_voxel_type type);
+/* The shared scan `file` (a name in ../shared/volumes), loaded; NULL after a skip line
+ * when ../shared/volumes is absent, or after a failed check when it does not load. */
+iso_volume *surface_load_shared(const char *file);
 /* The volume's hierarchy (the check fails if it cannot be built). */
 iso_tree *surface_build(const iso_volume *vol);
 /* f(p): the data's own trilinear interpolant at index-space point p. */

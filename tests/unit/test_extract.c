@@ -406,7 +406,7 @@ static void test_tree_is_small(void)
     iso_volume *vol = sphere_volume(100, &r0);
     iso_tree *tree = surface_build(vol);
     size_t volume_bytes = iso_vol_count(vol) * iso_vol_type_size(vol->type);
-    CHECKF(iso_tree_bytes(tree) * 10 < volume_bytes, "tree %zu bytes, volume %zu", iso_tree_bytes(tree), volume_bytes);
+    CHECKF(iso_tree_memory(tree) * 10 < volume_bytes, "tree %zu bytes, volume %zu", iso_tree_memory(tree), volume_bytes);
     iso_tree_destroy(tree);
     iso_vol_destroy(vol);
 }
@@ -415,18 +415,10 @@ static void test_tree_is_small(void)
 
 static void test_cthead_guarantee_and_trend(void)
 {
-    const char *dir = check_shared_volumes();
-    if (!dir) {
-        check_skip("needs ../shared/volumes (CThead)");
-        return;
-    }
-    char path[512];
-    snprintf(path, sizeof path, "%s/CThead_256x256x113_u16be.nhdr", dir);
-    iso_volume *vol = NULL;
-    iso_error err;
-    CHECK_OK(iso_load(path, NULL, &vol, &err), &err);
+    iso_volume *vol = surface_load_shared("CThead_256x256x113_u16be.nhdr");
     if (!vol)
         return;
+    iso_error err;
     iso_tree *tree = surface_build(vol);
     const double levels[] = {700, 1500}, tolerances[] = {0, 10, 50, 200};
     for (int l = 0; l < 2; l++) {

@@ -141,7 +141,7 @@ static void test_nifti_rescale_and_sform_vertex(void)
     CHECK_NEAR(iso_vol_get(vol, 3, 2, 1), 2 * 30 - 5, 0);
     CHECK(vol->value_min == -5 && vol->value_max == 95);
     iso_tree *tree = NULL;
-    CHECK_OK(iso_tree_build(vol, NULL, NULL, &tree, &err), &err);
+    CHECK_OK(iso_tree_build(vol, 0, NULL, NULL, &tree, &err), &err);
     iso_mesh mesh;
     iso_mesh_init(&mesh);
     iso_extract_params params = {.level = 25};

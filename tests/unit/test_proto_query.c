@@ -292,7 +292,7 @@ static void test_budget_picks_finest_fit(void)
     if (!vol)
         return;
     iso_vol_update_stats(vol);
-    CHECK_OK(iso_tree_build(vol, NULL, NULL, &tree, &err), &err);
+    CHECK_OK(iso_tree_build(vol, 0, NULL, NULL, &tree, &err), &err);
     iso_mesh mesh;
     iso_mesh_init(&mesh);
     iso_extract_stats full = {0}, st = {0};

@@ -1,0 +1,387 @@
+/* march.c: exact marching cubes over active bricks, count-then-fill like VTK's
+ * vtkFlyingEdges3D but brick by brick, so that min/max pruning skips the rest unread.
+ *
+ * Every crossing edge has one owner: the brick that holds its lower corner (the last
+ * brick along an axis also holds the volume's last sample plane). A brick numbers the
+ * crossings of the edges it owns row by row, in the order z, y, axis, then x; any brick
+ * finds a neighbour's vertex id from that neighbour's crossing rows by a popcount.
+ *
+ * PASS 1 (select): bricks with min <= level < max, in grid order.
+ * PASS 2 (classify, threads): per active brick, one 9-bit word per x-row of samples
+ *   saying which are above the level; from those by shifts and xors, the owned crossing
+ *   edges of every row and axis and their running count; the triangles of the cells that
+ *   are neither all inside nor all outside (found 8 cells at a time, per row of cells).
+ * PASS 3 (offsets): prefix sums give each brick its first vertex and first triangle; the
+ *   mesh is allocated once at its final size (the caller's arrays reused if they fit).
+ * PASS 4 (generate, threads): per active brick, the positions of its owned crossings in
+ *   numbering order, then the triangles of its mixed cells into its own range.
+ *
+ * Layout: a brick has at most 9x9x9 samples; row r = z * 9 + y of the brick holds bit x
+ * for sample (x, y, z), brick-local. Only bricks with triangles are touched in PASS 4. */
+#include "march.h"
+
+#include <assert.h>
+#include <pthread.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "mc.h"
+#include "parallel.h"
+
+#define S ISO_BRICK_SAMPLES
+#define ROWS (S * S)
+
+typedef struct active_brick {
+    uint32_t brick[3];
+    uint8_t n[3];                        /* samples per axis, 2..9 */
+    uint8_t owned[3];                    /* corners 0..owned-1 per axis are this brick's */
+    uint32_t vertices, triangles;        /* counted in PASS 2 */
+    size_t first_vertex, first_triangle; /* PASS 3 */
+    uint16_t inside[ROWS];               /* bit x: sample (x, y, z) above the level */
+    uint16_t cross[ROWS][3];             /* bit x: owned edge from (x, y, z) along axis crosses */
+    uint16_t before[ROWS][3];            /* owned crossings numbered before that row */
+} active_brick;
+
+#define MAX_THREADS 64
+
+typedef struct march_job {
+    const iso_volume *vol;
+    const iso_bricks *bricks;
+    double level;
+    active_brick *active;
+    size_t active_count;
+    int32_t *slot;     /* per brick of the grid: its index in active, or -1 */
+    iso_mesh *mesh;
+    int world;         /* positions in world mm rather than index space */
+    double error[MAX_THREADS];
+} march_job;
+
+static uint8_t bit_count[1 << S]; /* popcount of 9-bit words, without needing popcnt */
+
+static void count_bits(void)
+{
+    for (unsigned w = 0; w < (1u << S); w++)
+        bit_count[w] = (uint8_t)((w & 1) + bit_count[w >> 1]);
+}
+
+/* ---- one brick's inside bits, per voxel type ---- */
+
+#define DEFINE_INSIDE_ROWS(NAME, T)                                                             \
+    static void NAME(const iso_volume *vol, const size_t lo[3], const uint8_t n[3], double level, \
+                     uint16_t *rows)                                                            \
+    {                                                                                           \
+        const T *data = (const T *)vol->data;                                                   \
+        for (int z = 0; z < n[2]; z++)                                                          \
+            for (int y = 0; y < n[1]; y++) {                                                    \
+                const T *p = data + ((lo[2] + (size_t)z) * vol->dims[1] + lo[1] + (size_t)y) *  \
+                                        vol->dims[0] + lo[0];                                   \
+                unsigned bits = 0;                                                              \
+                for (int x = 0; x < n[0]; x++)                                                  \
+                    bits |= (unsigned)((double)p[x] > level) << x; /* NaN: outside */           \
+                rows[z * S + y] = (uint16_t)bits;                                               \
+            }                                                                                   \
+    }
+
+DEFINE_INSIDE_ROWS(inside_u8, uint8_t)
+DEFINE_INSIDE_ROWS(inside_i8, int8_t)
+DEFINE_INSIDE_ROWS(inside_u16, uint16_t)
+DEFINE_INSIDE_ROWS(inside_i16, int16_t)
+DEFINE_INSIDE_ROWS(inside_u32, uint32_t)
+DEFINE_INSIDE_ROWS(inside_i32, int32_t)
+DEFINE_INSIDE_ROWS(inside_f32, float)
+DEFINE_INSIDE_ROWS(inside_f64, double)
+
+static void inside_rows(const iso_volume *vol, const size_t lo[3], const uint8_t n[3], double level,
+                        uint16_t *rows)
+{
+    switch (vol->type) {
+    case ISO_U8: inside_u8(vol, lo, n, level, rows); break;
+    case ISO_I8: inside_i8(vol, lo, n, level, rows); break;
+    case ISO_U16: inside_u16(vol, lo, n, level, rows); break;
+    case ISO_I16: inside_i16(vol, lo, n, level, rows); break;
+    case ISO_U32: inside_u32(vol, lo, n, level, rows); break;
+    case ISO_I32: inside_i32(vol, lo, n, level, rows); break;
+    case ISO_F32: inside_f32(vol, lo, n, level, rows); break;
+    case ISO_F64: inside_f64(vol, lo, n, level, rows); break;
+    }
+}
+
+static void brick_origin(const active_brick *ab, size_t lo[3])
+{
+    for (int d = 0; d < 3; d++)
+        lo[d] = (size_t)ab->brick[d] * ISO_BRICK_CELLS;
+}
+
+/* Cells x of the row of cells at (y, z) that are neither all inside nor all outside. */
+static unsigned mixed_cells(const active_brick *ab, int y, int z)
+{
+    unsigned a = ab->inside[z * S + y], b = ab->inside[z * S + y + 1];
+    unsigned c = ab->inside[(z + 1) * S + y], d = ab->inside[(z + 1) * S + y + 1];
+    unsigned any = a | b | c | d, all = a & b & c & d;
+    unsigned full = all & (all >> 1), empty = ~any & ~(any >> 1);
+    return ~(full | empty) & ((1u << (ab->n[0] - 1)) - 1);
+}
+
+static unsigned cell_case(const active_brick *ab, int x, int y, int z)
+{
+    unsigned a = ab->inside[z * S + y] >> x, b = ab->inside[z * S + y + 1] >> x;
+    unsigned c = ab->inside[(z + 1) * S + y] >> x, d = ab->inside[(z + 1) * S + y + 1] >> x;
+    return (a & 3) | (b & 3) << 2 | (c & 3) << 4 | (d & 3) << 6;
+}
+
+/* ---- PASS 2: classify ---- */
+
+static void classify(const march_job *job, active_brick *ab)
+{
+    size_t lo[3], hi[3];
+    iso_bricks_box(job->vol, ab->brick, lo, hi);
+    for (int d = 0; d < 3; d++) {
+        ab->n[d] = (uint8_t)(hi[d] - lo[d] + 1);
+        ab->owned[d] = (uint8_t)(ab->brick[d] + 1 == job->bricks->count[d] ? ab->n[d] : ab->n[d] - 1);
+    }
+    inside_rows(job->vol, lo, ab->n, job->level, ab->inside);
+    unsigned owned_x = (1u << ab->owned[0]) - 1, x_edges = (1u << (ab->n[0] - 1)) - 1;
+    uint32_t count = 0;
+    for (int z = 0; z < ab->n[2]; z++)
+        for (int y = 0; y < ab->n[1]; y++) {
+            int r = z * S + y;
+            unsigned row = ab->inside[r], cross[3] = {0, 0, 0};
+            if (z < ab->owned[2] && y < ab->owned[1]) {
+                cross[0] = (row ^ (row >> 1)) & x_edges & owned_x;
+                if (y + 1 < ab->n[1])
+                    cross[1] = (row ^ ab->inside[r + 1]) & owned_x;
+                if (z + 1 < ab->n[2])
+                    cross[2] = (row ^ ab->inside[r + S]) & owned_x;
+            }
+            for (int a = 0; a < 3; a++) {
+                ab->cross[r][a] = (uint16_t)cross[a];
+                ab->before[r][a] = (uint16_t)count;
+                count += bit_count[cross[a]];
+            }
+        }
+    ab->vertices = count;
+    const iso_mc_case *cases = iso_mc_cases();
+    uint32_t triangles = 0;
+    for (int z = 0; z + 1 < ab->n[2]; z++)
+        for (int y = 0; y + 1 < ab->n[1]; y++)
+            for (unsigned m = mixed_cells(ab, y, z); m; m &= m - 1)
+                triangles += cases[cell_case(ab, __builtin_ctz(m), y, z)].triangle_count;
+    ab->triangles = triangles;
+}
+
+typedef struct range {
+    size_t begin, end;
+} range;
+
+static range share_of(size_t count, int t, int threads)
+{
+    range r = {count * (size_t)t / (size_t)threads, count * (size_t)(t + 1) / (size_t)threads};
+    return r;
+}
+
+static void classify_share(void *context, int t, int threads)
+{
+    march_job *job = context;
+    range r = share_of(job->active_count, t, threads);
+    for (size_t i = r.begin; i < r.end; i++)
+        classify(job, &job->active[i]);
+}
+
+/* ---- PASS 4: generate ---- */
+
+/* The vertex's float index position, then, if asked, world mm from that float position
+ * exactly as the other extraction paths place theirs (iso_vol_index_to_world). */
+static void store_position(const march_job *job, const size_t c[3], int axis, double t, float *p)
+{
+    double index[3], world[3];
+    for (int d = 0; d < 3; d++)
+        index[d] = (float)((double)c[d] + (d == axis ? t : 0.0));
+    if (job->world)
+        iso_vol_index_to_world(job->vol, index, world);
+    for (int d = 0; d < 3; d++)
+        p[d] = (float)(job->world ? world[d] : index[d]);
+}
+
+/* Positions of the brick's owned crossings, in numbering order; returns the largest
+ * vertex error. */
+static double place_vertices(const march_job *job, const active_brick *ab)
+{
+    const iso_volume *vol = job->vol;
+    const size_t step[3] = {1, vol->dims[0], vol->dims[0] * vol->dims[1]};
+    size_t lo[3];
+    brick_origin(ab, lo);
+    float *p = job->mesh->positions + 3 * ab->first_vertex;
+    double worst = 0;
+    for (int z = 0; z < ab->owned[2]; z++)
+        for (int y = 0; y < ab->owned[1]; y++)
+            for (int a = 0; a < 3; a++)
+                for (unsigned m = ab->cross[z * S + y][a]; m; m &= m - 1) {
+                    size_t c[3] = {lo[0] + (size_t)__builtin_ctz(m), lo[1] + (size_t)y, lo[2] + (size_t)z};
+                    size_t at = c[0] + c[1] * step[1] + c[2] * step[2];
+                    double from = iso_vol_sample(vol, at), to = iso_vol_sample(vol, at + step[a]);
+                    double t = iso_mc_edge_t(from, to, job->level);
+                    double e = iso_mc_edge_error(from, to, t, job->level);
+                    if (e > worst)
+                        worst = e;
+                    store_position(job, c, a, t, p);
+                    p += 3;
+                }
+    assert(p == job->mesh->positions + 3 * (ab->first_vertex + ab->vertices));
+    return worst;
+}
+
+/* Id of the crossing on the edge from brick-local corner (x, y, z) along axis: this
+ * brick's own, or, on its upper faces, the neighbour's that owns it. */
+static uint32_t vertex_id(const march_job *job, const active_brick *ab, int x, int y, int z, int axis)
+{
+    int up[3] = {x >= ab->owned[0], y >= ab->owned[1], z >= ab->owned[2]};
+    if (up[0] | up[1] | up[2]) {
+        const iso_bricks *g = job->bricks;
+        size_t index = ((size_t)(ab->brick[2] + (uint32_t)up[2]) * g->count[1] + ab->brick[1] + (uint32_t)up[1]) *
+                           g->count[0] + ab->brick[0] + (uint32_t)up[0];
+        int32_t slot = job->slot[index];
+        /* The edge's samples belong to that brick too, so its min/max hold the level. */
+        assert(slot >= 0);
+        ab = &job->active[slot];
+        x -= up[0] * ISO_BRICK_CELLS;
+        y -= up[1] * ISO_BRICK_CELLS;
+        z -= up[2] * ISO_BRICK_CELLS;
+    }
+    int r = z * S + y;
+    return (uint32_t)(ab->first_vertex + ab->before[r][axis] +
+                      bit_count[ab->cross[r][axis] & ((1u << x) - 1)]);
+}
+
+static void emit_triangles(const march_job *job, const active_brick *ab)
+{
+    const iso_mc_case *cases = iso_mc_cases();
+    uint32_t *out = job->mesh->indices + 3 * ab->first_triangle;
+    for (int z = 0; z + 1 < ab->n[2]; z++)
+        for (int y = 0; y + 1 < ab->n[1]; y++)
+            for (unsigned m = mixed_cells(ab, y, z); m; m &= m - 1) {
+                int x = __builtin_ctz(m);
+                const iso_mc_case *cs = cases + cell_case(ab, x, y, z);
+                uint32_t id[12];
+                uint16_t known = 0;
+                for (int k = 0; k < 3 * cs->triangle_count; k++) {
+                    int e = cs->edges[k];
+                    if (!(known >> e & 1)) {
+                        int lo = iso_mc_edge_corner[e][0];
+                        id[e] = vertex_id(job, ab, x + (lo & 1), y + (lo >> 1 & 1), z + (lo >> 2 & 1), e / 4);
+                        known |= (uint16_t)(1u << e);
+                    }
+                    *out++ = id[e];
+                }
+            }
+    assert(out == job->mesh->indices + 3 * (ab->first_triangle + ab->triangles));
+}
+
+static void generate_share(void *context, int t, int threads)
+{
+    march_job *job = context;
+    double worst = 0;
+    range r = share_of(job->active_count, t, threads);
+    for (size_t i = r.begin; i < r.end; i++) {
+        const active_brick *ab = &job->active[i];
+        if (ab->vertices) {
+            double e = place_vertices(job, ab);
+            if (e > worst)
+                worst = e;
+        }
+        if (ab->triangles)
+            emit_triangles(job, ab);
+    }
+    job->error[t] = worst;
+}
+
+/* ---- the passes in order ---- */
+
+static int select_bricks(march_job *job, int prune)
+{
+    const iso_bricks *g = job->bricks;
+    size_t total = iso_bricks_total(g), count = 0;
+    for (size_t i = 0; i < total; i++)
+        count += !prune || (g->min[i] <= job->level && job->level < g->max[i]);
+    job->slot = malloc(total * sizeof *job->slot);
+    job->active = malloc((count ? count : 1) * sizeof *job->active);
+    if (!job->slot || !job->active)
+        return ISO_E_NOMEM;
+    size_t n = 0;
+    for (uint32_t k = 0; k < g->count[2]; k++)
+        for (uint32_t j = 0; j < g->count[1]; j++)
+            for (uint32_t i = 0; i < g->count[0]; i++) {
+                size_t at = ((size_t)k * g->count[1] + j) * g->count[0] + i;
+                int on = !prune || (g->min[at] <= job->level && job->level < g->max[at]);
+                job->slot[at] = on ? (int32_t)n : -1;
+                if (on) {
+                    active_brick *ab = &job->active[n++];
+                    ab->brick[0] = i;
+                    ab->brick[1] = j;
+                    ab->brick[2] = k;
+                }
+            }
+    job->active_count = n;
+    return 0;
+}
+
+static int lay_out_mesh(march_job *job, iso_mesh *mesh)
+{
+    size_t vertices = 0, triangles = 0;
+    for (size_t i = 0; i < job->active_count; i++) {
+        job->active[i].first_vertex = vertices;
+        job->active[i].first_triangle = triangles;
+        vertices += job->active[i].vertices;
+        triangles += job->active[i].triangles;
+    }
+    if (vertices > UINT32_MAX)
+        return ISO_E_ARGUMENT;
+    /* The caller's arrays are reused when large enough: a server extracting again into
+     * the same mesh does not fault fresh pages in for every request. */
+    free(mesh->normals);
+    mesh->normals = NULL;
+    mesh->vertex_count = mesh->triangle_count = 0;
+    if (iso_mesh_reserve(mesh, vertices, triangles))
+        return ISO_E_NOMEM;
+    mesh->vertex_count = vertices;
+    mesh->triangle_count = triangles;
+    return 0;
+}
+
+int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double level, int prune,
+                     int world, int threads, iso_mesh *mesh, iso_march_stats *stats, iso_error *err)
+{
+    static pthread_once_t once = PTHREAD_ONCE_INIT;
+    assert(vol && bricks && mesh && stats);
+    pthread_once(&once, count_bits);
+    memset(stats, 0, sizeof *stats);
+    march_job job = {.vol = vol, .bricks = bricks, .level = level, .mesh = mesh, .world = world};
+    threads = iso_parallel_threads(threads);
+    int rc = select_bricks(&job, prune);
+    if (!rc) {
+        int used = job.active_count < (size_t)threads ? (job.active_count ? (int)job.active_count : 1) : threads;
+        iso_parallel_run(used, classify_share, &job);
+        rc = lay_out_mesh(&job, mesh);
+        if (!rc) {
+            iso_parallel_run(used, generate_share, &job);
+            for (int t = 0; t < used; t++)
+                if (job.error[t] > stats->error_bound)
+                    stats->error_bound = job.error[t];
+        }
+    }
+    stats->bricks_active = job.active_count;
+    for (size_t i = 0; i < job.active_count; i++) {
+        size_t lo[3], hi[3];
+        iso_bricks_box(vol, job.active[i].brick, lo, hi);
+        stats->cells_visited += (hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]);
+    }
+    free(job.slot);
+    free(job.active);
+    if (rc)
+        iso_mesh_free(mesh);
+    if (rc == ISO_E_ARGUMENT)
+        return iso_error_set(err, rc, "the surface needs more than 2^32 - 1 vertices");
+    if (rc)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    return 0;
+}

@@ -1,0 +1,18 @@
+/* parallel.h: running one function on several threads, for the passes of build and
+ * extraction that split their work into independent ranges. */
+#ifndef ISO_PARALLEL_H
+#define ISO_PARALLEL_H
+
+/* Cores online, 1..64: what "all cores" (threads = 0) means everywhere. */
+int iso_parallel_cores(void);
+
+/* Resolves a requested thread count: 0 means all cores; the result is 1..64. */
+int iso_parallel_threads(int requested);
+
+/* Calls fn(context, t, threads) for t = 0..threads-1, on threads - 1 new threads plus the
+ * caller, and returns when all are done. If a thread cannot start, the caller runs its
+ * share itself, so every t runs exactly once whatever happens. */
+typedef void (*iso_parallel_fn)(void *context, int t, int threads);
+void iso_parallel_run(int threads, iso_parallel_fn fn, void *context);
+
+#endif

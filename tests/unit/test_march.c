@@ -1,0 +1,179 @@
+/* test_march.c: the exact, directly indexed marching cubes over bricks (march.h): the
+ * same triangles as the full scan, whatever the brick boundaries, the thread count or the
+ * NaN samples; vertices shared across bricks exactly once. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "march.h"
+#include "surface.h"
+
+typedef struct triangle {
+    float p[9];
+} triangle;
+
+static int compare_triangles(const void *a, const void *b)
+{
+    return memcmp(a, b, sizeof(triangle));
+}
+
+/* The mesh's triangles by position, each rotated to start at its smallest corner (the
+ * winding kept), sorted: two meshes are the same surface iff these lists are equal. */
+static triangle *canonical_triangles(const iso_mesh *m)
+{
+    triangle *t = malloc((m->triangle_count ? m->triangle_count : 1) * sizeof *t);
+    for (size_t i = 0; i < m->triangle_count; i++) {
+        const float *c[3];
+        for (int k = 0; k < 3; k++)
+            c[k] = m->positions + 3 * m->indices[3 * i + k];
+        int first = 0;
+        for (int k = 1; k < 3; k++)
+            if (memcmp(c[k], c[first], 3 * sizeof(float)) < 0)
+                first = k;
+        for (int k = 0; k < 3; k++)
+            memcpy(t[i].p + 3 * k, c[(first + k) % 3], 3 * sizeof(float));
+    }
+    qsort(t, m->triangle_count, sizeof *t, compare_triangles);
+    return t;
+}
+
+static void march(const iso_volume *vol, double level, int threads, iso_mesh *m, iso_march_stats *st)
+{
+    iso_bricks bricks;
+    iso_error err;
+    CHECK_OK(iso_bricks_build(vol, threads, &bricks, &err), &err);
+    CHECK_OK(iso_march_bricks(vol, &bricks, level, 1, 0, threads, m, st, &err), &err);
+    iso_bricks_free(&bricks);
+}
+
+static void check_same_as_full_scan(const iso_volume *vol, double level)
+{
+    iso_mesh full, m;
+    iso_mesh_init(&full);
+    iso_mesh_init(&m);
+    iso_error err;
+    iso_extract_stats fs;
+    iso_march_stats st;
+    CHECK_OK(iso_extract_full_scan(vol, level, ISO_SPACE_INDEX, &full, &fs, &err), &err);
+    march(vol, level, 2, &m, &st);
+    CHECKF(m.triangle_count == full.triangle_count && m.vertex_count == full.vertex_count,
+           "%zux%zux%zu level %g: %zu triangles %zu vertices, full scan %zu, %zu", vol->dims[0],
+           vol->dims[1], vol->dims[2], level, m.triangle_count, m.vertex_count, full.triangle_count,
+           full.vertex_count);
+    CHECK(st.error_bound == fs.error_bound);
+    if (m.triangle_count == full.triangle_count) {
+        triangle *a = canonical_triangles(&m), *b = canonical_triangles(&full);
+        CHECK(memcmp(a, b, m.triangle_count * sizeof *a) == 0);
+        free(a);
+        free(b);
+    }
+    iso_mesh_free(&full);
+    iso_mesh_free(&m);
+}
+
+/* Random fields across brick boundaries (sizes 2..27, so 1 to 4 bricks per axis with
+ * partial last bricks), integer-valued with ties at the level, real-valued, and float
+ * volumes with NaN samples. */
+static void test_random_fields_match_full_scan(void)
+{
+    for (int trial = 0; trial < 60 && !check_failed(); trial++) {
+        size_t n[3];
+        for (int d = 0; d < 3; d++)
+            n[d] = 2 + (size_t)(surface_uniform() * 26);
+        int kind = trial % 3;
+        iso_volume *vol = surface_make_volume(n[0], n[1], n[2], kind == 0 ? ISO_U8 : ISO_F32);
+        for (size_t k = 0; k < n[2]; k++)
+            for (size_t j = 0; j < n[1]; j++)
+                for (size_t i = 0; i < n[0]; i++) {
+                    double v = kind == 0 ? floor(surface_uniform() * 4) : surface_uniform();
+                    if (kind == 2 && surface_uniform() < 0.05)
+                        v = NAN;
+                    iso_vol_set(vol, i, j, k, v);
+                }
+        iso_vol_update_stats(vol);
+        check_same_as_full_scan(vol, kind == 0 ? 1 : 0.5);
+        iso_vol_destroy(vol);
+    }
+}
+
+/* A single sample above the level at (8, 8, 8), the corner of 8 bricks: an octahedron of
+ * 6 vertices and 8 triangles whose edges are owned by 7 different bricks. Only the 8
+ * bricks holding that sample are active. */
+static void test_octahedron_across_eight_bricks(void)
+{
+    iso_volume *vol = surface_make_volume(33, 33, 33, ISO_U8);
+    iso_vol_set(vol, 8, 8, 8, 10);
+    iso_vol_update_stats(vol);
+    iso_mesh m;
+    iso_mesh_init(&m);
+    iso_march_stats st;
+    march(vol, 5, 3, &m, &st);
+    CHECK_EQ(m.vertex_count, 6);
+    CHECK_EQ(m.triangle_count, 8);
+    CHECK_EQ(st.bricks_active, 8);
+    CHECK_EQ(st.cells_visited, 8 * 512);
+    iso_mesh_edges e;
+    CHECK(iso_mesh_count_edges(&m, &e) == 0);
+    CHECK_EQ(e.edges, 12);
+    CHECK_EQ(e.open, 0);
+    CHECK_EQ(e.nonmanifold, 0);
+    CHECK_EQ(e.misoriented, 0);
+    for (size_t v = 0; v < m.vertex_count; v++) {
+        const float *p = m.positions + 3 * v;
+        double off = fabs(p[0] - 8) + fabs(p[1] - 8) + fabs(p[2] - 8);
+        CHECK_NEAR(off, 0.5, 1e-6); /* level 5 halfway between 10 and 0 */
+    }
+    iso_mesh_free(&m);
+    iso_vol_destroy(vol);
+}
+
+/* The mesh is fixed by the brick grid: 1, 2 and 5 threads give the same bytes. */
+static void test_threads_give_identical_meshes(void)
+{
+    iso_volume *vol = surface_make_volume(40, 29, 35, ISO_F32);
+    for (size_t k = 0; k < 35; k++)
+        for (size_t j = 0; j < 29; j++)
+            for (size_t i = 0; i < 40; i++)
+                iso_vol_set(vol, i, j, k, sin(0.3 * (double)i) + cos(0.25 * (double)j) * sin(0.2 * (double)k));
+    iso_vol_update_stats(vol);
+    iso_mesh one, other;
+    iso_mesh_init(&one);
+    iso_mesh_init(&other);
+    iso_march_stats st;
+    march(vol, 0.2, 1, &one, &st);
+    CHECK(one.triangle_count > 1000);
+    const int threads[] = {2, 5};
+    for (int t = 0; t < 2; t++) {
+        march(vol, 0.2, threads[t], &other, &st);
+        CHECK_EQ(other.triangle_count, one.triangle_count);
+        CHECK_EQ(other.vertex_count, one.vertex_count);
+        if (other.vertex_count == one.vertex_count && other.triangle_count == one.triangle_count) {
+            CHECK(memcmp(other.positions, one.positions, 3 * one.vertex_count * sizeof(float)) == 0);
+            CHECK(memcmp(other.indices, one.indices, 3 * one.triangle_count * sizeof(uint32_t)) == 0);
+        }
+    }
+    iso_mesh_free(&one);
+    iso_mesh_free(&other);
+    iso_vol_destroy(vol);
+}
+
+/* The real scan: the exact path over the hierarchy equals the full scan. */
+static void test_cthead_matches_full_scan(void)
+{
+    iso_volume *vol = surface_load_shared("CThead_256x256x113_u16be.nhdr");
+    if (!vol)
+        return;
+    check_same_as_full_scan(vol, 700);
+    check_same_as_full_scan(vol, 1500.5);
+    iso_vol_destroy(vol);
+}
+
+int main(void)
+{
+    CHECK_RUN(test_random_fields_match_full_scan);
+    CHECK_RUN(test_octahedron_across_eight_bricks);
+    CHECK_RUN(test_threads_give_identical_meshes);
+    CHECK_RUN(test_cthead_matches_full_scan);
+    return check_finish();
+}
