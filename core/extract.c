@@ -343,7 +343,7 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
     w->prune = !params->no_minmax;
     w->soup = mesh;
     w->stats = stats;
-    iso_mesh_free(mesh);
+    iso_mesh_clear(mesh);
     iso_box root = iso_box_root(tree->vol);
     int rc = visit_node(w, 0, &root);
     if (!rc && params->cap)

@@ -336,11 +336,7 @@ static int lay_out_mesh(march_job *job, iso_mesh *mesh)
     }
     if (vertices > UINT32_MAX)
         return ISO_E_ARGUMENT;
-    /* The caller's arrays are reused when large enough: a server extracting again into
-     * the same mesh does not fault fresh pages in for every request. */
-    free(mesh->normals);
-    mesh->normals = NULL;
-    mesh->vertex_count = mesh->triangle_count = 0;
+    iso_mesh_clear(mesh);
     if (iso_mesh_reserve(mesh, vertices, triangles))
         return ISO_E_NOMEM;
     mesh->vertex_count = vertices;

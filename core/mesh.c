@@ -21,6 +21,13 @@ void iso_mesh_free(iso_mesh *mesh)
     iso_mesh_init(mesh);
 }
 
+void iso_mesh_clear(iso_mesh *mesh)
+{
+    free(mesh->normals);
+    mesh->normals = NULL;
+    mesh->vertex_count = mesh->triangle_count = 0;
+}
+
 static size_t grown(size_t have, size_t want)
 {
     size_t cap = have ? have : 256;

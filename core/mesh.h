@@ -24,6 +24,9 @@ typedef struct iso_mesh {
 void iso_mesh_init(iso_mesh *mesh);
 /* Frees the arrays and leaves an empty mesh; NULL is allowed. */
 void iso_mesh_free(iso_mesh *mesh);
+/* Empties the mesh but keeps its position and index arrays for reuse (normals are
+ * freed): extracting again into the same mesh then faults no fresh pages in. */
+void iso_mesh_clear(iso_mesh *mesh);
 /* Makes room for at least the given totals. Returns 0 or ISO_E_NOMEM (mesh unchanged). */
 int iso_mesh_reserve(iso_mesh *mesh, size_t vertices, size_t triangles);
 /* Moves everything of `src` onto the end of `dst`, offsetting its indices; src is emptied
