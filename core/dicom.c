@@ -169,7 +169,8 @@ static int list_files(const char *spec, const char *source, name_list *l, iso_er
                              spec, ISO_DICOM_MAX_FILES);
     if (rc == 3)
         return iso_error_set(err, ISO_E_NOMEM, "%s: out of memory listing the files", spec);
-    qsort(l->names, l->count, sizeof *l->names, by_name);
+    if (l->count) /* qsort wants a non-NULL array even for none */
+        qsort(l->names, l->count, sizeof *l->names, by_name);
     return 0;
 }
 

@@ -9,6 +9,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "dicom.h"
 #include "loader.h"
 #include "sidecar.h"
 
@@ -192,7 +193,8 @@ int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err)
         struct stat st;
         char id[256];
         id_of(ent->d_name, id, sizeof id);
-        if (stat(path, &st) || !S_ISREG(st.st_mode) || !srv_load_recognises(path))
+        int series = !stat(path, &st) && S_ISDIR(st.st_mode) && iso_dicom_dir_has_files(path);
+        if (stat(path, &st) || !(S_ISREG(st.st_mode) || series) || !srv_load_recognises(path))
             ; /* not a volume of its own */
         else if (!srv_catalog_id_valid(id) || has_id(out, id))
             fprintf(stderr, "isoserve: %s: id \"%s\" is %s; skipped\n", path, id,

@@ -36,7 +36,8 @@ int srv_catalog_read(const char *file, srv_catalog *out, iso_error *err);
 
 /* Every loadable file of dir (not hidden, not the data file of a detached header) becomes
  * a volume whose id is its file name without its extension(s): "head.nhdr" -> "head",
- * "brain.nii.gz" -> "brain". Files whose id is not valid or is taken are reported and
+ * "brain.nii.gz" -> "brain"; so does every subdirectory holding DICOM files (a series,
+ * named by the subdirectory). Files whose id is not valid or is taken are reported and
  * skipped. Entries are sorted by id. */
 int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err);
 
