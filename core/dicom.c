@@ -235,7 +235,8 @@ static int choose_series(const char *spec, const char *uid, series *all, series 
     char list[400], wanted[sizeof all->files[0].h.series_uid];
     describe_series(all, list, sizeof list);
     if (all->count == 0)
-        return iso_error_set(err, ISO_E_FORMAT, "%s: no DICOM image files (with the DICM preamble)", spec);
+        return iso_error_set(err, ISO_E_UNSUPPORTED, "%s: no DICOM image files (with the DICM preamble): not a volume isoserve reads",
+                             spec); /* a folder of anything else is no format of ours */
     if (!*uid) {
         for (size_t i = 1; i < all->count; i++)
             if (strcmp(all->files[i].h.series_uid, all->files[0].h.series_uid))
