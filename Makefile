@@ -8,22 +8,27 @@ WARN     := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototy
             -Wpointer-arith -Wcast-qual -Wvla
 OPT      ?= -O2 -g
 CFLAGS   := $(OPT) -std=c11 -D_DEFAULT_SOURCE -D_POSIX_C_SOURCE=200809L $(WARN) -pthread -Icore -Iproto -I/usr/include/nifti
-CXXFLAGS := $(OPT) -std=c++17 -Wall -Wextra -Werror -Icore -Iproto $(shell pkg-config --cflags draco 2>/dev/null)
-LIBS     := $(shell pkg-config --libs libmicrohttpd jansson 2>/dev/null) \
-            -lnifti2 -ldraco -lz -lm -pthread -lstdc++
+# GDCM (DICOM, core/dicom_gdcm.cc) ships CMake files but no pkg-config file on Debian 12.
+GDCM_INC := /usr/include/gdcm-3.0
+GDCM_LIBS := -lgdcmMSFF -lgdcmDSED -lgdcmCommon
+CXXFLAGS := $(OPT) -std=c++17 -Wall -Wextra -Werror -Icore -Iproto $(shell pkg-config --cflags draco 2>/dev/null) \
+            -isystem $(GDCM_INC)
+LIBS     := $(shell pkg-config --libs libmicrohttpd jansson libcurl 2>/dev/null) \
+            -lnifti2 -ldraco $(GDCM_LIBS) -lz -lm -pthread -lstdc++
 
 BUILD    ?= build
 SAN_BUILD := build/san
 SAN_FLAGS := -O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all
 
 CORE_SRC   := $(sort $(wildcard core/*.c))
+CORE_CXX   := $(sort $(wildcard core/*.cc))
 PROTO_SRC  := $(sort $(wildcard proto/*.c))
 PROTO_CXX  := $(sort $(wildcard proto/*.cc))
 SERVER_SRC := $(sort $(wildcard server/*.c))
 TEST_SRC   := $(sort $(wildcard tests/unit/test_*.c))
 TEST_SUPPORT := $(sort $(wildcard tests/support/*.c))
 
-LIB_OBJ    = $(CORE_SRC:%.c=$(BUILD)/%.o) $(PROTO_SRC:%.c=$(BUILD)/%.o) $(PROTO_CXX:%.cc=$(BUILD)/%.o)
+LIB_OBJ    = $(CORE_SRC:%.c=$(BUILD)/%.o) $(CORE_CXX:%.cc=$(BUILD)/%.o) $(PROTO_SRC:%.c=$(BUILD)/%.o) $(PROTO_CXX:%.cc=$(BUILD)/%.o)
 SERVER_OBJ = $(SERVER_SRC:%.c=$(BUILD)/%.o)
 SUPPORT_OBJ = $(TEST_SUPPORT:%.c=$(BUILD)/%.o)
 TEST_BIN   = $(TEST_SRC:tests/unit/%.c=$(BUILD)/tests/%)

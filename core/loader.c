@@ -5,6 +5,7 @@
 #include <string.h>
 #include <strings.h>
 
+#include "dicom.h"
 #include "field.h"
 #include "metaimage.h"
 #include "nifti.h"
@@ -44,13 +45,15 @@ static int is_metaimage(const char *path)
     return has_suffix(path, ".mhd") || has_suffix(path, ".mha");
 }
 
-/* Tried in order, the first that recognises a path loads it. DICOM series slot in as more
- * rows; prefixes such as "field:" come first so that they win over any suffix. */
+/* Tried in order, the first that recognises a path loads it. Prefixes such as "field:"
+ * come first so that they win over any suffix; DICOM (a directory, "DIR#UID" or .dcm)
+ * comes last, being the only one that looks at the file system. */
 static const loader loaders[] = {
     {"field", is_field, iso_field_load},
     {"nrrd", is_nrrd, iso_nrrd_load},
     {"nifti", is_nifti, iso_nifti_load},
     {"metaimage", is_metaimage, iso_metaimage_load},
+    {"dicom", iso_dicom_recognises, iso_dicom_load},
 };
 
 #define LOADER_COUNT (sizeof loaders / sizeof loaders[0])
@@ -72,7 +75,7 @@ int iso_load(const char *path, const iso_load_options *opt, iso_volume **out, is
     l = find_loader(path);
     if (!l)
         return iso_error_set(err, ISO_E_UNSUPPORTED,
-                             "%s: not a volume format isoserve reads (.nrrd, .nhdr, .nii, .nii.gz, .mhd, .mha, field:NAME)",
+                             "%s: not a volume format isoserve reads (.nrrd, .nhdr, .nii, .nii.gz, .mhd, .mha, a DICOM series directory, .dcm, field:NAME)",
                              path);
     rc = l->load(path, opt, out, err);
     if (rc != ISO_OK) {

@@ -11,15 +11,20 @@
 
 typedef struct iso_load_options {
     uint64_t max_bytes; /* refuse volumes whose samples exceed this; 0 = ISO_VOL_DEFAULT_MAX_BYTES */
+    /* Called with the fraction done during long loads (a DICOM series of many files);
+     * NULL: none. */
+    void (*progress)(void *context, double fraction);
+    void *progress_context;
 } iso_load_options;
 
-/* Loads `path` (a file, or "field:NAME[:WxHxD]" for an analytic field, see field.h).
+/* Loads `path` (a file, a DICOM series directory "DIR[#SeriesInstanceUID]" (dicom.h), or
+ * "field:NAME[:WxHxD]" for an analytic field, see field.h).
  * opt may be NULL. On success *out owns a new volume with its stats computed; on failure
  * *out is NULL and err names the file and the problem. Safe on untrusted files. */
 int iso_load(const char *path, const iso_load_options *opt, iso_volume **out, iso_error *err);
 
 /* 1 if some loader recognises `path` as a volume of its own (a detached NRRD's data file
- * is not one). Looks at the name only. */
+ * is not one). Looks at the name only, and for DICOM at whether it names a directory. */
 int iso_load_recognises(const char *path);
 
 #endif

@@ -9,7 +9,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "dicom.h"
 #include "loader.h"
+#include "orthanc.h"
 #include "sidecar.h"
 
 int srv_catalog_id_valid(const char *id)
@@ -28,6 +30,8 @@ void srv_catalog_free(srv_catalog *catalog)
         free(catalog->entries[i].path);
         free(catalog->entries[i].name);
         free(catalog->entries[i].modality);
+        free(catalog->entries[i].orthanc_url);
+        free(catalog->entries[i].orthanc_series);
     }
     free(catalog->entries);
     catalog->entries = NULL;
@@ -86,6 +90,39 @@ static char *resolve(const char *catalog_file, const char *path)
     return out;
 }
 
+/* An "orthanc" member: {"url", "series"} checked; the URL without trailing slashes into
+ * base, the REST URL of the series into rest (the entry's path). 0, or 1 when it is bad
+ * (reported). Both buffers hold SRV_REST_MAX bytes. */
+#define SRV_REST_MAX 1200
+static int read_orthanc(const char *file, const char *id, json_t *orthanc, char *base,
+                        const char **series, char *rest)
+{
+    const char *url = json_string_value(json_object_get(orthanc, "url"));
+    *series = json_string_value(json_object_get(orthanc, "series"));
+    if (!url || !*series || !srv_orthanc_url_valid(url) || !srv_orthanc_id_valid(*series)) {
+        fprintf(stderr, "isoserve: %s: volume \"%s\": \"orthanc\" needs \"url\" (http:// or https://) and "
+                "\"series\" (an Orthanc id, [0-9a-f-]); skipped\n", file, id);
+        return 1;
+    }
+    size_t n = strlen(url); /* at most 1024: srv_orthanc_url_valid */
+    while (n > 0 && url[n - 1] == '/')
+        n--;
+    snprintf(base, SRV_REST_MAX, "%.*s", (int)n, url);
+    snprintf(rest, SRV_REST_MAX, "%.1100s/series/%.64s", base, *series);
+    return 0;
+}
+
+/* Sets the last entry's Orthanc source. */
+static int set_orthanc(srv_catalog *out, const char *url, const char *series, iso_error *err)
+{
+    srv_catalog_entry *e = &out->entries[out->count - 1];
+    e->orthanc_url = strdup(url);
+    e->orthanc_series = strdup(series);
+    if (!e->orthanc_url || !e->orthanc_series)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory reading the catalog");
+    return 0;
+}
+
 /* One entry of a catalog file; 1 = skipped (reported), 0 = added, < 0 = error. */
 static int read_entry(const char *file, size_t index, json_t *item, srv_catalog *out,
                       iso_error *err)
@@ -93,11 +130,16 @@ static int read_entry(const char *file, size_t index, json_t *item, srv_catalog 
     const char *id = json_string_value(json_object_get(item, "id"));
     const char *path = json_string_value(json_object_get(item, "path"));
     json_t *levels = json_object_get(item, "levels");
-    if (!json_is_object(item) || !id || !path) {
-        fprintf(stderr, "isoserve: %s: volume %zu needs string fields \"id\" and \"path\"; skipped\n",
+    json_t *orthanc = json_object_get(item, "orthanc");
+    const char *series = NULL;
+    char url[SRV_REST_MAX], rest[SRV_REST_MAX];
+    if (!json_is_object(item) || !id || (!path && !orthanc)) {
+        fprintf(stderr, "isoserve: %s: volume %zu needs string fields \"id\" and \"path\" (or \"orthanc\"); skipped\n",
                 file, index);
         return 1;
     }
+    if (orthanc && read_orthanc(file, id, orthanc, url, &series, rest))
+        return 1;
     if (!srv_catalog_id_valid(id) || has_id(out, id)) {
         fprintf(stderr, "isoserve: %s: volume %zu: id \"%s\" is %s; skipped\n", file, index, id,
                 has_id(out, id) ? "taken" : "not [A-Za-z0-9._-]{1,64}");
@@ -118,12 +160,14 @@ static int read_entry(const char *file, size_t index, json_t *item, srv_catalog 
         }
         values[count++] = json_number_value(v);
     }
-    char *full = resolve(file, path);
+    char *full = orthanc ? strdup(rest) : resolve(file, path);
     if (!full)
         return iso_error_set(err, ISO_E_NOMEM, "out of memory reading %s", file);
     int rc = add(out, id, full, json_string_value(json_object_get(item, "name")),
                  json_string_value(json_object_get(item, "modality")), values, count, err);
     free(full);
+    if (!rc && orthanc)
+        rc = set_orthanc(out, url, series, err);
     return rc;
 }
 
@@ -192,7 +236,8 @@ int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err)
         struct stat st;
         char id[256];
         id_of(ent->d_name, id, sizeof id);
-        if (stat(path, &st) || !S_ISREG(st.st_mode) || !srv_load_recognises(path))
+        int series = !stat(path, &st) && S_ISDIR(st.st_mode) && iso_dicom_dir_has_files(path);
+        if (stat(path, &st) || !(S_ISREG(st.st_mode) || series) || !srv_load_recognises(path))
             ; /* not a volume of its own */
         else if (!srv_catalog_id_valid(id) || has_id(out, id))
             fprintf(stderr, "isoserve: %s: id \"%s\" is %s; skipped\n", path, id,

@@ -13,7 +13,10 @@
 
 typedef struct srv_catalog_entry {
     char id[SRV_ID_MAX + 1];  /* [A-Za-z0-9._-]{1,64} */
-    char *path;               /* file path or field:NAME[:N] */
+    char *path;               /* file path, DICOM series directory or field:NAME[:N]; for an
+                                 Orthanc series its REST URL (for people, never opened) */
+    char *orthanc_url;        /* an Orthanc series: the server's base URL, else NULL */
+    char *orthanc_series;     /* ... and the series' Orthanc id */
     char *name;               /* for people; the id when the catalog gives none */
     char *modality;           /* "CT", "MR", "phantom", ... or "" */
     double levels[SRV_LEVELS_MAX];
@@ -29,14 +32,17 @@ typedef struct srv_catalog {
 int srv_catalog_id_valid(const char *id);
 
 /* Reads a catalog file: {"volumes": [{"id", "path", "name"?, "modality"?, "levels"?}, ...]}
- * (or the array alone). Relative paths are taken from the catalog's directory. A bad entry
- * (bad id, duplicate id, no path) is reported on stderr with its position and skipped; a
- * file that is not such JSON is an error. */
+ * (or the array alone). Relative paths are taken from the catalog's directory. Instead of
+ * "path", "orthanc": {"url": "http://host:8042", "series": "ORTHANC-SERIES-ID"} names a
+ * series on an Orthanc server (orthanc.h). A bad entry (bad id, duplicate id, no path, a
+ * bad Orthanc URL or id) is reported on stderr with its position and skipped; a file that
+ * is not such JSON is an error. */
 int srv_catalog_read(const char *file, srv_catalog *out, iso_error *err);
 
 /* Every loadable file of dir (not hidden, not the data file of a detached header) becomes
  * a volume whose id is its file name without its extension(s): "head.nhdr" -> "head",
- * "brain.nii.gz" -> "brain". Files whose id is not valid or is taken are reported and
+ * "brain.nii.gz" -> "brain"; so does every subdirectory holding DICOM files (a series,
+ * named by the subdirectory). Files whose id is not valid or is taken are reported and
  * skipped. Entries are sorted by id. */
 int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err);
 

@@ -86,7 +86,9 @@ int srv_open(const srv_open_options *opt, srv_subject *out)
     double start = iso_clock_ms();
     memset(out, 0, sizeof *out);
     out->name = opt->path;
-    if (srv_load_volume(opt->path, NULL, &out->vol, &err))
+    char label[] = "loading"; /* drawn only for slow loads that report progress (DICOM series) */
+    iso_load_options lopt = {.progress = srv_progress, .progress_context = label};
+    if (srv_load_volume(opt->path, &lopt, &out->vol, &err))
         return srv_fail("%s", err.message);
     if (opt->resample) {
         size_t dims[3];

@@ -12,6 +12,7 @@
 #include "clock.h"
 #include "histogram.h"
 #include "loader.h"
+#include "orthanc.h"
 #include "sidecar.h"
 
 /* Bump when extraction or encoding changes what a mesh URL returns: it is part of every
@@ -27,7 +28,9 @@ int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
     c->options = *options;
     c->volumes = calloc(catalog->count ? catalog->count : 1, sizeof *c->volumes);
     c->state = calloc(catalog->count ? catalog->count : 1, 1);
-    if (!c->volumes || !c->state || pthread_mutex_init(&c->lock, NULL))
+    c->upstream = calloc(catalog->count ? catalog->count : 1, 1);
+    c->failure = calloc(catalog->count ? catalog->count : 1, sizeof *c->failure);
+    if (!c->volumes || !c->state || !c->upstream || !c->failure || pthread_mutex_init(&c->lock, NULL))
         goto err;
     if (pthread_cond_init(&c->changed, NULL)) {
         pthread_mutex_destroy(&c->lock);
@@ -37,6 +40,8 @@ int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
 err:
     free(c->volumes);
     free(c->state);
+    free(c->upstream);
+    free(c->failure);
     memset(c, 0, sizeof *c);
     return -1;
 }
@@ -52,6 +57,8 @@ void srv_collection_free(srv_collection *c)
     }
     free(c->volumes);
     free(c->state);
+    free(c->upstream);
+    free(c->failure);
     pthread_cond_destroy(&c->changed);
     pthread_mutex_destroy(&c->lock);
     memset(c, 0, sizeof *c);
@@ -116,24 +123,35 @@ static int load_tree(srv_volume *v, const srv_preload_options *opt, char *label)
     return 0;
 }
 
-/* Loads one entry into v; 0, or 1 when it is skipped (reported). */
-static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload_options *opt,
-                    size_t index, size_t total)
+/* The entry's volume: from its Orthanc server (and the cache dir), or its path. */
+static int load_volume(const srv_catalog_entry *e, const srv_preload_options *opt, char *label,
+                       iso_volume **vol, iso_error *err, int *upstream)
 {
-    iso_error err;
+    iso_load_options lopt = {.max_bytes = opt->max_volume_bytes, .progress = srv_progress,
+                             .progress_context = label};
+    *upstream = 0;
+    if (e->orthanc_url)
+        return srv_orthanc_load(e->orthanc_url, e->orthanc_series, opt->cache_dir, &lopt, vol, err, upstream);
+    return srv_load_volume(e->path, &lopt, vol, err);
+}
+
+/* Loads one entry into v; 0, or 1 when it is skipped (reported, and said in err). */
+static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload_options *opt,
+                    size_t index, size_t total, iso_error *err, int *upstream)
+{
     memset(v, 0, sizeof *v);
     v->entry = e;
     double start = iso_clock_ms();
-    iso_load_options lopt = {.max_bytes = opt->max_volume_bytes};
-    if (srv_load_volume(e->path, &lopt, &v->vol, &err)) {
-        fprintf(stderr, "isoserve: volume \"%s\": %s; skipped\n", e->id, err.message);
+    char label[160];
+    snprintf(label, sizeof label, "isoserve: [%zu/%zu] %s: loading", index + 1, total, e->id);
+    if (load_volume(e, opt, label, &v->vol, err, upstream)) {
+        fprintf(stderr, "isoserve: volume \"%s\": %s; skipped\n", e->id, err->message);
         return 1;
     }
-    char label[160];
     snprintf(label, sizeof label, "isoserve: [%zu/%zu] %s: hierarchy", index + 1, total, e->id);
     if (load_tree(v, opt, label)) {
         iso_vol_destroy(v->vol);
-        return 1;
+        return iso_error_set(err, ISO_E_FORMAT, "its hierarchy could not be built"), 1;
     }
     snprintf(v->version, sizeof v->version, "%08x%08x-%d", (unsigned)v->tree->volume_crc,
              (unsigned)geometry_hash(v->vol), SRV_MESH_ALGORITHM_VERSION);
@@ -166,7 +184,9 @@ static void load_entry(srv_collection *c, size_t i, int on_demand)
     pthread_mutex_unlock(&c->lock);
 
     srv_volume v;
-    int failed = load_one(&v, &c->catalog->entries[i], &c->options, i, c->total);
+    iso_error err = {0};
+    int upstream = 0;
+    int failed = load_one(&v, &c->catalog->entries[i], &c->options, i, c->total, &err, &upstream);
     v.on_demand = on_demand;
 
     pthread_mutex_lock(&c->lock);
@@ -178,6 +198,10 @@ static void load_entry(srv_collection *c, size_t i, int on_demand)
             atomic_fetch_add(&c->on_demand, 1);
     }
     c->state[i] = failed ? SRV_ENTRY_FAILED : SRV_ENTRY_LOADED;
+    if (failed) {
+        c->failure[i] = err;
+        c->upstream[i] = (unsigned char)upstream;
+    }
     pthread_cond_broadcast(&c->changed);
     pthread_mutex_unlock(&c->lock);
 }
@@ -196,21 +220,39 @@ void srv_collection_preload(srv_collection *c)
     atomic_store(&c->ready, 1);
 }
 
+/* The catalog index of id, or c->total. */
+static size_t entry_index(const srv_collection *c, const char *id)
+{
+    size_t i = 0;
+    while (i < c->total && strcmp(c->catalog->entries[i].id, id))
+        i++;
+    return i;
+}
+
+const char *srv_collection_failure(srv_collection *c, const char *id)
+{
+    size_t i = entry_index(c, id);
+    if (i == c->total)
+        return "";
+    pthread_mutex_lock(&c->lock);
+    int failed = c->state[i] == SRV_ENTRY_FAILED;
+    pthread_mutex_unlock(&c->lock);
+    return failed ? c->failure[i].message : ""; /* never written again once failed */
+}
+
 int srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out)
 {
     if ((*out = srv_collection_find(c, id)))
         return 0;
-    size_t i = 0;
-    while (i < c->total && strcmp(c->catalog->entries[i].id, id))
-        i++;
+    size_t i = entry_index(c, id);
     if (i == c->total)
         return 404;
     load_entry(c, i, 1);
     pthread_mutex_lock(&c->lock);
     while (c->state[i] == SRV_ENTRY_LOADING) /* another request's load of the same entry */
         pthread_cond_wait(&c->changed, &c->lock);
-    int loaded = c->state[i] == SRV_ENTRY_LOADED;
+    int loaded = c->state[i] == SRV_ENTRY_LOADED, upstream = c->upstream[i];
     pthread_mutex_unlock(&c->lock);
     *out = loaded ? srv_collection_find(c, id) : NULL;
-    return *out ? 0 : 500;
+    return *out ? 0 : upstream ? 502 : 500;
 }

@@ -52,6 +52,8 @@ typedef struct srv_collection {
     pthread_mutex_t lock;             /* guards state and publication */
     pthread_cond_t changed;           /* an entry's state changed */
     unsigned char *state;             /* per catalog entry: SRV_ENTRY_* */
+    iso_error *failure;               /* per catalog entry: why it failed (SRV_ENTRY_FAILED) */
+    unsigned char *upstream;          /* per catalog entry: 1 if its source server failed */
 } srv_collection;
 
 enum { SRV_ENTRY_IDLE, SRV_ENTRY_LOADING, SRV_ENTRY_LOADED, SRV_ENTRY_FAILED };
@@ -71,8 +73,12 @@ const srv_volume *srv_collection_find(const srv_collection *c, const char *id);
 /* The volume with this id, loaded now (as preloading would) if the catalog names it and
  * it is not loaded yet; concurrent callers for one id wait for one load. Blocking for as
  * long as the load takes. Returns 0 with *out set, 404 when the catalog has no such id,
- * 500 when loading it failed (reported on stderr once; later calls fail at once). */
+ * 502 when its source server (Orthanc) was unreachable or answered an error, 500 when
+ * loading it failed otherwise (reported on stderr once; later calls fail at once, and
+ * srv_collection_failure says why). */
 int srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out);
+/* Why the entry with this id failed to load ("" if it did not fail). */
+const char *srv_collection_failure(srv_collection *c, const char *id);
 /* Bytes of all published hierarchies. */
 size_t srv_collection_hierarchy_bytes(const srv_collection *c);
 void srv_collection_free(srv_collection *c);

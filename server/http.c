@@ -483,8 +483,8 @@ static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_reques
     if (found == 404)
         return fail(s, c, req, path, 404, "no volume \"%s\"; /v1/volumes lists them", id);
     if (found)
-        return fail(s, c, req, path, 500, "volume \"%s\" could not be loaded; the server's log "
-                    "says why", id);
+        return fail(s, c, req, path, found, "volume \"%s\" could not be loaded: %s", id,
+                    srv_collection_failure(s->collection, id));
     req->volume = v;
     return kind == 1 ? route_volume(s, c, req, v) : route_mesh(s, c, req, v, path);
 }

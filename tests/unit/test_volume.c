@@ -156,7 +156,7 @@ static iso_volume *load_ok(const char *path)
  * file (its last component) and contains `detail` when not NULL. */
 static void expect_error(const char *path, uint64_t max_bytes, int code, const char *detail)
 {
-    iso_load_options opt = {max_bytes};
+    iso_load_options opt = {.max_bytes = max_bytes};
     iso_volume *vol = (iso_volume *)&opt; /* must be overwritten with NULL */
     iso_error err = {0, ""};
     const char *base = strrchr(path, '/') ? strrchr(path, '/') + 1 : path;
