@@ -31,7 +31,7 @@ TEST_BIN   = $(TEST_SRC:tests/unit/%.c=$(BUILD)/tests/%)
 # Objects of the test support must survive between runs (they are not final targets).
 .SECONDARY:
 
-.PHONY: all setup test unit-tests bench run clean sanitize node-deps web
+.PHONY: all setup test test-asan unit-tests bench run clean sanitize node-deps web
 all: $(BUILD)/isoserve web
 
 $(BUILD)/%.o: %.c
@@ -86,11 +86,18 @@ $(BUILD)/web/.stamp: $(WEB_SRC) web/node_modules/.package-lock.json
 
 web: $(BUILD)/web/.stamp
 
+# The whole suite twice: against the normal build, then against the ASan/UBSan build
+# (tests/run.sh's asan pass; `make test-asan` runs that pass alone).
 test: setup
 	$(MAKE) node-deps
 	$(MAKE) all unit-tests
 	$(MAKE) sanitize
-	bash tests/run.sh
+	bash tests/run.sh all
+
+test-asan: setup
+	$(MAKE) node-deps
+	$(MAKE) sanitize
+	bash tests/run.sh asan
 
 bench: setup all
 	bash tests/bench/run.sh

@@ -25,7 +25,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 from results import Results, Skip  # noqa: E402 - found through the path just set
 
 BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", "build/isoserve"))
-LABEL = os.environ.get("ISO_TEST_LABEL", "http")  # the sanitizer run says http-san
+LABEL = "http" + os.environ.get("ISO_SAN_SUFFIX", "")  # tests/run.sh's asan pass says http-san
 RESULTS = Results(LABEL)
 report, check = RESULTS.report, RESULTS.check
 
