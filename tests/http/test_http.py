@@ -374,7 +374,7 @@ draco3d.createDecoderModule({}).then(m => {
             ("/v1/volumes/nope", 404, None, "nope"),
             ("/v1/volumes/blob/other", 404, None, "no such resource"),
             ("/v1/elsewhere", 404, None, "no such resource"),
-            ("/v1/volumes/..%2F..%2Fetc%2Fpasswd/mesh?level=1", 404, None, "no such resource"),
+            ("/v1/volumes/..%2F..%2Fetc%2Fpasswd/mesh?level=1", 404, None, "not a valid id"),
             ("/v1/volumes/bl%20ob/mesh?level=1", 404, None, "not a valid id"),
             ("/v1/volumes/blob/mesh?level=1&" + "x" * 5000, 414, None, "bytes"),
         ]
