@@ -36,7 +36,7 @@ TEST_BIN   = $(TEST_SRC:tests/unit/%.c=$(BUILD)/tests/%)
 # Objects of the test support must survive between runs (they are not final targets).
 .SECONDARY:
 
-.PHONY: all setup test unit-tests bench run clean sanitize node-deps web
+.PHONY: all setup test test-asan unit-tests bench run clean sanitize node-deps web fuzz fuzz-build fuzz-lib
 all: $(BUILD)/isoserve web
 
 $(BUILD)/%.o: %.c
@@ -67,6 +67,36 @@ setup:
 sanitize:
 	$(MAKE) BUILD=$(SAN_BUILD) OPT="$(SAN_FLAGS)" all unit-tests
 
+# libFuzzer targets (tests/fuzz/fuzz_*.c) over the library built by clang into build/fuzz
+# (UBSan without vptr: its C++ runtime would need a clang++ link for the Draco shim alone)
+# with ASan and UBSan: the query parser, the NRRD, NIfTI and MetaImage loaders (one source,
+# three suffixes), the hierarchy-file reader and the Draco decoder shim.
+FUZZ_BUILD  := build/fuzz
+FUZZ_FLAGS  := -O1 -g -fsanitize=address,undefined -fno-sanitize=vptr -fno-sanitize-recover=all -fno-omit-frame-pointer
+FUZZ_TARGETS := query nrrd nifti metaimage tree draco
+FUZZ_BIN    := $(FUZZ_TARGETS:%=$(FUZZ_BUILD)/fuzz_%)
+FUZZ_SECONDS ?= 60
+
+# The library's objects get the fuzzer's coverage instrumentation (fuzzer-no-link).
+fuzz-lib:
+	$(MAKE) BUILD=$(FUZZ_BUILD) CC=clang CXX=clang++ OPT="$(FUZZ_FLAGS) -fsanitize=fuzzer-no-link" $(FUZZ_BUILD)/libisoserve.a
+
+FUZZ_LINK = clang $(FUZZ_FLAGS) -fsanitize=fuzzer -std=c11 -D_DEFAULT_SOURCE $(WARN) -Icore -Iproto
+$(FUZZ_BUILD)/fuzz_query $(FUZZ_BUILD)/fuzz_tree $(FUZZ_BUILD)/fuzz_draco: $(FUZZ_BUILD)/fuzz_%: tests/fuzz/fuzz_%.c fuzz-lib
+	$(FUZZ_LINK) $< $(FUZZ_BUILD)/libisoserve.a $(LIBS) -o $@
+$(FUZZ_BUILD)/fuzz_nrrd: SUFFIX := .nrrd
+$(FUZZ_BUILD)/fuzz_nifti: SUFFIX := .nii
+$(FUZZ_BUILD)/fuzz_metaimage: SUFFIX := .mha
+$(FUZZ_BUILD)/fuzz_nrrd $(FUZZ_BUILD)/fuzz_nifti $(FUZZ_BUILD)/fuzz_metaimage: tests/fuzz/fuzz_load.c fuzz-lib
+	$(FUZZ_LINK) -DFUZZ_SUFFIX='"$(SUFFIX)"' $< $(FUZZ_BUILD)/libisoserve.a $(LIBS) -o $@
+
+fuzz-build: $(FUZZ_BIN)
+
+# Each target for FUZZ_SECONDS (default 60) from seeds made at run time; crashes are
+# written to build/fuzz/crashes/ and fail the run (keep small ones in tests/fuzz/regressions/).
+fuzz: setup fuzz-build
+	bash tests/fuzz/run.sh $(FUZZ_SECONDS)
+
 # npm packages (three.js, draco3d), pinned by web/package-lock.json: installed with npm ci
 # when missing or older than the lockfile. No network, no packages: the build says so.
 web/node_modules/.package-lock.json: web/package-lock.json web/package.json
@@ -91,11 +121,19 @@ $(BUILD)/web/.stamp: $(WEB_SRC) web/node_modules/.package-lock.json
 
 web: $(BUILD)/web/.stamp
 
+# The whole suite twice: against the normal build, then against the ASan/UBSan build
+# (tests/run.sh's asan pass; `make test-asan` runs that pass alone).
 test: setup
 	$(MAKE) node-deps
 	$(MAKE) all unit-tests
 	$(MAKE) sanitize
-	bash tests/run.sh
+	$(MAKE) fuzz-build
+	bash tests/run.sh all
+
+test-asan: setup
+	$(MAKE) node-deps
+	$(MAKE) sanitize
+	bash tests/run.sh asan
 
 bench: setup all
 	bash tests/bench/run.sh

@@ -12,8 +12,10 @@ const char *proto_status_phrase(int status)
     case 304: return "Not Modified";
     case 400: return "Bad Request";
     case 404: return "Not Found";
+    case 401: return "Unauthorized";
     case 405: return "Method Not Allowed";
     case 414: return "URI Too Long";
+    case 422: return "Unprocessable Content";
     case 500: return "Internal Server Error";
     case 503: return "Service Unavailable";
     default: return "Error";
@@ -126,8 +128,10 @@ static const char *problem_type(int status)
     switch (status) {
     case 400: return "urn:isoserve:problem:bad-parameter";
     case 404: return "urn:isoserve:problem:not-found";
+    case 401: return "urn:isoserve:problem:unauthorized";
     case 405: return "urn:isoserve:problem:method-not-allowed";
     case 414: return "urn:isoserve:problem:uri-too-long";
+    case 422: return "urn:isoserve:problem:mesh-too-large";
     case 503: return "urn:isoserve:problem:unavailable";
     default: return "urn:isoserve:problem:internal";
     }

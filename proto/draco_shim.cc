@@ -193,13 +193,24 @@ int encode(const iso_mesh *mesh, const proto_encode_options *opt, unsigned char 
     return copy_out(buf, out, out_size, err);
 }
 
-// Reads a decoded 3-component attribute into floats, point by point.
+// Reads a decoded 3-component float attribute into floats, point by point. The bytes are
+// copied, not converted: ConvertValue reads the attribute's `normalized` flag, a bool that
+// libdraco fills from the stream unchecked, so a hostile stream made it load a bool of
+// value 2 (undefined behaviour; found by tests/fuzz/fuzz_draco, input kept in
+// tests/fuzz/regressions/draco/). Float attributes, which dequantized positions and
+// normals always are, never need the flag.
 bool read_float3(const draco::PointAttribute &att, size_t points, float *dst)
 {
+    if (att.data_type() != draco::DT_FLOAT32 || att.num_components() != 3 || !att.buffer())
+        return false;
+    const size_t stride = static_cast<size_t>(att.byte_stride()), offset = static_cast<size_t>(att.byte_offset());
+    const size_t bytes = static_cast<size_t>(att.buffer()->data_size());
     for (size_t i = 0; i < points; i++) {
         draco::AttributeValueIndex avi = att.mapped_index(draco::PointIndex(static_cast<uint32_t>(i)));
-        if (avi.value() >= att.size() || !att.ConvertValue(avi, 3, dst + 3 * i))
+        size_t at = offset + stride * static_cast<size_t>(avi.value());
+        if (avi.value() >= att.size() || stride < 3 * sizeof(float) || at > bytes || bytes - at < 3 * sizeof(float))
             return false;
+        std::memcpy(dst + 3 * i, att.buffer()->data() + at, 3 * sizeof(float));
     }
     return true;
 }

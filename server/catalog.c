@@ -17,7 +17,7 @@
 int srv_catalog_id_valid(const char *id)
 {
     size_t n = strlen(id);
-    if (n < 1 || n > SRV_ID_MAX)
+    if (n < 1 || n > SRV_ID_MAX || id[0] == '.') /* ".", ".." and hidden names: never path-like */
         return 0;
     return strspn(id, "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789._-") == n;
 }

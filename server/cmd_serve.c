@@ -29,6 +29,8 @@ typedef struct serve_options {
     char host[256];
     unsigned port;
     long threads, queue, cache_mb, drain_seconds, max_connections, max_volume_mb;
+    long connection_timeout, max_triangles;
+    const char *token_file;
     const char *origins[MAX_ORIGINS];
     size_t origin_count;
     long shard_self, shard_count;     /* --shard K/N; shard_count 0: not sharded */
@@ -104,6 +106,9 @@ static int set_option(serve_options *o, const char *a, const char *v, int from_e
     else if (!strcmp(a, "--web-root")) o->web_root = v;
     else if (!strcmp(a, "--shard-peers")) o->shard_peers = v;
     else if (!strcmp(a, "--replica-name")) o->replica_name = v;
+    else if (!strcmp(a, "--token-file")) o->token_file = v;
+    else if (!strcmp(a, "--connection-timeout")) return parse_count(a, v, 1, 3600, &o->connection_timeout);
+    else if (!strcmp(a, "--max-triangles")) return parse_count(a, v, 1, 1L << 40, &o->max_triangles);
     else if (!strcmp(a, "--shard")) return parse_shard(v, o);
     else if (!strcmp(a, "--listen")) return parse_listen(v, o);
     else if (!strcmp(a, "--threads")) return parse_count(a, v, 1, 256, &o->threads);
@@ -125,7 +130,8 @@ static int set_option(serve_options *o, const char *a, const char *v, int from_e
 static const char *const option_names[] = {
     "--catalog", "--volumes", "--cache-dir", "--web-root", "--listen", "--threads", "--queue",
     "--cache-mb", "--drain-seconds", "--max-connections", "--max-volume-mb", "--cors-origin",
-    "--shard", "--shard-peers", "--replica-name"};
+    "--shard", "--shard-peers", "--replica-name", "--token-file", "--connection-timeout",
+    "--max-triangles"};
 
 static int options_from_env(serve_options *o)
 {
@@ -147,7 +153,8 @@ static int parse_options(int argc, char **argv, serve_options *o)
     long cores = sysconf(_SC_NPROCESSORS_ONLN);
     *o = (serve_options){.host = "127.0.0.1", .port = 8080, .threads = cores > 0 ? cores : 1,
                          .queue = 64, .cache_mb = 256, .drain_seconds = 10,
-                         .max_connections = 256, .max_volume_mb = 8192};
+                         .max_connections = 256, .max_volume_mb = 8192,
+                         .connection_timeout = 30};
     if (options_from_env(o))
         return 1;
     for (int i = 0; i < argc; i += 2) {
@@ -160,6 +167,30 @@ static int parse_options(int argc, char **argv, serve_options *o)
         return srv_fail("serve: give --catalog or --volumes, not both");
     if (!o->shard_count != !o->shard_peers)
         return srv_fail("serve: --shard K/N and --shard-peers HOST:PORT,... go together");
+    return 0;
+}
+
+/* The bearer token: the file's first line, without its line end. Refused when missing,
+ * empty, or holding blanks or control bytes (which no header could carry intact). The
+ * token itself is never printed, only the file's name. */
+static int read_token(const char *path, char *token, size_t size)
+{
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return srv_fail("--token-file %s: %s", path, strerror(errno));
+    if (!fgets(token, (int)size, f))
+        token[0] = '\0';
+    int more = getc(f) != EOF && !strchr(token, '\n');
+    fclose(f);
+    token[strcspn(token, "\r\n")] = '\0';
+    size_t n = strlen(token);
+    if (more || n >= size - 1)
+        return srv_fail("--token-file %s: the token is longer than %zu bytes", path, size - 2);
+    if (n < 16)
+        return srv_fail("--token-file %s: the token has %zu bytes; at least 16 are needed", path, n);
+    for (size_t i = 0; i < n; i++)
+        if ((unsigned char)token[i] <= 0x20 || token[i] == 0x7f)
+            return srv_fail("--token-file %s: the token holds a blank or a control byte", path);
     return 0;
 }
 
@@ -264,6 +295,12 @@ static int serve(const serve_options *o, srv_catalog *catalog)
     if (!o->replica_name && !o->shard_count && gethostname(host_name, sizeof host_name))
         snprintf(host_name, sizeof host_name, "isoserve");
     host_name[sizeof host_name - 1] = '\0';
+    static char token[1024];
+    if (o->token_file && read_token(o->token_file, token, sizeof token)) {
+        srv_shard_ring_free(&ring);
+        free(skip);
+        return 1;
+    }
     char *root = web_root(o->web_root);
     srv_preload_options preload = {.cache_dir = o->cache_dir, .skip = skip,
                                    .max_volume_bytes = (uint64_t)o->max_volume_mb << 20};
@@ -278,8 +315,9 @@ static int serve(const serve_options *o, srv_catalog *catalog)
     server.config = (srv_http_config){
         .host = o->host, .port = o->port, .web_root = root, .cors_origins = o->origins,
         .cors_origin_count = o->origin_count, .max_connections = (unsigned)o->max_connections,
-        .connection_timeout_s = 30, .retry_after_s = 1, .replica_name = replica,
-        .shard_ring = o->shard_count ? &ring : NULL};
+        .connection_timeout_s = (unsigned)o->connection_timeout, .retry_after_s = 1,
+        .replica_name = replica, .shard_ring = o->shard_count ? &ring : NULL,
+        .token = o->token_file ? token : NULL, .max_triangles = (size_t)o->max_triangles};
     server.collection = &collection;
     server.cache = &cache;
     server.pool = &pool;
@@ -340,6 +378,9 @@ int srv_cmd_serve(int argc, char **argv)
     sigaddset(&stop_signals, SIGTERM);
     pthread_sigmask(SIG_BLOCK, &stop_signals, NULL);
     signal(SIGPIPE, SIG_IGN);
+    /* Past a file size limit (ulimit -f) write() then fails with EFBIG, like a full disk,
+     * and the hierarchy is served from memory; the default action would kill the server. */
+    signal(SIGXFSZ, SIG_IGN);
     srv_catalog catalog;
     if (read_catalog(&o, &catalog))
         return 1;

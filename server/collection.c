@@ -118,8 +118,13 @@ static int load_tree(srv_volume *v, const srv_preload_options *opt, char *label)
                 err.message);
         return 1;
     }
-    if (file[0] && iso_tree_save(v->tree, file, &err))
-        fprintf(stderr, "isoserve: %s: hierarchy not cached: %s\n", v->entry->id, err.message);
+    /* A full or read-only disk costs the next start a rebuild, nothing more: the tree in
+     * memory is complete, and iso_tree_save leaves no partial file under the real name. */
+    if (file[0] && iso_tree_save(v->tree, file, &err)) {
+        v->tree_unsaved = 1;
+        fprintf(stderr, "isoserve: %s: hierarchy not cached: %s; serving it from memory\n",
+                v->entry->id, err.message);
+    }
     return 0;
 }
 
@@ -196,6 +201,8 @@ static void load_entry(srv_collection *c, size_t i, int on_demand)
         atomic_store_explicit(&c->count, n + 1, memory_order_release);
         if (on_demand)
             atomic_fetch_add(&c->on_demand, 1);
+        if (v.tree_unsaved)
+            atomic_fetch_add(&c->unsaved, 1);
     }
     c->state[i] = failed ? SRV_ENTRY_FAILED : SRV_ENTRY_LOADED;
     if (failed) {

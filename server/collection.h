@@ -30,6 +30,8 @@ typedef struct srv_volume {
     size_t level_count;
     int tree_from_file;               /* 1: read from the cache dir */
     int on_demand;                    /* 1: loaded at a request, not preloaded */
+    int tree_unsaved;                 /* 1: built, but the cache dir refused the file (disk
+                                         full, read-only): served from memory only */
 } srv_volume;
 
 typedef struct srv_preload_options {
@@ -47,6 +49,7 @@ typedef struct srv_collection {
     _Atomic int ready;                /* every entry tried */
     _Atomic int stop;                 /* set on shutdown: preloading ends after the volume at hand */
     _Atomic size_t on_demand;         /* volumes loaded at a request */
+    _Atomic size_t unsaved;           /* hierarchies the cache dir refused (tree_unsaved) */
     const srv_catalog *catalog;
     srv_preload_options options;      /* also for loads on demand */
     pthread_mutex_t lock;             /* guards state and publication */

@@ -12,6 +12,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -117,6 +118,8 @@ static enum MHD_Result send_problem(srv_server *s, struct MHD_Connection *c, srv
     struct MHD_Response *r = text_response(body, "application/problem+json", "no-store", &size);
     if (r && problem->status == 405)
         MHD_add_response_header(r, MHD_HTTP_HEADER_ALLOW, "GET, HEAD, OPTIONS");
+    if (r && problem->status == 401)
+        MHD_add_response_header(r, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"isoserve\"");
     if (r && problem->status == 503)
         add_retry_after(s, r);
     return send_response(s, c, req, problem->status, r, size);
@@ -226,6 +229,7 @@ static enum MHD_Result route_metrics(srv_server *s, struct MHD_Connection *c, sr
     g.coalesced_total = atomic_load(&s->pool->coalesced);
     g.rejected_total = atomic_load(&s->pool->rejected);
     g.hierarchy_bytes = srv_collection_hierarchy_bytes(s->collection);
+    g.hierarchies_unsaved = atomic_load(&s->collection->unsaved);
     g.volumes = atomic_load(&s->collection->count);
     g.volumes_on_demand = atomic_load(&s->collection->on_demand);
     g.volumes_total = s->collection->total;
@@ -369,6 +373,7 @@ static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_r
     work->volume = v;
     work->request = mr;
     work->cache = s->cache;
+    work->max_triangles = s->config.max_triangles;
     int coalesced;
     srv_job *job = srv_pool_submit(s->pool, key, srv_mesh_job_run, work, srv_mesh_job_free, &coalesced);
     if (!job)
@@ -408,7 +413,7 @@ static enum MHD_Result preflight(srv_server *s, struct MHD_Connection *c, srv_re
     if (!r)
         return MHD_NO;
     MHD_add_response_header(r, "Access-Control-Allow-Methods", "GET, HEAD, OPTIONS");
-    MHD_add_response_header(r, "Access-Control-Allow-Headers", "If-None-Match");
+    MHD_add_response_header(r, "Access-Control-Allow-Headers", "If-None-Match, Authorization");
     MHD_add_response_header(r, "Access-Control-Max-Age", "86400");
     MHD_add_response_header(r, MHD_HTTP_HEADER_ALLOW, "GET, HEAD, OPTIONS");
     return send_response(s, c, req, 204, r, 0);
@@ -439,6 +444,38 @@ static int volume_path(const char *path, char *id, size_t size)
     return !strcmp(slash, "/mesh") ? 2 : 0;
 }
 
+/* 1 when a and b (b_len bytes) are equal, in a time that depends on b_len only: the
+ * configured token's length, not where a guess first differs. */
+static int token_equal(const char *a, size_t a_len, const char *b, size_t b_len)
+{
+    unsigned diff = a_len != b_len;
+    for (size_t i = 0; i < b_len; i++)
+        diff |= (unsigned char)b[i] ^ (unsigned char)(i < a_len ? a[i] : 0);
+    return diff == 0;
+}
+
+/* With --token-file, "Authorization: Bearer TOKEN" (scheme case-insensitive, RFC 6750).
+ * The header's value is never logged or echoed. */
+static int authorized(const srv_server *s, struct MHD_Connection *c)
+{
+    const char *token = s->config.token;
+    if (!token)
+        return 1;
+    const char *h = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
+    if (!h || strncasecmp(h, "Bearer ", 7))
+        return 0;
+    h += 7;
+    h += strspn(h, " ");
+    return token_equal(h, strlen(h), token, strlen(token));
+}
+
+/* /healthz stays open for load balancers' probes (it tells readiness and counts, no
+ * volume); the web client's files are public code. The API and /metrics need the token. */
+static int needs_token(const char *path)
+{
+    return !strcmp(path, "/metrics") || !strncmp(path, "/v1/", 4) || !strcmp(path, "/v1");
+}
+
 static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_request *req,
                              const char *path, const char *method)
 {
@@ -454,6 +491,11 @@ static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_reques
     if (!strcmp(path, "/healthz")) {
         req->route = SRV_ROUTE_HEALTH;
         return route_health(s, c, req);
+    }
+    if (needs_token(path) && !authorized(s, c)) {
+        const char *given = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
+        return fail(s, c, req, path, 401, given ? "the bearer token is not this server's"
+                                                : "this server needs \"Authorization: Bearer TOKEN\"");
     }
     if (!strcmp(path, "/metrics")) {
         req->route = SRV_ROUTE_METRICS;
@@ -490,6 +532,36 @@ static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_reques
 }
 
 /* ---------------------------------------------------------------- life cycle */
+
+static int hex_digit(char ch)
+{
+    return ch >= '0' && ch <= '9' ? ch - '0' : ch >= 'a' && ch <= 'f' ? ch - 'a' + 10
+         : ch >= 'A' && ch <= 'F' ? ch - 'A' + 10 : -1;
+}
+
+/* libmicrohttpd's unescaping of the path and the query, less "%00" and "%2F": a decoded
+ * NUL would end the C string early ("/v1/volumes/x%00/anything" read as "/v1/volumes/x"),
+ * and a decoded slash would let one path segment pose as two ("/v1/volumes/x%2Fmesh" as
+ * the mesh of x). Kept as the three characters, they make an id invalid, as they should;
+ * no query value needs either. */
+static size_t unescape(void *cls, struct MHD_Connection *c, char *s)
+{
+    (void)cls;
+    (void)c;
+    char *out = s;
+    for (const char *in = s; *in;) {
+        int hi = in[0] == '%' ? hex_digit(in[1]) : -1, lo = hi >= 0 ? hex_digit(in[2]) : -1;
+        int byte = hi * 16 + lo;
+        if (lo >= 0 && byte != 0 && byte != '/') {
+            *out++ = (char)byte;
+            in += 3;
+        } else {
+            *out++ = *in++;
+        }
+    }
+    *out = '\0';
+    return (size_t)(out - s);
+}
 
 static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url,
                                   const char *method, const char *version,
@@ -572,6 +644,7 @@ int srv_http_start(srv_server *s, iso_error *err)
         MHD_OPTION_CONNECTION_LIMIT, s->config.max_connections,
         MHD_OPTION_CONNECTION_TIMEOUT, s->config.connection_timeout_s,
         MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)64 * 1024,
+        MHD_OPTION_UNESCAPE_CALLBACK, unescape, NULL,
         MHD_OPTION_END);
     freeaddrinfo(addr);
     if (!s->daemon)

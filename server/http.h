@@ -32,6 +32,9 @@ typedef struct srv_http_config {
     const char *replica_name;      /* X-Iso-Replica on every response */
     const srv_shard_ring *shard_ring; /* sharded: /v1/volumes lists the catalog with each
                                          volume's shard; NULL: the loaded volumes in full */
+    const char *token;             /* --token-file's token: /v1 and /metrics need
+                                      "Authorization: Bearer TOKEN"; NULL: open */
+    size_t max_triangles;          /* --max-triangles: larger meshes get 422; 0: no limit */
 } srv_http_config;
 
 struct MHD_Daemon;

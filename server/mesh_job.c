@@ -65,6 +65,16 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
 
     double start = iso_clock_ms();
     int rc = extract(job, &mesh, &stats, &facts, &err);
+    /* Refused before normals and encoding, which cost several times the extraction's
+     * memory for a large mesh; the refusal is not cached, so a later, larger limit answers. */
+    if (!rc && job->max_triangles && stats.triangles > job->max_triangles) {
+        iso_mesh_free(&mesh);
+        proto_problem_set(problem, 422, NULL,
+                          "the mesh has %zu triangles, more than this server's limit of %zu; "
+                          "a larger tolerance gives fewer", (size_t)stats.triangles,
+                          job->max_triangles);
+        return NULL;
+    }
     if (!rc && r->normals && mesh.vertex_count)
         rc = iso_normals_compute(job->volume->vol, &mesh, r->normals, ISO_SPACE_WORLD, &err);
     iso_census census = {0};

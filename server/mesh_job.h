@@ -13,6 +13,7 @@ typedef struct srv_mesh_job {
     proto_mesh_request request;
     srv_cache *cache;       /* where the body goes when done; may be NULL */
     char *key;              /* the cache key (owned) */
+    size_t max_triangles;   /* serve --max-triangles: a larger mesh is refused (422); 0: none */
 } srv_mesh_job;
 
 /* A job for the pool (see pool.h's srv_job_fn): arg is a srv_mesh_job. */

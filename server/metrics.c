@@ -121,6 +121,9 @@ char *srv_metrics_render(srv_metrics *m, const srv_metrics_gauges *g, size_t *si
            (double)g->workers);
     metric(f, "isoserve_hierarchy_bytes", "gauge", "Bytes of all loaded hierarchies.",
            (double)g->hierarchy_bytes);
+    metric(f, "isoserve_hierarchies_unsaved", "gauge",
+           "Hierarchies built but not written to --cache-dir (disk full, read-only): served "
+           "from memory, rebuilt at the next start.", (double)g->hierarchies_unsaved);
     metric(f, "isoserve_volumes_loaded", "gauge", "Volumes being served.", (double)g->volumes);
     metric(f, "isoserve_volumes_loaded_on_demand", "gauge",
            "Of those, volumes of another shard loaded at a request.", (double)g->volumes_on_demand);

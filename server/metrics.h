@@ -28,7 +28,7 @@ typedef struct srv_metrics_gauges {
     size_t cache_bytes, cache_items, cache_limit;
     size_t queue_length, queue_capacity, extractions_running, workers;
     unsigned long long extractions_total, coalesced_total, rejected_total;
-    size_t hierarchy_bytes, volumes, volumes_on_demand, volumes_total;
+    size_t hierarchy_bytes, hierarchies_unsaved, volumes, volumes_on_demand, volumes_total;
     int ready;
 } srv_metrics_gauges;
 

@@ -10,10 +10,12 @@ import { join, resolve } from 'node:path';
 const require = createRequire(resolve('web/node_modules') + '/');
 const { chromium } = require('playwright-core');
 
+// tests/run.sh's asan pass runs the page against build/san/isoserve and says web-san.
+const label = `web${process.env.ISO_SAN_SUFFIX || ''}`;
 let failures = 0;
 const report = (name, ok, why = '') => {
   if (!ok) failures++;
-  console.log(ok ? `PASS web.${name}` : `FAIL web.${name}: ${why}`);
+  console.log(ok ? `PASS ${label}.${name}` : `FAIL ${label}.${name}: ${why}`);
 };
 
 // The volume: Debian's ch2bet brain (NIfTI) when installed, else an analytic torus.
@@ -28,7 +30,7 @@ writeFileSync(join(tmp, 'catalog.json'), JSON.stringify({ volumes: [
 
 function startServer() {
   return new Promise((resolvePort, reject) => {
-    const proc = spawn(resolve('build/isoserve'), ['serve', '--catalog', join(tmp, 'catalog.json'),
+    const proc = spawn(resolve(process.env.ISOSERVE_BIN || 'build/isoserve'), ['serve', '--catalog', join(tmp, 'catalog.json'),
       '--listen', '127.0.0.1:0'], { stdio: ['ignore', 'ignore', 'pipe'] });
     let log = '';
     proc.stderr.on('data', (d) => {

@@ -3,14 +3,14 @@
 # hierarchy files, and clear failures on bad input. Prints PASS/FAIL/SKIP lines.
 set -uo pipefail
 cd "$(dirname "$0")/../.."
-bin=build/isoserve
+bin=${ISOSERVE_BIN:-build/isoserve}  # tests/run.sh's asan pass gives build/san/isoserve
 py=/usr/bin/python3
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 shared=${ISO_SHARED_VOLUMES:-../shared/volumes}
 
-pass() { echo "PASS cli.$1"; }
-fail() { echo "FAIL cli.$1: $2"; }
+pass() { echo "PASS cli${ISO_SAN_SUFFIX:-}.$1"; }
+fail() { echo "FAIL cli${ISO_SAN_SUFFIX:-}.$1: $2"; }
 json() { "$py" -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))" "$@"; }
 
 # info reports the volume's shape and range.

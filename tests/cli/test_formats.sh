@@ -4,13 +4,13 @@
 # hostile sidecars fail with a message naming the file and the field. PASS/FAIL lines.
 set -uo pipefail
 cd "$(dirname "$0")/../.."
-bin=build/isoserve
+bin=${ISOSERVE_BIN:-build/isoserve}  # tests/run.sh's asan pass gives build/san/isoserve
 py=/usr/bin/python3
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 
-pass() { echo "PASS formats.$1"; }
-fail() { echo "FAIL formats.$1: $2"; }
+pass() { echo "PASS formats${ISO_SAN_SUFFIX:-}.$1"; }
+fail() { echo "FAIL formats${ISO_SAN_SUFFIX:-}.$1: $2"; }
 
 # 8x6x5 big-endian uint16 samples 100*i, spacing (0.5, 2, 3), origin (10, 20, 30).
 "$py" - "$tmp/ramp.raw" <<'PY'

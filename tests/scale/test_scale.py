@@ -38,7 +38,7 @@ CONF = os.path.join(ROOT, "docker/nginx.conf")
 WEB = os.path.join(ROOT, "build/web")
 MRICRON = "/usr/share/mricron/templates"
 REPLICAS = 3
-RESULTS = Results(os.environ.get("ISO_TEST_LABEL", "scale"))  # the sanitizer run says scale-san
+RESULTS = Results("scale" + os.environ.get("ISO_SAN_SUFFIX", ""))  # the asan pass says scale-san
 report, check = RESULTS.report, RESULTS.check
 cache_status = {"HIT": 0, "MISS": 0}
 

@@ -2,11 +2,13 @@
 #include "check.h"
 
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <zlib.h>
 
 static const char *current_name;
 static int current_failed, current_skipped, any_failed;
@@ -86,4 +88,39 @@ int check_finish(void)
             fprintf(stderr, "could not remove %s\n", temp_dir);
     }
     return any_failed ? 1 : 0;
+}
+
+unsigned char *check_deflate(const void *data, size_t size, int window, int level,
+                             size_t *out_size)
+{
+    z_stream zs;
+    memset(&zs, 0, sizeof zs);
+    CHECK(deflateInit2(&zs, level, Z_DEFLATED, window, 8, Z_DEFAULT_STRATEGY) == Z_OK);
+    size_t cap = deflateBound(&zs, (uLong)size) + 64;
+    unsigned char *out = malloc(cap);
+    CHECK(out != NULL);
+    if (!out) {
+        deflateEnd(&zs);
+        return NULL;
+    }
+    zs.next_in = (Bytef *)(uintptr_t)data; /* zlib's API is not const-correct */
+    zs.avail_in = (uInt)size;
+    zs.next_out = out;
+    zs.avail_out = (uInt)cap;
+    CHECK(deflate(&zs, Z_FINISH) == Z_STREAM_END);
+    *out_size = cap - zs.avail_out;
+    deflateEnd(&zs);
+    return out;
+}
+
+void check_write_file(const char *path, const void *a, size_t a_len, const void *b, size_t b_len)
+{
+    FILE *f = fopen(path, "wb");
+    CHECKF(f != NULL, "cannot create %s", path);
+    if (!f)
+        return;
+    CHECK(fwrite(a, 1, a_len, f) == a_len);
+    if (b_len)
+        CHECK(fwrite(b, 1, b_len, f) == b_len);
+    CHECK(fclose(f) == 0);
 }

@@ -29,6 +29,14 @@ const char *check_shared_volumes(void);
 /* A fresh temporary directory for this process, removed by check_finish. */
 const char *check_temp_dir(void);
 
+/* Writes a then b (b_len may be 0) to path; failures are CHECK failures. */
+void check_write_file(const char *path, const void *a, size_t a_len, const void *b, size_t b_len);
+/* Compresses data with zlib's deflate into a malloc'd buffer (caller frees): window 15 + 16
+ * for gzip framing, 15 for zlib; level 0 stores the bytes as they are, so a stream cut at a
+ * known offset inflates to a known number of bytes. Failures are CHECK failures. */
+unsigned char *check_deflate(const void *data, size_t size, int window, int level,
+                             size_t *out_size);
+
 #define CHECK(cond) \
     do { if (!(cond)) check_fail_at(__FILE__, __LINE__, "%s", #cond); } while (0)
 #define CHECKF(cond, ...) \

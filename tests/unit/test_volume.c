@@ -80,34 +80,13 @@ static void tmp_path(char *buf, size_t cap, const char *name)
 static void write_file(const char *path, const void *a, size_t a_len, const void *b,
                        size_t b_len)
 {
-    FILE *f = fopen(path, "wb");
-    CHECKF(f != NULL, "cannot create %s", path);
-    if (!f)
-        return;
-    CHECK(fwrite(a, 1, a_len, f) == a_len);
-    if (b_len)
-        CHECK(fwrite(b, 1, b_len, f) == b_len);
-    CHECK(fclose(f) == 0);
+    check_write_file(path, a, a_len, b, b_len);
 }
 
 /* gzip-compresses into a malloc'd buffer (caller frees). */
 static unsigned char *gzip(const void *data, size_t size, size_t *out_size)
 {
-    z_stream zs;
-    unsigned char *out;
-    memset(&zs, 0, sizeof zs);
-    CHECK(deflateInit2(&zs, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) == Z_OK);
-    size_t cap = deflateBound(&zs, (uLong)size) + 64;
-    out = malloc(cap);
-    CHECK(out != NULL);
-    zs.next_in = (Bytef *)(uintptr_t)data; /* zlib's API is not const-correct */
-    zs.avail_in = (uInt)size;
-    zs.next_out = out;
-    zs.avail_out = (uInt)cap;
-    CHECK(deflate(&zs, Z_FINISH) == Z_STREAM_END);
-    *out_size = cap - zs.avail_out;
-    deflateEnd(&zs);
-    return out;
+    return check_deflate(data, size, 15 + 16, 6, out_size);
 }
 
 /* The 3x5x7 test volume's samples as `type` in the given byte order (caller frees). */
