@@ -25,7 +25,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "http"))
 from results import Results, Skip  # noqa: E402 - found through the path just set
 from test_http import BIN, Server, problem  # noqa: E402 - the daemon driver, shared
 
-LABEL = os.environ.get("ISO_TEST_LABEL", "dicom")
+LABEL = "dicom" + os.environ.get("ISO_SAN_SUFFIX", "")  # tests/run.sh's asan pass says dicom-san
 RESULTS = Results(LABEL)
 report, check = RESULTS.report, RESULTS.check
 HELPER = os.path.join(HERE, "..", "support", "dicom_series.py")

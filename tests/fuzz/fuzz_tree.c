@@ -21,7 +21,7 @@ static char path[256];
 static void setup(void)
 {
     iso_error err;
-    if (iso_load("field:sphere:12", NULL, &vol, &err) || iso_tree_build(vol, NULL, NULL, &built, &err))
+    if (iso_load("field:sphere:12", NULL, &vol, &err) || iso_tree_build(vol, 0, NULL, NULL, &built, &err))
         abort();
     const char *dir = getenv("TMPDIR");
     snprintf(path, sizeof path, "%s/isoserve-fuzz-%d.isotree", dir ? dir : "/tmp", (int)getpid());

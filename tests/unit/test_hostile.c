@@ -218,7 +218,7 @@ static void test_nan_samples_defined(void)
         return;
     CHECK(vol->has_nan == 1 && vol->value_min == 0 && vol->value_max == 10);
     iso_tree *tree = NULL;
-    CHECK_OK(iso_tree_build(vol, NULL, NULL, &tree, &err), &err);
+    CHECK_OK(iso_tree_build(vol, 0, NULL, NULL, &tree, &err), &err);
     for (int tol = 0; tree && tol <= 2; tol += 2) {
         iso_extract_params p = {.level = 5, .tolerance = tol, .space = ISO_SPACE_INDEX};
         iso_mesh mesh;
@@ -287,7 +287,7 @@ static void test_tree_file_damage_exact(void)
     CHECK_OK(iso_load("field:ml:40", NULL, &vol, &err), &err);
     iso_tree *tree = NULL;
     if (vol)
-        CHECK_OK(iso_tree_build(vol, NULL, NULL, &tree, &err), &err);
+        CHECK_OK(iso_tree_build(vol, 0, NULL, NULL, &tree, &err), &err);
     if (!tree) {
         iso_vol_destroy(vol);
         return;
