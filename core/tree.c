@@ -53,7 +53,14 @@ int iso_box_split(const iso_box *box, iso_box *left, iso_box *right)
     }
     if (longest <= 1 && iso_box_cells(box) <= 1)
         return -1;
-    uint32_t mid = box->lo[axis] + longest / 2;
+    /* Above brick size the split falls on a multiple of the brick (the root starts at 0,
+     * so every stored box does too): stored leaves are then exactly the bricks of the
+     * regular grid (bricks.h), whatever the volume's dimensions, and extraction can hand a
+     * leaf to the brick kernel as it is. Below, the paper's middle split. */
+    uint32_t half = longest > ISO_TREE_BRICK
+                        ? ISO_TREE_BRICK * ((longest + ISO_TREE_BRICK) / (2 * ISO_TREE_BRICK))
+                        : longest / 2;
+    uint32_t mid = box->lo[axis] + half;
     *left = *box;
     *right = *box;
     left->hi[axis] = mid;
@@ -317,7 +324,7 @@ uint32_t iso_tree_volume_crc(const iso_volume *vol)
 /* ---- the file ---- */
 
 #define TREE_MAGIC "ISOTREE"
-#define TREE_VERSION 1
+#define TREE_VERSION 2 /* 2: splits above brick size aligned to the brick grid */
 
 typedef struct tree_header {
     char magic[8];          /* "ISOTREE\0" */

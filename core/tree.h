@@ -4,7 +4,9 @@
  * An implicit binary kd-tree over the volume's samples. A node is an inclusive box of
  * samples lo..hi; the root is the whole volume. A node splits its longest side in cells
  * (ties: x before y before z) at mid = lo + cells/2, and both children keep the sample
- * plane at mid. Boxes are never stored: they follow from the root and the path.
+ * plane at mid. Above brick size mid is rounded to the nearest multiple of ISO_TREE_BRICK
+ * (at least one brick), so the stored leaves are exactly the regular grid's bricks
+ * (bricks.h). Boxes are never stored: they follow from the root and the path.
  *
  * Stored nodes go down to bricks: a node whose every side is at most ISO_TREE_BRICK cells
  * is a stored leaf. Below a brick, extraction continues the same split rule on the fly,
@@ -27,7 +29,7 @@
 #include "error.h"
 #include "volume.h"
 
-#define ISO_TREE_BRICK 8
+#define ISO_TREE_BRICK ISO_BRICK_CELLS /* the stored leaves are the grid's bricks */
 
 typedef struct iso_box {
     uint32_t lo[3], hi[3]; /* inclusive sample indices; hi[a] - lo[a] cells along a */
