@@ -1,22 +1,27 @@
 /* extract.c: iso-surface extraction over the hierarchy (Elber and Malzbender, with
  * Wilhelms and Van Gelder's min/max pruning), and the full-scan marching cubes baseline.
  *
- * Tolerance 0 takes the exact path instead (march.c): marching cubes over the bricks of
- * the regular min/max grid that hold the level, every crossing computed once and
- * indexed directly, on several threads; PASS 2 and 3 below then run only with a cap.
+ * Everything that is not fanned is marching cubes by the brick kernel (march.c), which
+ * computes each crossing once and gives it one id; fans name their loop vertices by grid
+ * edge and take those ids, so no weld is needed. Tolerance 0 is the kernel alone.
  *
- * PASS 1 (descend): from the root, skip every node whose [min, max] cannot hold the level;
- *   stop at the first node of at least MIN_FAN_CELLS cells whose fit error is within the
- *   fit share of the tolerance and whose face loops fan within the tolerance (fan.c);
- *   below stored bricks the same rule runs on the brick's samples, read once into a
- *   scratch block; single cells are marching cubes on the data itself. Every piece is
- *   appended to a triangle soup in index space. Fans and cells compute identical
- *   crossings on every shared face, so pieces of any size meet without cracks.
- * PASS 2 (cap, if asked): the cells between the volume's border samples and a virtual
- *   layer below every level around it, so the surface closes where it leaves the data.
- * PASS 3 (weld): vertices with bit-identical positions merge (mesh.c). Crossings are
- *   interpolated from the edge's low end by one function (mc.h), so they weld exactly.
- * PASS 4 (place): index space to world millimetres, if asked. */
+ * PASS 1 (descend, tolerance > 0): from the root, skip every stored node whose [min, max]
+ *   cannot hold the level; stop at the first node of at least MIN_FAN_CELLS cells whose
+ *   fit error is within the fit share of the tolerance and whose face loops fan within
+ *   the tolerance (fan.c). The bricks inside a fanned node are marked: the kernel numbers
+ *   their crossings but marches none of their cells. Stored leaves are the kernel's
+ *   bricks (tree.h), so an unfanned leaf goes to PASS 2 whole.
+ * PASS 2 (march): the kernel classifies the active bricks; for each unmarked one, the
+ *   same rule runs on the fly below it (cover), on its samples read once: a sub-box is
+ *   active when it holds a mixed cell (the kernel's bits), its fit error is scanned with
+ *   an early exit past the limit, and a fanned sub-box's cells are covered. The kernel
+ *   then marches the cells left.
+ * PASS 3 (number the fans): fan centres become new vertices, loop vertices the kernel's
+ *   ids; the vertices only fanned-over cells used are dropped.
+ * PASS 4 (cap, if asked): the cells between the volume's border samples and a virtual
+ *   layer below every level around it, welded on in index space.
+ * PASS 5 (place): index space to world millimetres, if asked (the kernel places its own
+ *   vertices directly when there is no cap). */
 #include "extract.h"
 
 #include <assert.h>
@@ -26,12 +31,13 @@
 #include <time.h>
 
 #include "clock.h"
+#include "fan.h"
 #include "march.h"
 #include "mc.h"
+#include "parallel.h"
 #include "trilinear.h"
-#include "fan.h"
 
-#define BRICK_SAMPLES ((ISO_TREE_BRICK + 1) * (ISO_TREE_BRICK + 1) * (ISO_TREE_BRICK + 1))
+#define BRICK_SAMPLES (ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES)
 
 /* A fan emits about one triangle per loop vertex, marching cubes about two per crossed
  * cell: below 2x2x2 cells fanning a node saves nothing. */
@@ -39,186 +45,253 @@
 /* Share of the tolerance a fan's centre may be off the level (Newton lands far closer). */
 #define CENTRE_SHARE (1.0 / 64)
 
-typedef struct walk {
+/* What the fans of one walk did, summed into the stats at the end. */
+typedef struct fan_tally {
+    size_t nodes_visited, nodes_polygonized, cells_covered;
+    double vertex_error, fit_error;
+} fan_tally;
+
+/* The fans one thread made below the bricks (PASS 2), and its scratch. */
+typedef struct sub_walk {
+    iso_fan_scratch scratch;
+    iso_fan_output fans;
+    fan_tally tally;
+    iso_march_brick *brick;         /* the brick at hand */
+    double samples[BRICK_SAMPLES];  /* its samples, x fastest, brick->n per axis */
+} sub_walk;
+
+typedef struct coarse {
     const iso_tree *tree;
     const iso_volume *vol;
-    double level, tolerance, fit_limit;
+    double level, fit_limit, centre_limit;
     int prune;
-    iso_mesh *soup;
-    iso_extract_stats *stats;
-    iso_fan_scratch fan;
-    /* The current brick's samples, x fastest, and where the brick starts. */
-    double brick[BRICK_SAMPLES];
-    uint32_t brick_lo[3], brick_n[3];
-} walk;
+    uint8_t *skip;            /* per brick of the grid: inside a node fanned whole */
+    iso_fan_scratch scratch;  /* PASS 1's */
+    iso_fan_output fans;
+    fan_tally tally;
+    sub_walk *threads;
+    int thread_count;
+} coarse;
 
-static int active(const walk *w, double min, double max)
+/* Fans box if its fit error and face loops allow: 1 done, 0 not, <0 error. Below a brick,
+ * where counting is cheap, a small node with a tangled surface can fan into more
+ * triangles than its cells would give (max_triangles): it is refused then, so no
+ * tolerance ever costs triangles. */
+static int try_fan(const coarse *c, const iso_box *box, double fit_error, size_t max_triangles,
+                   iso_fan_scratch *scratch, iso_fan_output *fans, fan_tally *tally)
 {
-    return !w->prune || (min <= w->level && w->level < max);
-}
-
-static void raise_bound(iso_extract_stats *stats, double vertex_error)
-{
-    if (vertex_error > stats->error_bound)
-        stats->error_bound = vertex_error;
-}
-
-static size_t brick_mc_triangles(const walk *w, const iso_box *b);
-
-/* Emits box as fans over its face loops if it may; 1 done, 0 not, <0 error. Inside a
- * brick, where counting is cheap, a small node with a tangled surface can fan into more
- * triangles than its cells would give: it is refused then, so no tolerance ever costs
- * triangles. */
-static int try_fan(walk *w, const iso_box *box, double fit_error, int in_brick)
-{
-    if (iso_box_cells(box) < MIN_FAN_CELLS || !(fit_error <= w->fit_limit))
+    if (iso_box_cells(box) < MIN_FAN_CELLS || !(fit_error <= c->fit_limit))
         return 0;
-    iso_fan_result fan;
+    iso_fan_result result;
     /* Centres must land on the surface, not merely within the tolerance of its level: a
      * centre left in a flat background would meet that loosely and still be far off. */
-    double centre_limit = w->tolerance * CENTRE_SHARE;
-    size_t max_triangles = in_brick ? brick_mc_triangles(w, box) : SIZE_MAX;
-    int rc = iso_fan_polygonize(w->vol, box, w->level, centre_limit, max_triangles, &w->fan,
-                                w->soup, &fan);
+    int rc = iso_fan_polygonize(c->vol, box, c->level, c->centre_limit, max_triangles, scratch, fans, &result);
     if (rc == 1) {
-        w->stats->nodes_polygonized++;
-        w->stats->cells_visited++;
-        raise_bound(w->stats, fan.vertex_error);
-        if (fit_error > w->stats->fit_error)
-            w->stats->fit_error = fit_error;
+        tally->nodes_polygonized++;
+        tally->cells_covered += iso_box_cells(box);
+        if (result.vertex_error > tally->vertex_error)
+            tally->vertex_error = result.vertex_error;
+        if (fit_error > tally->fit_error)
+            tally->fit_error = fit_error;
     }
     return rc;
 }
 
-/* ---- below a brick: the samples come from the scratch block ---- */
+/* ---- PASS 1: stored nodes ---- */
 
-static double brick_at(const walk *w, uint32_t x, uint32_t y, uint32_t z)
+/* Marks the bricks of a fanned box: those on its boundary still number their crossings
+ * (the fan's loop vertices and the marched cells next to it use them), those inside it
+ * are not even read. */
+static void skip_bricks_of(coarse *c, const iso_box *box)
 {
-    return w->brick[((size_t)(z - w->brick_lo[2]) * w->brick_n[1] + (y - w->brick_lo[1])) * w->brick_n[0] +
-                    (x - w->brick_lo[0])];
-}
-
-static void brick_corners(const walk *w, const iso_box *b, double c[8])
-{
-    for (int k = 0; k < 8; k++)
-        c[k] = brick_at(w, k & 1 ? b->hi[0] : b->lo[0], k & 2 ? b->hi[1] : b->lo[1],
-                        k & 4 ? b->hi[2] : b->lo[2]);
-}
-
-static int march_cell(walk *w, uint32_t x, uint32_t y, uint32_t z)
-{
-    double v[8], origin[3] = {x, y, z};
-    static const double unit[3] = {1, 1, 1};
-    for (int k = 0; k < 8; k++)
-        v[k] = brick_at(w, x + (k & 1), y + ((k >> 1) & 1), z + ((k >> 2) & 1));
-    w->stats->cells_visited++;
-    int rc = iso_mc_cell(v, w->level, origin, unit, w->soup, &w->stats->error_bound);
-    return rc < 0 ? rc : 0;
-}
-
-static void scan_brick_box(const walk *w, const iso_box *b, const double c[8], double *mn,
-                           double *mx, double *er)
-{
-    double lo = INFINITY, hi = -INFINITY, worst = 0;
-    double n[3];
-    for (int d = 0; d < 3; d++)
-        n[d] = b->hi[d] - b->lo[d];
-    for (uint32_t z = b->lo[2]; z <= b->hi[2]; z++)
-        for (uint32_t y = b->lo[1]; y <= b->hi[1]; y++)
-            for (uint32_t x = b->lo[0]; x <= b->hi[0]; x++) {
-                double s = brick_at(w, x, y, z);
-                double t = iso_tri_eval(c, (x - b->lo[0]) / n[0], (y - b->lo[1]) / n[1],
-                                        (z - b->lo[2]) / n[2]);
-                double d = fabs(s - t);
-                if (s < lo) lo = s;
-                if (s > hi) hi = s;
-                if (d > worst || s != s) worst = s != s ? INFINITY : d;
-            }
-    *mn = lo;
-    *mx = hi;
-    *er = worst;
-}
-
-/* Triangles marching cubes would give for the box's cells. */
-static size_t brick_mc_triangles(const walk *w, const iso_box *b)
-{
-    const iso_mc_case *cases = iso_mc_cases();
-    size_t count = 0;
-    for (uint32_t z = b->lo[2]; z < b->hi[2]; z++)
-        for (uint32_t y = b->lo[1]; y < b->hi[1]; y++)
-            for (uint32_t x = b->lo[0]; x < b->hi[0]; x++) {
-                double v[8];
-                for (int k = 0; k < 8; k++)
-                    v[k] = brick_at(w, x + (k & 1), y + ((k >> 1) & 1), z + ((k >> 2) & 1));
-                count += cases[iso_mc_case_index(v, w->level)].triangle_count;
-            }
-    return count;
-}
-
-static int visit_sub(walk *w, const iso_box *box);
-
-static int visit_sub_children(walk *w, const iso_box *box)
-{
-    iso_box left, right;
-    if (iso_box_split(box, &left, &right) < 0)
-        return march_cell(w, box->lo[0], box->lo[1], box->lo[2]);
-    int rc = visit_sub(w, &left);
-    return rc ? rc : visit_sub(w, &right);
-}
-
-static int visit_sub(walk *w, const iso_box *box)
-{
-    w->stats->nodes_visited++;
-    if (iso_box_cells(box) == 1) {
-        double c[8], lo = INFINITY, hi = -INFINITY;
-        brick_corners(w, box, c);
-        for (int k = 0; k < 8; k++) {
-            if (c[k] < lo) lo = c[k];
-            if (c[k] > hi) hi = c[k];
-        }
-        return active(w, lo, hi) ? march_cell(w, box->lo[0], box->lo[1], box->lo[2]) : 0;
-    }
-    double c[8], mn, mx, er;
-    brick_corners(w, box, c);
-    scan_brick_box(w, box, c, &mn, &mx, &er);
-    if (!active(w, mn, mx))
-        return 0;
-    int rc = try_fan(w, box, er, 1);
-    if (rc)
-        return rc < 0 ? rc : 0;
-    return visit_sub_children(w, box);
-}
-
-static int visit_brick(walk *w, const iso_box *box)
-{
-    size_t lo[3], hi[3];
+    const iso_bricks *g = &c->tree->bricks;
+    uint32_t lo[3], hi[3];
     for (int d = 0; d < 3; d++) {
-        lo[d] = box->lo[d];
-        hi[d] = box->hi[d];
-        w->brick_lo[d] = box->lo[d];
-        w->brick_n[d] = box->hi[d] - box->lo[d] + 1;
+        lo[d] = box->lo[d] / ISO_BRICK_CELLS;
+        hi[d] = (box->hi[d] - 1) / ISO_BRICK_CELLS;
     }
-    iso_vol_read_box(w->vol, lo, hi, w->brick);
-    return visit_sub_children(w, box);
+    for (uint32_t k = lo[2]; k <= hi[2]; k++)
+        for (uint32_t j = lo[1]; j <= hi[1]; j++)
+            for (uint32_t i = lo[0]; i <= hi[0]; i++) {
+                int inner = i > lo[0] && i < hi[0] && j > lo[1] && j < hi[1] && k > lo[2] && k < hi[2];
+                c->skip[((size_t)k * g->count[1] + j) * g->count[0] + i] =
+                    inner ? ISO_MARCH_SKIP_UNREAD : ISO_MARCH_SKIP_NUMBERED;
+            }
 }
 
-/* ---- stored nodes ---- */
-
-static int visit_node(walk *w, uint32_t index, const iso_box *box)
+static int descend(coarse *c, uint32_t index, const iso_box *box)
 {
-    const iso_tree_node *node = &w->tree->nodes[index];
-    w->stats->nodes_visited++;
-    if (!active(w, node->min, node->max))
+    const iso_tree_node *node = &c->tree->nodes[index];
+    c->tally.nodes_visited++;
+    if (c->prune && !(node->min <= c->level && c->level < node->max))
         return 0;
-    int rc = try_fan(w, box, node->err, 0);
-    if (rc)
-        return rc < 0 ? rc : 0;
-    if (!node->first_child)
-        return visit_brick(w, box);
+    int rc = try_fan(c, box, node->err, SIZE_MAX, &c->scratch, &c->fans, &c->tally);
+    if (rc == 1)
+        skip_bricks_of(c, box);
+    if (rc || !node->first_child)
+        return rc < 0 ? rc : 0; /* fanned, or a brick left to PASS 2 */
     iso_box left, right;
     iso_box_split(box, &left, &right);
-    rc = visit_node(w, node->first_child, &left);
-    return rc ? rc : visit_node(w, node->first_child + 1, &right);
+    rc = descend(c, node->first_child, &left);
+    return rc ? rc : descend(c, node->first_child + 1, &right);
+}
+
+/* ---- PASS 2: below the bricks ---- */
+
+static double sample_at(const sub_walk *w, uint32_t x, uint32_t y, uint32_t z)
+{
+    const iso_march_brick *b = w->brick;
+    return w->samples[((size_t)(z - b->lo[2]) * b->n[1] + (y - b->lo[1])) * b->n[0] + (x - b->lo[0])];
+}
+
+/* Lemma 1's fit error of box, or any value above limit as soon as a row shows it. */
+static double fit_error_past(const sub_walk *w, const iso_box *box, double limit)
+{
+    double c[8], inv[3], worst = 0;
+    for (int k = 0; k < 8; k++)
+        c[k] = sample_at(w, k & 1 ? box->hi[0] : box->lo[0], k & 2 ? box->hi[1] : box->lo[1],
+                         k & 4 ? box->hi[2] : box->lo[2]);
+    for (int d = 0; d < 3; d++)
+        inv[d] = box->hi[d] > box->lo[d] ? 1.0 / (box->hi[d] - box->lo[d]) : 0.0;
+    /* The middle sample first: where the data strays from its corners' trilinear most
+     * often, so most boxes that will not fan are refused after one sample. */
+    uint32_t m[3];
+    for (int d = 0; d < 3; d++)
+        m[d] = (box->lo[d] + box->hi[d]) / 2;
+    double at_middle = sample_at(w, m[0], m[1], m[2]);
+    double middle = fabs(at_middle - iso_tri_eval(c, (m[0] - box->lo[0]) * inv[0], (m[1] - box->lo[1]) * inv[1],
+                                          (m[2] - box->lo[2]) * inv[2]));
+    if (middle > limit)
+        return middle;
+    for (uint32_t z = box->lo[2]; z <= box->hi[2]; z++)
+        for (uint32_t y = box->lo[1]; y <= box->hi[1]; y++) {
+            double v = (y - box->lo[1]) * inv[1], t = (z - box->lo[2]) * inv[2];
+            double a = iso_tri_eval(c, 0, v, t), e = iso_tri_eval(c, 1, v, t) - a;
+            for (uint32_t x = box->lo[0]; x <= box->hi[0]; x++) {
+                double s = sample_at(w, x, y, z), d = fabs(s - (a + e * ((x - box->lo[0]) * inv[0])));
+                if (!(d <= worst))
+                    worst = s != s ? INFINITY : d;
+            }
+            if (worst > limit)
+                return worst;
+        }
+    return worst;
+}
+
+/* The brick-local cell range of box, and whether any of its cells is mixed. */
+static int box_cells(const sub_walk *w, const iso_box *box, uint32_t lo[3], uint32_t hi[3])
+{
+    for (int d = 0; d < 3; d++) {
+        lo[d] = box->lo[d] - w->brick->lo[d];
+        hi[d] = box->hi[d] - w->brick->lo[d];
+    }
+    unsigned span = ((1u << hi[0]) - 1) & ~((1u << lo[0]) - 1);
+    for (uint32_t z = lo[2]; z < hi[2]; z++)
+        for (uint32_t y = lo[1]; y < hi[1]; y++)
+            if (w->brick->mixed[z][y] & span)
+                return 1;
+    return 0;
+}
+
+static void cover_cells(iso_march_brick *brick, const uint32_t lo[3], const uint32_t hi[3])
+{
+    unsigned span = ((1u << hi[0]) - 1) & ~((1u << lo[0]) - 1);
+    for (uint32_t z = lo[2]; z < hi[2]; z++)
+        for (uint32_t y = lo[1]; y < hi[1]; y++)
+            brick->covered[z][y] |= (uint8_t)span;
+}
+
+static int visit_sub(const coarse *c, sub_walk *w, const iso_box *box)
+{
+    uint32_t lo[3], hi[3];
+    if (iso_box_cells(box) < MIN_FAN_CELLS || !box_cells(w, box, lo, hi))
+        return 0; /* marching cubes' cells, or nothing to draw */
+    w->tally.nodes_visited++;
+    double err = fit_error_past(w, box, c->fit_limit);
+    if (err <= c->fit_limit) {
+        size_t triangles = w->fans.triangle_count, centres = w->fans.centre_count;
+        size_t most = iso_march_box_triangles(w->brick, lo, hi);
+        int rc = try_fan(c, box, err, most, &w->scratch, &w->fans, &w->tally);
+        if (rc < 0)
+            return rc;
+        if (rc == 1) {
+            cover_cells(w->brick, lo, hi);
+            w->brick->extra_triangles += w->fans.triangle_count - triangles;
+            w->brick->extra_vertices += w->fans.centre_count - centres;
+            return 0;
+        }
+    }
+    iso_box left, right;
+    iso_box_split(box, &left, &right);
+    int rc = visit_sub(c, w, &left);
+    return rc ? rc : visit_sub(c, w, &right);
+}
+
+static int cover(void *context, int thread, iso_march_brick *brick)
+{
+    const coarse *c = context;
+    sub_walk *w = &c->threads[thread];
+    iso_box box, left, right;
+    size_t lo[3], hi[3];
+    for (int d = 0; d < 3; d++) {
+        box.lo[d] = brick->lo[d];
+        box.hi[d] = brick->lo[d] + brick->n[d] - 1u;
+        lo[d] = box.lo[d];
+        hi[d] = box.hi[d];
+    }
+    w->brick = brick;
+    iso_vol_read_box(c->vol, lo, hi, w->samples);
+    iso_box_split(&box, &left, &right);
+    int rc = visit_sub(c, w, &left);
+    return rc ? rc : visit_sub(c, w, &right);
+}
+
+/* ---- PASS 3: the fans' vertices ---- */
+
+static void place_centre(const iso_volume *vol, const float *index, int world, float *out)
+{
+    double p[3] = {index[0], index[1], index[2]}, q[3];
+    if (world)
+        iso_vol_index_to_world(vol, p, q);
+    for (int d = 0; d < 3; d++)
+        out[d] = (float)(world ? q[d] : p[d]);
+}
+
+static int number_fans(const iso_volume *vol, const iso_fan_output *fans, const iso_march *march,
+                       int world, iso_mesh *mesh)
+{
+    assert(mesh->vertex_count + fans->centre_count <= mesh->vertex_capacity);
+    assert(mesh->triangle_count + fans->triangle_count <= mesh->triangle_capacity);
+    size_t first_centre = mesh->vertex_count;
+    for (size_t i = 0; i < fans->centre_count; i++)
+        place_centre(vol, fans->centres + 3 * i, world, mesh->positions + 3 * mesh->vertex_count++);
+    uint32_t *out = mesh->indices + 3 * mesh->triangle_count;
+    for (size_t i = 0; i < 3 * fans->triangle_count; i++) {
+        uint64_t ref = fans->corners[i];
+        if (ref & ISO_FAN_CENTRE) {
+            out[i] = (uint32_t)(first_centre + (ref & ~ISO_FAN_CENTRE));
+            continue;
+        }
+        uint32_t corner[3];
+        int axis;
+        iso_fan_edge_of_key(vol, ref, corner, &axis);
+        out[i] = iso_march_vertex(march, corner, axis);
+        if (out[i] == UINT32_MAX)
+            return ISO_E_ARGUMENT; /* a loop vertex the kernel did not number: a bug */
+    }
+    mesh->triangle_count += fans->triangle_count;
+    return 0;
+}
+
+static void sum_tally(fan_tally *into, const fan_tally *from)
+{
+    into->nodes_visited += from->nodes_visited;
+    into->nodes_polygonized += from->nodes_polygonized;
+    into->cells_covered += from->cells_covered;
+    if (from->vertex_error > into->vertex_error)
+        into->vertex_error = from->vertex_error;
+    if (from->fit_error > into->fit_error)
+        into->fit_error = from->fit_error;
 }
 
 /* ---- the passes after descent ---- */
@@ -282,28 +355,47 @@ static int finish(const iso_volume *vol, iso_space space, int weld, iso_mesh *me
     return 0;
 }
 
-/* Tolerance 0: the exact path, then the cap's cells welded onto it if asked. */
-static int extract_exact(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
-                         iso_extract_stats *stats, double start, iso_error *err)
+/* PASS 2 to 5, after PASS 1 when c is not NULL: the kernel, the fans, the cap. */
+static int march_and_finish(const iso_tree *tree, const iso_extract_params *params, coarse *c,
+                            iso_mesh *mesh, iso_extract_stats *stats, double start, iso_error *err)
 {
-    /* The root's bounds answer a level outside the data with one node, as the descent does. */
-    const iso_tree_node *root = &tree->nodes[0];
-    stats->nodes_visited = 1;
-    if (!params->no_minmax && !(root->min <= params->level && params->level < root->max) &&
-        !params->cap) {
-        iso_mesh_free(mesh);
-        return finish(tree->vol, params->space, 0, mesh, stats, start, err);
-    }
-    iso_march_stats ms;
     /* With a cap the march stays in index space, so that the cap's vertices weld to it. */
     int world = params->space == ISO_SPACE_WORLD && !params->cap;
-    int rc = iso_march_bricks(tree->vol, &tree->bricks, params->level, !params->no_minmax, world,
-                              params->threads, mesh, &ms, err);
+    iso_march_options options = {.prune = !params->no_minmax, .world = world, .threads = params->threads};
+    if (c) {
+        options.skip = c->skip;
+        options.cover = cover;
+        options.cover_context = c;
+        options.extra_vertices = c->fans.centre_count;
+        options.extra_triangles = c->fans.triangle_count;
+    }
+    iso_march *march;
+    iso_march_stats ms;
+    int rc = iso_march_begin(tree->vol, &tree->bricks, params->level, &options, mesh, &march, &ms, err);
     if (rc)
         return rc;
-    stats->nodes_visited += iso_bricks_total(&tree->bricks);
-    stats->cells_visited = ms.cells_visited;
-    stats->error_bound = ms.error_bound;
+    fan_tally tally = {0};
+    if (c) {
+        sum_tally(&tally, &c->tally);
+        rc = number_fans(tree->vol, &c->fans, march, world, mesh);
+        for (int t = 0; t < c->thread_count && !rc; t++) {
+            sum_tally(&tally, &c->threads[t].tally);
+            rc = number_fans(tree->vol, &c->threads[t].fans, march, world, mesh);
+        }
+        if (!rc && tally.nodes_polygonized && iso_mesh_drop_unused(mesh))
+            rc = ISO_E_NOMEM;
+    }
+    iso_march_end(march);
+    if (rc) {
+        iso_mesh_free(mesh);
+        return rc == ISO_E_NOMEM ? iso_error_set(err, rc, "out of memory extracting the surface")
+                                 : iso_error_set(err, rc, "a fan vertex has no crossing in the brick kernel");
+    }
+    stats->nodes_visited += tally.nodes_visited + ms.bricks_active;
+    stats->nodes_polygonized = tally.nodes_polygonized;
+    stats->cells_visited = ms.cells_visited + tally.nodes_polygonized;
+    stats->error_bound = ms.error_bound > tally.vertex_error ? ms.error_bound : tally.vertex_error;
+    stats->fit_error = tally.fit_error;
     if (params->cap && emit_caps(tree->vol, params->level, mesh)) {
         iso_mesh_free(mesh);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory capping the surface");
@@ -312,10 +404,43 @@ static int extract_exact(const iso_tree *tree, const iso_extract_params *params,
     return finish(tree->vol, world ? ISO_SPACE_INDEX : params->space, params->cap, mesh, stats, start, err);
 }
 
+static void coarse_free(coarse *c)
+{
+    iso_fan_scratch_free(&c->scratch);
+    iso_fan_output_free(&c->fans);
+    for (int t = 0; t < c->thread_count; t++) {
+        iso_fan_scratch_free(&c->threads[t].scratch);
+        iso_fan_output_free(&c->threads[t].fans);
+    }
+    free(c->threads);
+    free(c->skip);
+}
+
+/* Tolerance > 0: PASS 1, then the rest. */
+static int extract_coarse(const iso_tree *tree, const iso_extract_params *params, double fit_share,
+                          iso_mesh *mesh, iso_extract_stats *stats, double start, iso_error *err)
+{
+    coarse c = {.tree = tree, .vol = tree->vol, .level = params->level, .prune = !params->no_minmax};
+    c.fit_limit = fit_share * params->tolerance;
+    c.centre_limit = params->tolerance * CENTRE_SHARE;
+    c.thread_count = iso_parallel_threads(params->threads);
+    c.threads = calloc((size_t)c.thread_count, sizeof *c.threads);
+    c.skip = calloc(iso_bricks_total(&tree->bricks), 1);
+    iso_box root = iso_box_root(tree->vol);
+    int rc = c.threads && c.skip ? descend(&c, 0, &root) : ISO_E_NOMEM;
+    if (rc) {
+        coarse_free(&c);
+        iso_mesh_free(mesh);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    }
+    rc = march_and_finish(tree, params, &c, mesh, stats, start, err);
+    coarse_free(&c);
+    return rc;
+}
+
 int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
                 iso_extract_stats *stats, iso_error *err)
 {
-    static walk zero_walk;
     iso_extract_stats local;
     double start = iso_clock_ms();
     if (!stats)
@@ -328,33 +453,17 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
     double share = params->fit_share == 0 ? 1.0 : params->fit_share;
     if (!(share > 0 && share <= 1))
         return iso_error_set(err, ISO_E_ARGUMENT, "fit share must be in (0, 1]");
-
-    if (params->tolerance == 0)
-        return extract_exact(tree, params, mesh, stats, start, err);
-    walk *w = malloc(sizeof *w);
-    if (!w)
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory");
-    *w = zero_walk;
-    w->tree = tree;
-    w->vol = tree->vol;
-    w->level = params->level;
-    w->tolerance = params->tolerance;
-    w->fit_limit = share * params->tolerance;
-    w->prune = !params->no_minmax;
-    w->soup = mesh;
-    w->stats = stats;
-    iso_mesh_clear(mesh);
-    iso_box root = iso_box_root(tree->vol);
-    int rc = visit_node(w, 0, &root);
-    if (!rc && params->cap)
-        rc = emit_caps(tree->vol, params->level, mesh);
-    iso_fan_scratch_free(&w->fan);
-    free(w);
-    if (rc) {
-        iso_mesh_free(mesh);
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    /* The root's bounds answer a level outside the data with one node. */
+    const iso_tree_node *root = &tree->nodes[0];
+    if (!params->no_minmax && !params->cap && !(root->min <= params->level && params->level < root->max)) {
+        stats->nodes_visited = 1;
+        iso_mesh_clear(mesh);
+        return finish(tree->vol, params->space, 0, mesh, stats, start, err);
     }
-    return finish(tree->vol, params->space, 1, mesh, stats, start, err);
+    if (params->tolerance > 0)
+        return extract_coarse(tree, params, share, mesh, stats, start, err);
+    stats->nodes_visited = 1;
+    return march_and_finish(tree, params, NULL, mesh, stats, start, err);
 }
 
 int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,

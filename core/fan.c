@@ -271,19 +271,41 @@ static int sound_triangle(const iso_volume *vol, const float *a, const float *b,
     return n[0] * g[0] + n[1] * g[1] + n[2] * g[2] < 0;
 }
 
-static int emit_triangle(iso_mesh *soup, const float *a, const float *b, const float *c)
+void iso_fan_output_free(iso_fan_output *out)
 {
-    if (iso_mesh_reserve(soup, soup->vertex_count + 3, soup->triangle_count + 1))
+    free(out->corners);
+    free(out->centres);
+    memset(out, 0, sizeof *out);
+}
+
+void iso_fan_edge_of_key(const iso_volume *vol, uint64_t key, uint32_t corner[3], int *axis)
+{
+    uint64_t at = key / 3;
+    *axis = (int)(key % 3);
+    corner[0] = (uint32_t)(at % vol->dims[0]);
+    at /= vol->dims[0];
+    corner[1] = (uint32_t)(at % vol->dims[1]);
+    corner[2] = (uint32_t)(at / vol->dims[1]);
+}
+
+static int emit_triangle(iso_fan_output *out, uint64_t a, uint64_t b, uint64_t c)
+{
+    if (grow((void **)&out->corners, &out->triangle_capacity, out->triangle_count + 1, 3 * sizeof *out->corners))
         return ISO_E_NOMEM;
-    float *p = soup->positions + 3 * soup->vertex_count;
-    memcpy(p, a, 12);
-    memcpy(p + 3, b, 12);
-    memcpy(p + 6, c, 12);
-    uint32_t *t = soup->indices + 3 * soup->triangle_count;
-    for (int k = 0; k < 3; k++)
-        t[k] = (uint32_t)(soup->vertex_count + (size_t)k);
-    soup->vertex_count += 3;
-    soup->triangle_count++;
+    uint64_t *t = out->corners + 3 * out->triangle_count++;
+    t[0] = a;
+    t[1] = b;
+    t[2] = c;
+    return 0;
+}
+
+static int add_centre(iso_fan_output *out, const double centre[3], uint64_t *ref)
+{
+    if (grow((void **)&out->centres, &out->centre_capacity, out->centre_count + 1, 3 * sizeof *out->centres))
+        return ISO_E_NOMEM;
+    for (int d = 0; d < 3; d++)
+        out->centres[3 * out->centre_count + (size_t)d] = (float)centre[d];
+    *ref = ISO_FAN_CENTRE | out->centre_count++;
     return 0;
 }
 
@@ -291,7 +313,7 @@ static int emit_triangle(iso_mesh *soup, const float *a, const float *b, const f
  * (centre, next, this): each face segment this -> next is then used as next -> this, the
  * direction marching cubes' own triangles give it. */
 static int fan_loop(const iso_volume *vol, const iso_box *box, double level, double vertex_limit,
-                    const iso_fan_scratch *s, size_t n, iso_mesh *soup, iso_fan_result *result)
+                    const iso_fan_scratch *s, size_t n, iso_fan_output *out, iso_fan_result *result)
 {
     if (n < 3)
         return 0;
@@ -304,7 +326,8 @@ static int fan_loop(const iso_volume *vol, const iso_box *box, double level, dou
         if (!sound_triangle(vol, c, b, a))
             return 0;
         result->triangles++;
-        return emit_triangle(soup, c, b, a) ? ISO_E_NOMEM : 1;
+        return emit_triangle(out, s->segments[s->loop[2]].from, s->segments[s->loop[1]].from,
+                             s->segments[s->loop[0]].from) ? ISO_E_NOMEM : 1;
     }
     double centre[3];
     double error = place_centre(vol, box, level, s, n, centre);
@@ -319,19 +342,19 @@ static int fan_loop(const iso_volume *vol, const iso_box *box, double level, dou
         if (!sound_triangle(vol, c, next, here))
             return 0;
     }
-    for (size_t i = 0; i < n; i++) {
-        const float *here = s->segments[s->loop[i]].from_position;
-        const float *next = s->segments[s->loop[(i + 1) % n]].from_position;
-        if (emit_triangle(soup, c, next, here))
+    uint64_t centre_ref;
+    if (add_centre(out, centre, &centre_ref))
+        return ISO_E_NOMEM;
+    for (size_t i = 0; i < n; i++)
+        if (emit_triangle(out, centre_ref, s->segments[s->loop[(i + 1) % n]].from, s->segments[s->loop[i]].from))
             return ISO_E_NOMEM;
-    }
     result->triangles += n;
     return 1;
 }
 
 int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
                        double vertex_limit, size_t max_triangles, iso_fan_scratch *s,
-                       iso_mesh *soup, iso_fan_result *result)
+                       iso_fan_output *out, iso_fan_result *result)
 {
     assert(iso_box_cells(box) >= 2);
     memset(result, 0, sizeof *result);
@@ -342,13 +365,13 @@ int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
                 return ISO_E_NOMEM;
     if (index_segments(s))
         return ISO_E_NOMEM;
-    size_t vertices_before = soup->vertex_count, triangles_before = soup->triangle_count;
+    size_t centres_before = out->centre_count, triangles_before = out->triangle_count;
     int rc = 1;
     for (size_t i = 0; i < s->segment_count && rc == 1; i++) {
         if (s->segments[i].used)
             continue;
         size_t n = collect_loop(s, i);
-        rc = fan_loop(vol, box, level, vertex_limit, s, n, soup, result);
+        rc = fan_loop(vol, box, level, vertex_limit, s, n, out, result);
         result->loops++;
         if (rc == 1 && result->triangles > max_triangles)
             rc = 0;
@@ -358,8 +381,8 @@ int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
     if (rc == 1 && result->loops == 0)
         rc = 0;
     if (rc != 1) {
-        soup->vertex_count = vertices_before;
-        soup->triangle_count = triangles_before;
+        out->centre_count = centres_before;
+        out->triangle_count = triangles_before;
         memset(result, 0, sizeof *result);
     }
     return rc;

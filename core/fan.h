@@ -27,7 +27,6 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "mesh.h"
 #include "tree.h"
 #include "volume.h"
 
@@ -47,16 +46,34 @@ typedef struct iso_fan_scratch {
 
 void iso_fan_scratch_free(iso_fan_scratch *scratch);
 
+/* A fan's triangles, as references the caller turns into vertex ids: a loop vertex is
+ * named by the grid edge it lies on, key ((z * ny + y) * nx + x) * 3 + axis with (x, y, z)
+ * the edge's low end (marching cubes numbers the same crossing, so nothing needs welding);
+ * a centre is ISO_FAN_CENTRE | i, its index-space position centres[3i..3i+2]. Owned by the
+ * caller; grows as needed; iso_fan_output_free releases it. */
+#define ISO_FAN_CENTRE (UINT64_C(1) << 63)
+typedef struct iso_fan_output {
+    uint64_t *corners;                 /* 3 per triangle */
+    size_t triangle_count, triangle_capacity;
+    float *centres;                    /* 3 per centre */
+    size_t centre_count, centre_capacity;
+} iso_fan_output;
+
+void iso_fan_output_free(iso_fan_output *out);
+
+/* The grid edge of a key: its low end and axis. */
+void iso_fan_edge_of_key(const iso_volume *vol, uint64_t key, uint32_t corner[3], int *axis);
+
 typedef struct iso_fan_result {
     size_t triangles, loops;
     double vertex_error; /* largest |f(v) - level| over the vertices emitted */
 } iso_fan_result;
 
-/* Appends box's surface to soup in index space. Returns 1 when emitted, 0 when refused
- * (nothing appended; also when it would take more than max_triangles), ISO_E_NOMEM. The
- * box must hold at least two cells. */
+/* Appends box's surface to out. Returns 1 when emitted, 0 when refused (nothing
+ * appended; also when it would take more than max_triangles), ISO_E_NOMEM. The box must
+ * hold at least two cells. */
 int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
                        double vertex_limit, size_t max_triangles, iso_fan_scratch *scratch,
-                       iso_mesh *soup, iso_fan_result *result);
+                       iso_fan_output *out, iso_fan_result *result);
 
 #endif

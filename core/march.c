@@ -17,7 +17,11 @@
  *   numbering order, then the triangles of its mixed cells into its own range.
  *
  * Layout: a brick has at most 9x9x9 samples; row r = z * 9 + y of the brick holds bit x
- * for sample (x, y, z), brick-local. Only bricks with triangles are touched in PASS 4. */
+ * for sample (x, y, z), brick-local. Only bricks with triangles are touched in PASS 4.
+ *
+ * With a tolerance (iso_march_begin), PASS 2 also hands each brick to the caller's cover
+ * function, which may take cells out of marching cubes (it fans them itself), and skipped
+ * bricks are classified for their crossing ids only. */
 #include "march.h"
 
 #include <assert.h>
@@ -38,6 +42,8 @@ typedef struct active_brick {
     uint8_t owned[3];                    /* corners 0..owned-1 per axis are this brick's */
     uint32_t vertices, triangles;        /* counted in PASS 2 */
     size_t first_vertex, first_triangle; /* PASS 3 */
+    int skip;                            /* number the crossings, march no cell */
+    uint8_t covered[ISO_BRICK_CELLS][ISO_BRICK_CELLS]; /* [z][y] bit x: a cover's cell */
     uint16_t inside[ROWS];               /* bit x: sample (x, y, z) above the level */
     uint16_t cross[ROWS][3];             /* bit x: owned edge from (x, y, z) along axis crosses */
     uint16_t before[ROWS][3];            /* owned crossings numbered before that row */
@@ -45,7 +51,7 @@ typedef struct active_brick {
 
 #define MAX_THREADS 64
 
-typedef struct march_job {
+typedef struct iso_march {
     const iso_volume *vol;
     const iso_bricks *bricks;
     double level;
@@ -54,7 +60,12 @@ typedef struct march_job {
     int32_t *slot;     /* per brick of the grid: its index in active, or -1 */
     iso_mesh *mesh;
     int world;         /* positions in world mm rather than index space */
+    const uint8_t *skip;
+    iso_march_cover_fn cover;
+    void *cover_context;
     double error[MAX_THREADS];
+    size_t extra_vertices[MAX_THREADS], extra_triangles[MAX_THREADS];
+    int cover_status[MAX_THREADS];
 } march_job;
 
 static uint8_t bit_count[1 << S]; /* popcount of 9-bit words, without needing popcnt */
@@ -113,26 +124,56 @@ static void brick_origin(const active_brick *ab, size_t lo[3])
         lo[d] = (size_t)ab->brick[d] * ISO_BRICK_CELLS;
 }
 
-/* Cells x of the row of cells at (y, z) that are neither all inside nor all outside. */
-static unsigned mixed_cells(const active_brick *ab, int y, int z)
+static void brick_origin_u32(const active_brick *ab, uint32_t lo[3])
 {
-    unsigned a = ab->inside[z * S + y], b = ab->inside[z * S + y + 1];
-    unsigned c = ab->inside[(z + 1) * S + y], d = ab->inside[(z + 1) * S + y + 1];
-    unsigned any = a | b | c | d, all = a & b & c & d;
-    unsigned full = all & (all >> 1), empty = ~any & ~(any >> 1);
-    return ~(full | empty) & ((1u << (ab->n[0] - 1)) - 1);
+    for (int d = 0; d < 3; d++)
+        lo[d] = ab->brick[d] * ISO_BRICK_CELLS;
 }
 
-static unsigned cell_case(const active_brick *ab, int x, int y, int z)
+/* Cells x of the row of cells at (y, z) that are neither all inside nor all outside. */
+static unsigned mixed_row(const uint16_t *inside, const uint8_t n[3], int y, int z)
 {
-    unsigned a = ab->inside[z * S + y] >> x, b = ab->inside[z * S + y + 1] >> x;
-    unsigned c = ab->inside[(z + 1) * S + y] >> x, d = ab->inside[(z + 1) * S + y + 1] >> x;
+    unsigned a = inside[z * S + y], b = inside[z * S + y + 1];
+    unsigned c = inside[(z + 1) * S + y], d = inside[(z + 1) * S + y + 1];
+    unsigned any = a | b | c | d, all = a & b & c & d;
+    unsigned full = all & (all >> 1), empty = ~any & ~(any >> 1);
+    return ~(full | empty) & ((1u << (n[0] - 1)) - 1);
+}
+
+/* The cells of the row this brick marches: mixed and not covered by a caller's fan. */
+static unsigned mixed_cells(const active_brick *ab, int y, int z)
+{
+    return mixed_row(ab->inside, ab->n, y, z) & ~(unsigned)ab->covered[z][y];
+}
+
+static unsigned cell_case(const uint16_t *inside, int x, int y, int z)
+{
+    unsigned a = inside[z * S + y] >> x, b = inside[z * S + y + 1] >> x;
+    unsigned c = inside[(z + 1) * S + y] >> x, d = inside[(z + 1) * S + y + 1] >> x;
     return (a & 3) | (b & 3) << 2 | (c & 3) << 4 | (d & 3) << 6;
 }
 
 /* ---- PASS 2: classify ---- */
 
-static void classify(const march_job *job, active_brick *ab)
+/* Shows the classified brick to the caller's cover function and keeps what it covers. */
+static int cover_brick(march_job *job, int t, active_brick *ab)
+{
+    iso_march_brick view;
+    memset(&view, 0, sizeof view);
+    brick_origin_u32(ab, view.lo);
+    memcpy(view.n, ab->n, sizeof view.n);
+    view.inside = ab->inside;
+    for (int z = 0; z + 1 < ab->n[2]; z++)
+        for (int y = 0; y + 1 < ab->n[1]; y++)
+            view.mixed[z][y] = (uint8_t)mixed_row(ab->inside, ab->n, y, z);
+    int rc = job->cover(job->cover_context, t, &view);
+    memcpy(ab->covered, view.covered, sizeof ab->covered);
+    job->extra_vertices[t] += view.extra_vertices;
+    job->extra_triangles[t] += view.extra_triangles;
+    return rc;
+}
+
+static void classify(march_job *job, int t, active_brick *ab)
 {
     size_t lo[3], hi[3];
     iso_bricks_box(job->vol, ab->brick, lo, hi);
@@ -161,12 +202,18 @@ static void classify(const march_job *job, active_brick *ab)
             }
         }
     ab->vertices = count;
+    memset(ab->covered, 0, sizeof ab->covered);
+    ab->triangles = 0;
+    if (ab->skip)
+        return;
+    if (job->cover && !job->cover_status[t])
+        job->cover_status[t] = cover_brick(job, t, ab);
     const iso_mc_case *cases = iso_mc_cases();
     uint32_t triangles = 0;
     for (int z = 0; z + 1 < ab->n[2]; z++)
         for (int y = 0; y + 1 < ab->n[1]; y++)
             for (unsigned m = mixed_cells(ab, y, z); m; m &= m - 1)
-                triangles += cases[cell_case(ab, __builtin_ctz(m), y, z)].triangle_count;
+                triangles += cases[cell_case(ab->inside, __builtin_ctz(m), y, z)].triangle_count;
     ab->triangles = triangles;
 }
 
@@ -185,7 +232,7 @@ static void classify_share(void *context, int t, int threads)
     march_job *job = context;
     range r = share_of(job->active_count, t, threads);
     for (size_t i = r.begin; i < r.end; i++)
-        classify(job, &job->active[i]);
+        classify(job, t, &job->active[i]);
 }
 
 /* ---- PASS 4: generate ---- */
@@ -261,7 +308,7 @@ static void emit_triangles(const march_job *job, const active_brick *ab)
         for (int y = 0; y + 1 < ab->n[1]; y++)
             for (unsigned m = mixed_cells(ab, y, z); m; m &= m - 1) {
                 int x = __builtin_ctz(m);
-                const iso_mc_case *cs = cases + cell_case(ab, x, y, z);
+                const iso_mc_case *cs = cases + cell_case(ab->inside, x, y, z);
                 uint32_t id[12];
                 uint16_t known = 0;
                 for (int k = 0; k < 3 * cs->triangle_count; k++) {
@@ -297,12 +344,20 @@ static void generate_share(void *context, int t, int threads)
 
 /* ---- the passes in order ---- */
 
+static int brick_selected(const march_job *job, size_t at, int prune)
+{
+    const iso_bricks *g = job->bricks;
+    if (job->skip && job->skip[at] == ISO_MARCH_SKIP_UNREAD)
+        return 0;
+    return !prune || (g->min[at] <= job->level && job->level < g->max[at]);
+}
+
 static int select_bricks(march_job *job, int prune)
 {
     const iso_bricks *g = job->bricks;
     size_t total = iso_bricks_total(g), count = 0;
     for (size_t i = 0; i < total; i++)
-        count += !prune || (g->min[i] <= job->level && job->level < g->max[i]);
+        count += brick_selected(job, i, prune);
     job->slot = malloc(total * sizeof *job->slot);
     job->active = malloc((count ? count : 1) * sizeof *job->active);
     if (!job->slot || !job->active)
@@ -312,10 +367,11 @@ static int select_bricks(march_job *job, int prune)
         for (uint32_t j = 0; j < g->count[1]; j++)
             for (uint32_t i = 0; i < g->count[0]; i++) {
                 size_t at = ((size_t)k * g->count[1] + j) * g->count[0] + i;
-                int on = !prune || (g->min[at] <= job->level && job->level < g->max[at]);
+                int on = brick_selected(job, at, prune);
                 job->slot[at] = on ? (int32_t)n : -1;
                 if (on) {
                     active_brick *ab = &job->active[n++];
+                    ab->skip = job->skip && job->skip[at];
                     ab->brick[0] = i;
                     ab->brick[1] = j;
                     ab->brick[2] = k;
@@ -325,7 +381,7 @@ static int select_bricks(march_job *job, int prune)
     return 0;
 }
 
-static int lay_out_mesh(march_job *job, iso_mesh *mesh)
+static int lay_out_mesh(march_job *job, iso_mesh *mesh, size_t extra_vertices, size_t extra_triangles)
 {
     size_t vertices = 0, triangles = 0;
     for (size_t i = 0; i < job->active_count; i++) {
@@ -334,50 +390,148 @@ static int lay_out_mesh(march_job *job, iso_mesh *mesh)
         vertices += job->active[i].vertices;
         triangles += job->active[i].triangles;
     }
-    if (vertices > UINT32_MAX)
+    if (vertices + extra_vertices > UINT32_MAX)
         return ISO_E_ARGUMENT;
     iso_mesh_clear(mesh);
-    if (iso_mesh_reserve(mesh, vertices, triangles))
+    if (iso_mesh_reserve(mesh, vertices + extra_vertices, triangles + extra_triangles))
         return ISO_E_NOMEM;
     mesh->vertex_count = vertices;
     mesh->triangle_count = triangles;
     return 0;
 }
 
+static size_t cells_of(const iso_volume *vol, const active_brick *ab)
+{
+    size_t lo[3], hi[3], covered = 0;
+    iso_bricks_box(vol, ab->brick, lo, hi);
+    for (int z = 0; z < ISO_BRICK_CELLS; z++)
+        for (int y = 0; y < ISO_BRICK_CELLS; y++)
+            covered += bit_count[ab->covered[z][y]];
+    return (hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]) - covered;
+}
+
+static void total_extras(const march_job *job, int used, const iso_march_options *o, size_t *vertices,
+                         size_t *triangles)
+{
+    *vertices = o->extra_vertices;
+    *triangles = o->extra_triangles;
+    for (int t = 0; t < used; t++) {
+        *vertices += job->extra_vertices[t];
+        *triangles += job->extra_triangles[t];
+    }
+}
+
+static int run_passes(march_job *job, const iso_march_options *o, iso_march_stats *stats)
+{
+    int threads = iso_parallel_threads(o->threads);
+    int rc = select_bricks(job, o->prune);
+    if (rc)
+        return rc;
+    int used = job->active_count < (size_t)threads ? (job->active_count ? (int)job->active_count : 1) : threads;
+    iso_parallel_run(used, classify_share, job);
+    for (int t = 0; t < used; t++)
+        if (job->cover_status[t])
+            return job->cover_status[t];
+    size_t extra_vertices, extra_triangles;
+    total_extras(job, used, o, &extra_vertices, &extra_triangles);
+    rc = lay_out_mesh(job, job->mesh, extra_vertices, extra_triangles);
+    if (rc)
+        return rc;
+    iso_parallel_run(used, generate_share, job);
+    for (int t = 0; t < used; t++)
+        if (job->error[t] > stats->error_bound)
+            stats->error_bound = job->error[t];
+    stats->bricks_active = job->active_count;
+    for (size_t i = 0; i < job->active_count; i++)
+        if (!job->active[i].skip)
+            stats->cells_visited += cells_of(job->vol, &job->active[i]);
+    return 0;
+}
+
+int iso_march_begin(const iso_volume *vol, const iso_bricks *bricks, double level,
+                    const iso_march_options *options, iso_mesh *mesh, iso_march **out,
+                    iso_march_stats *stats, iso_error *err)
+{
+    static pthread_once_t once = PTHREAD_ONCE_INIT;
+    assert(vol && bricks && options && mesh && out && stats);
+    pthread_once(&once, count_bits);
+    memset(stats, 0, sizeof *stats);
+    *out = NULL;
+    march_job *job = calloc(1, sizeof *job);
+    if (!job) {
+        iso_mesh_free(mesh);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    }
+    job->vol = vol;
+    job->bricks = bricks;
+    job->level = level;
+    job->mesh = mesh;
+    job->world = options->world;
+    job->skip = options->skip;
+    job->cover = options->cover;
+    job->cover_context = options->cover_context;
+    int rc = run_passes(job, options, stats);
+    if (rc) {
+        iso_march_end(job);
+        iso_mesh_free(mesh);
+        if (rc == ISO_E_ARGUMENT)
+            return iso_error_set(err, rc, "the surface needs more than 2^32 - 1 vertices");
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    }
+    *out = job;
+    return 0;
+}
+
+uint32_t iso_march_vertex(const iso_march *job, const uint32_t corner[3], int axis)
+{
+    const iso_bricks *g = job->bricks;
+    uint32_t b[3];
+    for (int d = 0; d < 3; d++) {
+        b[d] = corner[d] / ISO_BRICK_CELLS;
+        if (b[d] >= g->count[d])
+            b[d] = g->count[d] - 1; /* the last sample plane belongs to the last brick */
+    }
+    int32_t slot = job->slot[((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0]];
+    assert(slot >= 0);
+    if (slot < 0)
+        return UINT32_MAX;
+    const active_brick *ab = &job->active[slot];
+    int x = (int)(corner[0] - b[0] * ISO_BRICK_CELLS), r = (int)(corner[2] - b[2] * ISO_BRICK_CELLS) * S +
+                                                       (int)(corner[1] - b[1] * ISO_BRICK_CELLS);
+    unsigned row = ab->cross[r][axis];
+    assert(row >> x & 1);
+    if (!(row >> x & 1))
+        return UINT32_MAX;
+    return (uint32_t)(ab->first_vertex + ab->before[r][axis] + bit_count[row & ((1u << x) - 1)]);
+}
+
+size_t iso_march_box_triangles(const iso_march_brick *brick, const uint32_t lo[3], const uint32_t hi[3])
+{
+    const iso_mc_case *cases = iso_mc_cases();
+    size_t count = 0;
+    unsigned span = ((1u << hi[0]) - 1) & ~((1u << lo[0]) - 1);
+    for (uint32_t z = lo[2]; z < hi[2]; z++)
+        for (uint32_t y = lo[1]; y < hi[1]; y++)
+            for (unsigned m = brick->mixed[z][y] & span; m; m &= m - 1)
+                count += cases[cell_case(brick->inside, __builtin_ctz(m), (int)y, (int)z)].triangle_count;
+    return count;
+}
+
+void iso_march_end(iso_march *job)
+{
+    if (!job)
+        return;
+    free(job->slot);
+    free(job->active);
+    free(job);
+}
+
 int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double level, int prune,
                      int world, int threads, iso_mesh *mesh, iso_march_stats *stats, iso_error *err)
 {
-    static pthread_once_t once = PTHREAD_ONCE_INIT;
-    assert(vol && bricks && mesh && stats);
-    pthread_once(&once, count_bits);
-    memset(stats, 0, sizeof *stats);
-    march_job job = {.vol = vol, .bricks = bricks, .level = level, .mesh = mesh, .world = world};
-    threads = iso_parallel_threads(threads);
-    int rc = select_bricks(&job, prune);
-    if (!rc) {
-        int used = job.active_count < (size_t)threads ? (job.active_count ? (int)job.active_count : 1) : threads;
-        iso_parallel_run(used, classify_share, &job);
-        rc = lay_out_mesh(&job, mesh);
-        if (!rc) {
-            iso_parallel_run(used, generate_share, &job);
-            for (int t = 0; t < used; t++)
-                if (job.error[t] > stats->error_bound)
-                    stats->error_bound = job.error[t];
-        }
-    }
-    stats->bricks_active = job.active_count;
-    for (size_t i = 0; i < job.active_count; i++) {
-        size_t lo[3], hi[3];
-        iso_bricks_box(vol, job.active[i].brick, lo, hi);
-        stats->cells_visited += (hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]);
-    }
-    free(job.slot);
-    free(job.active);
-    if (rc)
-        iso_mesh_free(mesh);
-    if (rc == ISO_E_ARGUMENT)
-        return iso_error_set(err, rc, "the surface needs more than 2^32 - 1 vertices");
-    if (rc)
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
-    return 0;
+    iso_march_options options = {.prune = prune, .world = world, .threads = threads};
+    iso_march *job;
+    int rc = iso_march_begin(vol, bricks, level, &options, mesh, &job, stats, err);
+    iso_march_end(job);
+    return rc;
 }

@@ -154,6 +154,33 @@ int iso_mesh_weld(iso_mesh *mesh)
     return 0;
 }
 
+int iso_mesh_drop_unused(iso_mesh *mesh)
+{
+    size_t n = mesh->vertex_count, indices = 3 * mesh->triangle_count;
+    uint32_t *remap = malloc((n ? n : 1) * sizeof *remap);
+    if (!remap)
+        return ISO_E_NOMEM;
+    memset(remap, 0xff, n * sizeof *remap);
+    for (size_t i = 0; i < indices; i++)
+        remap[mesh->indices[i]] = 0;
+    size_t kept = 0;
+    for (size_t v = 0; v < n; v++) {
+        if (remap[v] == UINT32_MAX)
+            continue;
+        if (kept != v) {
+            memcpy(mesh->positions + 3 * kept, mesh->positions + 3 * v, 12);
+            if (mesh->normals)
+                memcpy(mesh->normals + 3 * kept, mesh->normals + 3 * v, 12);
+        }
+        remap[v] = (uint32_t)kept++;
+    }
+    for (size_t i = 0; i < indices; i++)
+        mesh->indices[i] = remap[mesh->indices[i]];
+    mesh->vertex_count = kept;
+    free(remap);
+    return 0;
+}
+
 /* ---- measurements ---- */
 
 static void triangle_vectors(const iso_mesh *m, size_t t, double a[3], double b[3], double c[3])

@@ -38,6 +38,11 @@ int iso_mesh_append(iso_mesh *dst, iso_mesh *src);
  * temporary hash table of ~2V entries. Returns 0 or ISO_E_NOMEM (mesh unchanged). */
 int iso_mesh_weld(iso_mesh *mesh);
 
+/* Removes the vertices no triangle uses, keeping the others in order, and renumbers the
+ * triangles. O(V + T), allocates a temporary V-entry table. Returns 0 or ISO_E_NOMEM
+ * (mesh unchanged). */
+int iso_mesh_drop_unused(iso_mesh *mesh);
+
 /* Sum of triangle areas, in the square of the position unit. O(T). */
 double iso_mesh_area(const iso_mesh *mesh);
 /* Signed enclosed volume (divergence theorem), positive when normals point outward of
