@@ -324,6 +324,22 @@ static void emit_triangles(const march_job *job, const active_brick *ab)
     assert(out == job->mesh->indices + 3 * (ab->first_triangle + ab->triangles));
 }
 
+/* Asks for the sample rows of the brick's owned crossings ahead of time: PASS 2 read
+ * them long before, and along y and z consecutive rows are far apart in memory. */
+static void prefetch_samples(const march_job *job, const active_brick *ab)
+{
+    const iso_volume *vol = job->vol;
+    size_t size = iso_vol_type_size(vol->type), lo[3];
+    brick_origin(ab, lo);
+    const char *base = (const char *)vol->data;
+    for (int z = 0; z < ab->n[2]; z++)
+        for (int y = 0; y < ab->n[1]; y++)
+            if (ab->cross[z * S + y][0] | ab->cross[z * S + y][1] | ab->cross[z * S + y][2] |
+                (z && ab->cross[(z - 1) * S + y][2]) | (y && ab->cross[z * S + y - 1][1]))
+                __builtin_prefetch(base + (((lo[2] + (size_t)z) * vol->dims[1] + lo[1] + (size_t)y) * vol->dims[0] +
+                                           lo[0]) * size);
+}
+
 static void generate_share(void *context, int t, int threads)
 {
     march_job *job = context;
@@ -331,6 +347,8 @@ static void generate_share(void *context, int t, int threads)
     range r = share_of(job->active_count, t, threads);
     for (size_t i = r.begin; i < r.end; i++) {
         const active_brick *ab = &job->active[i];
+        if (i + 1 < r.end && job->active[i + 1].vertices)
+            prefetch_samples(job, &job->active[i + 1]);
         if (ab->vertices) {
             double e = place_vertices(job, ab);
             if (e > worst)
