@@ -112,7 +112,7 @@ int srv_cmd_extract(int argc, char **argv)
                         "[--budget N [--no-simplify]] [--simplify N] "
                         "[--normals none|trilinear|triquadratic|tricubic] [-o OUT.ply|.stl|.obj|.drc|.glb] [--json]");
     if (full_scan && (params.cap || budget))
-        return srv_fail("extract: --cap and --budget need the hierarchy; drop --full-scan");
+        return srv_fail("extract: %s needs the hierarchy; drop --full-scan", params.cap ? "--cap" : "--budget");
     if (budget && simplify)
         return srv_fail("extract: --budget chooses its own simplification; drop --simplify");
     if (no_simplify && !budget)

@@ -138,8 +138,15 @@ def main():
     only = os.environ.get("ISO_BENCH_CASES")  # e.g. "CThead skin" for a quick look
     chosen = [c for c in CASES if not only or any(o.strip() == c[2] for o in only.split(","))]
     chosen = [c for c in chosen if os.path.exists(os.path.join(SHARED, c[0]))]
+    os.makedirs("bench/results", exist_ok=True)
+    out = "bench/results/simplify.json"
+    cases = []
     with tempfile.TemporaryDirectory(prefix="isoserve-simplify-") as tmp:
-        cases = [run_case(f, lvl, label, tmp) for f, lvl, label in chosen]
+        for f, lvl, label in chosen:  # the JSON after every case: a long run keeps what it measured
+            cases.append(run_case(f, lvl, label, tmp))
+            json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                       "sample_step_voxels": SAMPLE_STEP, "vtk": vtk.vtkVersion.GetVTKVersion(),
+                       "cases": cases}, open(out, "w"), indent=1)
     print("distances in voxels to the exact surface: symmetric mean, p99, max; then the")
     print("largest distance from an exact vertex to the candidate (what the candidate lost)")
     print(f"{'case':12} {'budget':>7} {'mesh':24} {'triangles':>9} {'fits':>4} "
@@ -155,10 +162,6 @@ def main():
             est = f"{srv['simplify']['error_voxels']:>8.3f} {srv['simplify']['ms']:>7.0f}" if srv["simplified"] else ""
             print(f"{'':12} {'':>7} {kind:24} {srv['triangles']:>9} {'yes' if srv['fits'] else 'no':>4} "
                   f"{fmt(srv['distance'])} {est}")
-    os.makedirs("bench/results", exist_ok=True)
-    out = "bench/results/simplify.json"
-    json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "sample_step_voxels": SAMPLE_STEP,
-               "vtk": vtk.vtkVersion.GetVTKVersion(), "cases": cases}, open(out, "w"), indent=1)
     print(f"written {out}")
     return 0
 
