@@ -11,7 +11,7 @@ is one cell wide, so the ladder removes few triangles there. For each case and b
               tolerance, value range / 32, then the exact mesh simplified to N).
 Distances are in voxels (index-space meshes), both ways: from every vertex of the exact
 mesh to the candidate surface, and from points sampled every 0.5 voxel over the candidate
-(vertices, edges and interiors, vtkPolyDataPointSampler) to the exact surface
+(vertices, edges and interiors, vtkPolyDataPointSampler; ISO_SIMPLIFY_SAMPLE_STEP) to the exact surface
 (vtkImplicitPolyDataDistance from Debian's python3-vtk9); the symmetric figures pool
 both. For served meshes that were simplified, meshoptimizer's own error estimate stands
 next to the measured distances. Prints a table, writes bench/results/simplify.json."""
@@ -35,7 +35,7 @@ CASES = [  # file, level, label
     ("ch2better_301x370x316_u8.nhdr", 30, "ch2better"),
 ]
 BUDGETS = (50_000, 100_000, 200_000)
-SAMPLE_STEP = 0.5  # voxels between points sampled on a candidate surface
+SAMPLE_STEP = float(os.environ.get("ISO_SIMPLIFY_SAMPLE_STEP", "0.5"))  # voxels between samples on a candidate
 
 
 def extract(path, level, out, *args):
