@@ -14,7 +14,7 @@ GDCM_LIBS := -lgdcmMSFF -lgdcmDSED -lgdcmCommon
 CXXFLAGS := $(OPT) -std=c++17 -Wall -Wextra -Werror -Icore -Iproto $(shell pkg-config --cflags draco 2>/dev/null) \
             -isystem $(GDCM_INC)
 LIBS     := $(shell pkg-config --libs libmicrohttpd jansson libcurl 2>/dev/null) \
-            -lnifti2 -ldraco $(GDCM_LIBS) -lz -lm -pthread -lstdc++
+            -lnifti2 -ldraco -lmeshoptimizer $(GDCM_LIBS) -lz -lm -pthread -lstdc++
 
 BUILD    ?= build
 SAN_BUILD := build/san

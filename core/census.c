@@ -66,20 +66,8 @@ static void invert(const double a[3][3], double out[3][3])
 static size_t degenerate_triangles(const iso_mesh *m)
 {
     size_t count = 0;
-    for (size_t t = 0; t < m->triangle_count; t++) {
-        const float *p[3];
-        for (int k = 0; k < 3; k++)
-            p[k] = m->positions + 3 * (size_t)m->indices[3 * t + k];
-        double u[3], v[3];
-        for (int d = 0; d < 3; d++) {
-            u[d] = (double)p[1][d] - p[0][d];
-            v[d] = (double)p[2][d] - p[0][d];
-        }
-        double x = u[1] * v[2] - u[2] * v[1], y = u[2] * v[0] - u[0] * v[2],
-               z = u[0] * v[1] - u[1] * v[0];
-        if (x == 0 && y == 0 && z == 0)
-            count++;
-    }
+    for (size_t t = 0; t < m->triangle_count; t++)
+        count += (size_t)iso_mesh_zero_area(m, t);
     return count;
 }
 

@@ -242,13 +242,9 @@ typedef struct edge_slot {
     uint32_t forward, backward; /* uses as lo->hi and as hi->lo */
 } edge_slot;
 
-int iso_mesh_count_edges(const iso_mesh *mesh, iso_mesh_edges *out)
-{
-    return iso_mesh_count_edges_excusing(mesh, NULL, NULL, out);
-}
-
-int iso_mesh_count_edges_excusing(const iso_mesh *mesh, iso_mesh_edge_excuse_fn excuse,
-                                  void *context, iso_mesh_edges *out)
+/* Builds the table of undirected edges with their uses in each direction; the caller
+ * frees *out. */
+static int edge_table(const iso_mesh *mesh, edge_slot **out, size_t *out_cap)
 {
     size_t cap = 16;
     while (cap < 4 * mesh->triangle_count)
@@ -256,7 +252,6 @@ int iso_mesh_count_edges_excusing(const iso_mesh *mesh, iso_mesh_edge_excuse_fn 
     edge_slot *slots = calloc(cap, sizeof *slots);
     if (!slots)
         return ISO_E_NOMEM;
-    memset(out, 0, sizeof *out);
     for (size_t t = 0; t < mesh->triangle_count; t++)
         for (int e = 0; e < 3; e++) {
             uint32_t a = mesh->indices[3 * t + e], b = mesh->indices[3 * t + (e + 1) % 3];
@@ -273,21 +268,67 @@ int iso_mesh_count_edges_excusing(const iso_mesh *mesh, iso_mesh_edge_excuse_fn 
             else
                 slots[s].backward++;
         }
-    for (size_t s = 0; s < cap; s++) {
-        uint32_t uses = slots[s].forward + slots[s].backward;
-        if (!uses)
-            continue;
-        out->edges++;
-        if (uses == 1) {
-            if (excuse && excuse(context, slots[s].lo, slots[s].hi))
-                out->open_excused++;
-            else
-                out->open++;
-        } else if (uses > 2)
-            out->nonmanifold++;
-        else if (slots[s].forward != 1)
-            out->misoriented++;
-    }
+    *out = slots;
+    *out_cap = cap;
+    return 0;
+}
+
+int iso_mesh_visit_edges(const iso_mesh *mesh, iso_mesh_edge_visit_fn visit, void *context)
+{
+    edge_slot *slots;
+    size_t cap;
+    if (edge_table(mesh, &slots, &cap))
+        return ISO_E_NOMEM;
+    for (size_t s = 0; s < cap; s++)
+        if (slots[s].forward || slots[s].backward)
+            visit(context, slots[s].lo, slots[s].hi, slots[s].forward, slots[s].backward);
     free(slots);
     return 0;
+}
+
+typedef struct edge_count {
+    iso_mesh_edges *out;
+    iso_mesh_edge_excuse_fn excuse;
+    void *context;
+} edge_count;
+
+static void count_edge(void *context, uint32_t lo, uint32_t hi, uint32_t forward, uint32_t backward)
+{
+    edge_count *c = context;
+    uint32_t uses = forward + backward;
+    c->out->edges++;
+    if (uses == 1) {
+        if (c->excuse && c->excuse(c->context, lo, hi))
+            c->out->open_excused++;
+        else
+            c->out->open++;
+    } else if (uses > 2)
+        c->out->nonmanifold++;
+    else if (forward != 1)
+        c->out->misoriented++;
+}
+
+int iso_mesh_count_edges(const iso_mesh *mesh, iso_mesh_edges *out)
+{
+    return iso_mesh_count_edges_excusing(mesh, NULL, NULL, out);
+}
+
+int iso_mesh_count_edges_excusing(const iso_mesh *mesh, iso_mesh_edge_excuse_fn excuse,
+                                  void *context, iso_mesh_edges *out)
+{
+    memset(out, 0, sizeof *out);
+    edge_count c = {.out = out, .excuse = excuse, .context = context};
+    return iso_mesh_visit_edges(mesh, count_edge, &c);
+}
+
+int iso_mesh_zero_area(const iso_mesh *mesh, size_t t)
+{
+    double a[3], b[3], c[3], u[3], v[3];
+    triangle_vectors(mesh, t, a, b, c);
+    for (int k = 0; k < 3; k++) {
+        u[k] = b[k] - a[k];
+        v[k] = c[k] - a[k];
+    }
+    return u[1] * v[2] - u[2] * v[1] == 0 && u[2] * v[0] - u[0] * v[2] == 0 &&
+           u[0] * v[1] - u[1] * v[0] == 0;
 }

@@ -62,6 +62,17 @@ typedef int (*iso_mesh_edge_excuse_fn)(void *context, uint32_t a, uint32_t b);
 int iso_mesh_count_edges_excusing(const iso_mesh *mesh, iso_mesh_edge_excuse_fn excuse,
                                   void *context, iso_mesh_edges *out);
 
+/* Calls visit(context, lo, hi, forward, backward) once for every edge (lo < hi) with its
+ * uses as lo->hi and as hi->lo, in no particular order. Allocates a temporary table of
+ * ~4T slots of 16 bytes; returns 0 or ISO_E_NOMEM (nothing visited). */
+typedef void (*iso_mesh_edge_visit_fn)(void *context, uint32_t lo, uint32_t hi,
+                                       uint32_t forward, uint32_t backward);
+int iso_mesh_visit_edges(const iso_mesh *mesh, iso_mesh_edge_visit_fn visit, void *context);
+
+/* 1 when triangle t has zero area: its edge vectors' cross product, in double from the
+ * float positions, is exactly zero. */
+int iso_mesh_zero_area(const iso_mesh *mesh, size_t t);
+
 /* Axis-aligned bounds of the positions; min > max for an empty mesh. */
 void iso_mesh_bounds(const iso_mesh *mesh, float min[3], float max[3]);
 

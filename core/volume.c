@@ -310,6 +310,15 @@ void iso_vol_update_stats(iso_volume *vol)
 
 /* ---- geometry ---- */
 
+double iso_vol_min_spacing(const iso_volume *vol)
+{
+    double s = vol->spacing[0];
+    for (int d = 1; d < 3; d++)
+        if (vol->spacing[d] < s)
+            s = vol->spacing[d];
+    return s;
+}
+
 void iso_vol_index_to_world(const iso_volume *vol, const double index[3], double world[3])
 {
     double scaled[3];

@@ -98,6 +98,9 @@ void iso_vol_read_box(const iso_volume *vol, const size_t lo[3], const size_t hi
  * min/max/mean; they never count as above any level (see extract.h). O(N). */
 void iso_vol_update_stats(iso_volume *vol);
 
+/* The smallest of the three spacings: mm per voxel where a length in mm must be stated
+ * in voxels without understating it along any axis. */
+double iso_vol_min_spacing(const iso_volume *vol);
 /* Index space (i,j,k may be fractional) to world millimetres. */
 void iso_vol_index_to_world(const iso_volume *vol, const double index[3], double world[3]);
 /* Sets spacing, direction and origin from a 3x4 affine [A | origin] (world = A index +

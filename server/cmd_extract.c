@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "budget.h"
 #include "census.h"
 #include "cli.h"
 #include "normals.h"
@@ -57,6 +58,8 @@ int srv_cmd_extract(int argc, char **argv)
     iso_extract_params params = {0};
     const char *out = NULL;
     int as_json = 0, have_level = 0, full_scan = 0, normals = 4; /* tricubic by default */
+    int no_simplify = 0;
+    double budget = 0, simplify = 0; /* triangles; 0: none */
     for (int i = 0; i < argc; i++) {
         const char *a = argv[i], *value = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--json"))
@@ -67,6 +70,14 @@ int srv_cmd_extract(int argc, char **argv)
             full_scan = 1;
         else if (!strcmp(a, "--cap"))
             params.cap = 1;
+        else if (!strcmp(a, "--no-simplify"))
+            no_simplify = 1;
+        else if ((!strcmp(a, "--budget") || !strcmp(a, "--simplify")) && value) {
+            double *n = !strcmp(a, "--budget") ? &budget : &simplify;
+            if (srv_parse_number(value, n) || *n < 1 || *n > 4294967295.0 || *n != floor(*n))
+                return srv_fail("extract: %s '%s' must be a whole number of triangles from 1", a, value);
+            i++;
+        }
         else if (!strcmp(a, "--threads") && value) {
             if (srv_parse_threads("extract", argv[++i], &params.threads))
                 return 1;
@@ -98,9 +109,14 @@ int srv_cmd_extract(int argc, char **argv)
     }
     if (!opt.path || !have_level)
         return srv_fail("extract: usage: isoserve extract VOLUME --level L [--tolerance T] [--cap] [--threads N] "
+                        "[--budget N [--no-simplify]] [--simplify N] "
                         "[--normals none|trilinear|triquadratic|tricubic] [-o OUT.ply|.stl|.obj|.drc|.glb] [--json]");
-    if (full_scan && params.cap)
-        return srv_fail("extract: --cap needs the hierarchy; drop --full-scan");
+    if (full_scan && (params.cap || budget))
+        return srv_fail("extract: %s needs the hierarchy; drop --full-scan", params.cap ? "--cap" : "--budget");
+    if (budget && simplify)
+        return srv_fail("extract: --budget chooses its own simplification; drop --simplify");
+    if (no_simplify && !budget)
+        return srv_fail("extract: --no-simplify goes with --budget");
     opt.want_tree = !full_scan;
     srv_subject s;
     if (srv_open(&opt, &s))
@@ -109,8 +125,21 @@ int srv_cmd_extract(int argc, char **argv)
     iso_mesh_init(&mesh);
     iso_extract_stats st;
     iso_error err;
+    iso_budget_result chosen = {.tolerance = params.tolerance, .fits = -1};
     int rc = full_scan ? iso_extract_full_scan(s.vol, params.level, params.space, &mesh, &st, &err)
-                       : iso_extract(s.tree, &params, &mesh, &st, &err);
+             : !budget ? iso_extract(s.tree, &params, &mesh, &st, &err)
+             : no_simplify ? iso_extract_budget(s.tree, &params, (size_t)budget, &mesh, &st, &chosen, &err)
+                           : iso_extract_budget_faithful(s.tree, &params, (size_t)budget, &mesh, &st, &chosen, &err);
+    if (!rc && simplify) {
+        /* An explicit simplification: no error limit, the open edges (on the border) locked. */
+        iso_simplify_params sp = {.target_triangles = (size_t)simplify, .target_error = INFINITY,
+                                  .voxel_size = params.space == ISO_SPACE_INDEX ? 1 : iso_vol_min_spacing(s.vol),
+                                  .lock_border = 1};
+        rc = iso_simplify(&mesh, &sp, &chosen.simplify, &err);
+        chosen.simplified = !rc;
+        st.triangles = mesh.triangle_count;
+        st.vertices = mesh.vertex_count;
+    }
     if (!rc && normals)
         rc = iso_normals_compute(s.vol, &mesh, normals, params.space, &err);
     if (rc) {
@@ -126,7 +155,7 @@ int srv_cmd_extract(int argc, char **argv)
         double area = iso_mesh_area(&mesh);
         json_t *doc = json_pack(
             "{s:s, s:f, s:f, s:I, s:I, s:I, s:I, s:I, s:f, s:f, s:f, s:f, s:f, s:I, s:I, s:s, s:s}",
-            "volume", opt.path, "level", params.level, "tolerance", params.tolerance,
+            "volume", opt.path, "level", params.level, "tolerance", chosen.tolerance,
             "triangles", (json_int_t)st.triangles, "vertices", (json_int_t)st.vertices,
             "cells_visited", (json_int_t)st.cells_visited, "nodes_visited", (json_int_t)st.nodes_visited,
             "nodes_polygonized", (json_int_t)st.nodes_polygonized, "extract_ms", st.extract_ms,
@@ -143,6 +172,17 @@ int srv_cmd_extract(int argc, char **argv)
             "closed", census.closed);
         if (doc)
             json_object_set_new(doc, "fit_error", json_real(st.fit_error));
+        if (doc && budget)
+            json_object_set_new(doc, "budget", json_pack("{s:I, s:b, s:i}", "triangles", (json_int_t)budget,
+                                                         "fits", chosen.fits, "extractions", chosen.extractions));
+        if (doc && chosen.simplified)
+            json_object_set_new(doc, "simplify", json_pack(
+                "{s:I, s:I, s:f, s:f, s:f, s:I, s:I, s:I}", "triangles_in", (json_int_t)chosen.simplify.triangles_in,
+                "vertices_in", (json_int_t)chosen.simplify.vertices_in, "error", chosen.simplify.error,
+                "error_voxels", chosen.simplify.error_voxels, "ms", chosen.simplify.ms,
+                "folds_dropped", (json_int_t)chosen.simplify.folds_dropped,
+                "nonmanifold_edges", (json_int_t)chosen.simplify.nonmanifold_edges,
+                "unpaired_edges", (json_int_t)chosen.simplify.unpaired_edges));
         if (doc && watertight)
             json_object_update(doc, watertight);
         json_decref(watertight);
@@ -160,6 +200,13 @@ int srv_cmd_extract(int argc, char **argv)
     } else if (status == 0) {
         printf("%zu triangles, %zu vertices, %zu cells visited, error bound %g, %.2f ms\n",
                st.triangles, st.vertices, st.cells_visited, st.error_bound, st.extract_ms);
+        if (budget)
+            printf("budget %.0f: %s at tolerance %g\n", budget, chosen.fits ? "fits" : "does not fit",
+                   chosen.tolerance);
+        if (chosen.simplified)
+            printf("simplified from %zu triangles in %.2f ms, error %g (%g voxels, meshoptimizer's estimate)\n",
+                   chosen.simplify.triangles_in, chosen.simplify.ms, chosen.simplify.error,
+                   chosen.simplify.error_voxels);
     }
     iso_mesh_free(&mesh);
     srv_close(&s);

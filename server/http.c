@@ -37,7 +37,8 @@ typedef struct srv_request {
 static const char expose_headers[] =
     "ETag, X-Iso-Triangles, X-Iso-Vertices, X-Iso-Cells-Visited, X-Iso-Extract-Ms, "
     "X-Iso-Encode-Ms, X-Iso-Error-Bound, X-Iso-Tolerance, X-Iso-Area-Mm2, X-Iso-Volume-Mm3, "
-    "X-Iso-Budget-Fits, X-Iso-Cache, X-Iso-Replica, X-Iso-Load";
+    "X-Iso-Budget-Fits, X-Iso-Simplified, X-Iso-Simplify-Error-Mm, X-Iso-Simplify-Error-Voxels, "
+    "X-Iso-Cache, X-Iso-Replica, X-Iso-Load";
 
 /* ---------------------------------------------------------------- responses */
 
@@ -330,8 +331,14 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
     add_number(r, "X-Iso-Area-Mm2", "%.6g", body->area_mm2);
     if (body->closed)
         add_number(r, "X-Iso-Volume-Mm3", "%.6g", body->volume_mm3);
-    if (body->budget_fits >= 0)
+    if (body->budget_fits >= 0) {
         MHD_add_response_header(r, "X-Iso-Budget-Fits", body->budget_fits ? "true" : "false");
+        MHD_add_response_header(r, "X-Iso-Simplified", body->simplified ? "true" : "false");
+    }
+    if (body->simplified) {
+        add_number(r, "X-Iso-Simplify-Error-Mm", "%.6g", body->simplify_error_mm);
+        add_number(r, "X-Iso-Simplify-Error-Voxels", "%.6g", body->simplify_error_voxels);
+    }
     MHD_add_response_header(r, "X-Iso-Cache", hit ? "hit" : "miss");
     return send_response(s, c, req, 200, r, body->size);
 }

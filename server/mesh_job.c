@@ -19,7 +19,8 @@ void srv_mesh_job_free(void *arg)
     free(job);
 }
 
-/* Extraction, under the budget when one is asked. */
+/* Extraction, under the budget when one is asked: the ladder up to a faithful tolerance,
+ * then meshoptimizer (budget.h). */
 static int extract(const srv_mesh_job *job, iso_mesh *mesh, iso_extract_stats *stats,
                    srv_body *facts, iso_error *err)
 {
@@ -30,9 +31,13 @@ static int extract(const srv_mesh_job *job, iso_mesh *mesh, iso_extract_stats *s
     if (!r->budget)
         return iso_extract(job->volume->tree, &params, mesh, stats, err);
     iso_budget_result chosen;
-    int rc = iso_extract_budget(job->volume->tree, &params, r->budget, mesh, stats, &chosen, err);
+    int rc = iso_extract_budget_faithful(job->volume->tree, &params, r->budget, mesh, stats,
+                                         &chosen, err);
     facts->tolerance = chosen.tolerance;
     facts->budget_fits = chosen.fits;
+    facts->simplified = chosen.simplified;
+    facts->simplify_error_mm = chosen.simplify.error;
+    facts->simplify_error_voxels = chosen.simplify.error_voxels;
     return rc;
 }
 
@@ -106,6 +111,9 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     body->error_bound = stats.error_bound;
     body->tolerance = facts.tolerance;
     body->budget_fits = facts.budget_fits;
+    body->simplified = facts.simplified;
+    body->simplify_error_mm = facts.simplify_error_mm;
+    body->simplify_error_voxels = facts.simplify_error_voxels;
     body->area_mm2 = iso_mesh_area(&mesh);
     body->closed = census.closed;
     body->volume_mm3 = body->closed ? fabs(iso_mesh_enclosed_volume(&mesh)) : 0;

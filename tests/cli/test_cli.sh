@@ -67,6 +67,19 @@ check_refusal negative_tolerance "--tolerance" $bin extract field:sphere:16 --le
 check_refusal unknown_field "sphere" $bin info field:nosuchfield
 check_refusal unknown_format "unknown output format" $bin extract field:sphere:16 --level 1 -o "$tmp/x.xyz"
 check_refusal cap_full_scan "--cap needs the hierarchy" $bin extract field:sphere:16 --level 1 --cap --full-scan
+check_refusal budget_zero "whole number of triangles from 1" $bin extract field:sphere:16 --level 1 --budget 0
+check_refusal no_simplify_alone "--no-simplify goes with --budget" $bin extract field:sphere:16 --level 1 --no-simplify
+
+# --budget: on a sphere even the whole value range leaves the ladder at 512 triangles, so
+# 500 are met by simplifying the exact mesh; --no-simplify shows the ladder falling short.
+if $bin extract field:sphere:40 --level 3 --budget 500 --normals none --json > "$tmp/bs.json" &&
+   $bin extract field:sphere:40 --level 3 --budget 500 --no-simplify --normals none --json > "$tmp/bl.json" &&
+   [ "$(json "$tmp/bs.json" "(d['triangles'], d['tolerance'], d['budget']['fits'], d['simplify']['unpaired_edges'], d['closed'])")" = "(500, 0.0, True, 0, True)" ] &&
+   [ "$(json "$tmp/bl.json" "(d['triangles'], d['budget']['fits'], 'simplify' in d)")" = "(512, False, False)" ]; then
+    pass budget_simplifies
+else
+    fail budget_simplifies "$(cat "$tmp/bs.json" "$tmp/bl.json")"
+fi
 printf 'NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n\nshort' > "$tmp/short.nrrd"
 check_refusal truncated_nrrd "short.nrrd" $bin extract "$tmp/short.nrrd" --level 1
 
