@@ -154,12 +154,9 @@ int iso_mesh_weld(iso_mesh *mesh)
     return 0;
 }
 
-int iso_mesh_drop_unused(iso_mesh *mesh)
+void iso_mesh_drop_unused_into(iso_mesh *mesh, uint32_t *remap)
 {
     size_t n = mesh->vertex_count, indices = 3 * mesh->triangle_count;
-    uint32_t *remap = malloc((n ? n : 1) * sizeof *remap);
-    if (!remap)
-        return ISO_E_NOMEM;
     memset(remap, 0xff, n * sizeof *remap);
     for (size_t i = 0; i < indices; i++)
         remap[mesh->indices[i]] = 0;
@@ -177,6 +174,14 @@ int iso_mesh_drop_unused(iso_mesh *mesh)
     for (size_t i = 0; i < indices; i++)
         mesh->indices[i] = remap[mesh->indices[i]];
     mesh->vertex_count = kept;
+}
+
+int iso_mesh_drop_unused(iso_mesh *mesh)
+{
+    uint32_t *remap = malloc((mesh->vertex_count ? mesh->vertex_count : 1) * sizeof *remap);
+    if (!remap)
+        return ISO_E_NOMEM;
+    iso_mesh_drop_unused_into(mesh, remap);
     free(remap);
     return 0;
 }

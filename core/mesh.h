@@ -42,6 +42,9 @@ int iso_mesh_weld(iso_mesh *mesh);
  * triangles. O(V + T), allocates a temporary V-entry table. Returns 0 or ISO_E_NOMEM
  * (mesh unchanged). */
 int iso_mesh_drop_unused(iso_mesh *mesh);
+/* The same with the caller's scratch: remap has vertex_count entries (it ends up holding
+ * each old vertex's new index, UINT32_MAX for those dropped). Cannot fail. */
+void iso_mesh_drop_unused_into(iso_mesh *mesh, uint32_t *remap);
 
 /* Sum of triangle areas, in the square of the position unit. O(T). */
 double iso_mesh_area(const iso_mesh *mesh);

@@ -69,29 +69,6 @@ static size_t drop_folds(uint32_t *indices, size_t triangle_count, corner_key *k
     return dropped;
 }
 
-/* PASS 5: drops the vertices no triangle uses; the others keep their order (and their
- * normals). remap has vertex_count entries. O(V + T), in place. */
-static void compact_vertices(iso_mesh *mesh, uint32_t *remap)
-{
-    memset(remap, 0xff, mesh->vertex_count * sizeof *remap);
-    for (size_t i = 0; i < 3 * mesh->triangle_count; i++)
-        remap[mesh->indices[i]] = 0;
-    size_t kept = 0;
-    for (size_t v = 0; v < mesh->vertex_count; v++) {
-        if (remap[v] == UINT32_MAX)
-            continue;
-        if (kept != v) {
-            memcpy(mesh->positions + 3 * kept, mesh->positions + 3 * v, 3 * sizeof(float));
-            if (mesh->normals)
-                memcpy(mesh->normals + 3 * kept, mesh->normals + 3 * v, 3 * sizeof(float));
-        }
-        remap[v] = (uint32_t)kept++;
-    }
-    for (size_t i = 0; i < 3 * mesh->triangle_count; i++)
-        mesh->indices[i] = remap[mesh->indices[i]];
-    mesh->vertex_count = kept;
-}
-
 /* PASS 4: what topology the result has (simplify.h). */
 static void count_edge(void *context, uint32_t lo, uint32_t hi, uint32_t forward, uint32_t backward)
 {
@@ -171,7 +148,7 @@ int iso_simplify(iso_mesh *mesh, const iso_simplify_params *params,
     memcpy(mesh->indices, indices, 3 * triangles * sizeof *indices);
     free(indices);
     mesh->triangle_count = triangles;
-    compact_vertices(mesh, remap);
+    iso_mesh_drop_unused_into(mesh, remap); /* PASS 5 */
     free(remap);
     describe(mesh, r);
     r->error = (double)achieved * r->scale;
