@@ -126,6 +126,69 @@ def server_stage():
     assert any(w == "VOLUME" for w, _ in mine), "no VOLUME"
 
 
+# What debian:bookworm-slim already holds among the libraries isoserve links.
+SLIM_BASE = {"libc6", "libgcc-s1", "libstdc++6", "zlib1g"}
+
+
+def apt_packages(stage_steps):
+    """Package names of a stage's `apt-get install` commands."""
+    names = set()
+    for w, r in stage_steps:
+        if w != "RUN":
+            continue
+        for cmd in re.findall(r"apt-get install ([^&|;]*)", r):
+            names.update(t for t in cmd.split() if not t.startswith("-") and "=" not in t)
+    return names
+
+
+def package_of(path):
+    owner = subprocess.run(["dpkg", "-S", path], capture_output=True, text=True)
+    if owner.returncode != 0:
+        owner = subprocess.run(["dpkg", "-S", os.path.realpath(path)], capture_output=True, text=True)
+    return owner.stdout.split(":")[0] if owner.returncode == 0 else None
+
+
+def dev_package_of(link):
+    """The package owning an unversioned libX.so link itself (not what it points to)."""
+    owner = subprocess.run(["dpkg", "-S", link], capture_output=True, text=True)
+    return owner.stdout.split(":")[0] if owner.returncode == 0 else None
+
+
+def runtime_libraries():
+    """Every library the built daemon links directly (its NEEDED entries) comes from a
+    package the server stage installs or the slim base has, and its development package
+    (the owner of the unversioned libX.so link) is installed by the build stage: found
+    with readelf, ldd and dpkg -S on this Debian 12. apt brings what those need."""
+    binary = os.environ.get("ISOSERVE_BIN", os.path.join(ROOT, "build", "isoserve"))
+    if not os.path.exists(binary):
+        raise Skip(f"{binary} is not built")
+    steps = dockerfile_instructions(os.path.join(DOCKER, "Dockerfile"))
+    stages = []
+    for stage, _, _ in steps:
+        if stage not in stages:
+            stages.append(stage)
+    build = apt_packages([(w, r) for st, w, r in steps if st == stages[0]])
+    server = apt_packages([(w, r) for st, w, r in steps if st == stages[-1]])
+    dynamic = subprocess.run(["readelf", "-d", binary], capture_output=True, text=True, check=True).stdout
+    needed = set(re.findall(r"\(NEEDED\)\s+Shared library: \[(\S+)\]", dynamic))
+    ldd = dict(re.findall(r"^\s*(\S+) => (/\S+)", subprocess.run(["ldd", binary], capture_output=True,
+                                                                   text=True, check=True).stdout, re.M))
+    missing_runtime, missing_dev = [], []
+    for soname in sorted(needed):
+        package = package_of(ldd.get(soname, ""))
+        if package is None or package in SLIM_BASE or "san" in soname:
+            continue  # libc and friends, or a sanitizer runtime of an ASan build
+        if package not in server:
+            missing_runtime.append(f"{package} ({soname})")
+        link = soname.split(".so")[0] + ".so"
+        dev = next(filter(None, (dev_package_of(os.path.join(d, link)) for d in
+                                 (os.path.dirname(ldd[soname]), "/usr/lib/x86_64-linux-gnu", "/usr/lib"))), None)
+        if dev and dev not in build:
+            missing_dev.append(f"{dev} ({soname})")
+    assert not missing_runtime, f"the server stage lacks {missing_runtime}"
+    assert not missing_dev, f"the build stage lacks {missing_dev}"
+
+
 def ring_agrees():
     compose = load_compose()
     conf = open(os.path.join(DOCKER, "nginx.conf")).read()
@@ -153,6 +216,7 @@ def main():
     RESULTS.check("compose_yaml_paths_and_targets", compose_paths)
     RESULTS.check("dockerfile_copy_sources_and_make_targets", dockerfile_sources)
     RESULTS.check("server_image_nonroot_healthcheck", server_stage)
+    RESULTS.check("server_image_has_every_shared_library", runtime_libraries)
     RESULTS.check("shard_peers_match_nginx_upstreams", ring_agrees)
     return 1 if RESULTS.failures else 0
 
