@@ -230,6 +230,30 @@ static range share_of(size_t count, int t, int threads)
     return r;
 }
 
+/* The first active brick at or past a share of PASS 4's work, counted as vertices plus
+ * triangles from PASS 3's prefix sums: threads then get equal work, not equal bricks. */
+static size_t first_at_work(const march_job *job, size_t work)
+{
+    size_t lo = 0, hi = job->active_count;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        const active_brick *ab = &job->active[mid];
+        if (ab->first_vertex + ab->first_triangle < work)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+static range work_share_of(const march_job *job, int t, int threads)
+{
+    size_t total = job->mesh->vertex_count + job->mesh->triangle_count;
+    range r = {first_at_work(job, total * (size_t)t / (size_t)threads),
+               t + 1 == threads ? job->active_count : first_at_work(job, total * (size_t)(t + 1) / (size_t)threads)};
+    return r;
+}
+
 static void classify_share(void *context, int t, int threads)
 {
     march_job *job = context;
@@ -385,7 +409,7 @@ static void generate_share(void *context, int t, int threads)
     march_job *job = context;
     double worst = 0;
     id_table table;
-    range r = share_of(job->active_count, t, threads);
+    range r = work_share_of(job, t, threads);
     for (size_t i = r.begin; i < r.end; i++) {
         const active_brick *ab = &job->active[i];
         if (i + 1 < r.end && job->active[i + 1].vertices)
