@@ -47,7 +47,7 @@
 
 /* What the fans of one walk did, summed into the stats at the end. */
 typedef struct fan_tally {
-    size_t nodes_visited, nodes_polygonized, cells_covered;
+    size_t nodes_visited, nodes_polygonized;
     double vertex_error, fit_error;
 } fan_tally;
 
@@ -88,7 +88,6 @@ static int try_fan(const coarse *c, const iso_box *box, double fit_error, size_t
     int rc = iso_fan_polygonize(c->vol, box, c->level, c->centre_limit, max_triangles, scratch, fans, &result);
     if (rc == 1) {
         tally->nodes_polygonized++;
-        tally->cells_covered += iso_box_cells(box);
         if (result.vertex_error > tally->vertex_error)
             tally->vertex_error = result.vertex_error;
         if (fit_error > tally->fit_error)
@@ -239,9 +238,11 @@ static int cover(void *context, int thread, iso_march_brick *brick)
         lo[d] = box.lo[d];
         hi[d] = box.hi[d];
     }
+    /* The brick itself was tried whole in PASS 1; a brick of one cell has no sub-box. */
+    if (iso_box_split(&box, &left, &right) < 0)
+        return 0;
     w->brick = brick;
     iso_vol_read_box(c->vol, lo, hi, w->samples);
-    iso_box_split(&box, &left, &right);
     int rc = visit_sub(c, w, &left);
     return rc ? rc : visit_sub(c, w, &right);
 }
@@ -287,7 +288,6 @@ static void sum_tally(fan_tally *into, const fan_tally *from)
 {
     into->nodes_visited += from->nodes_visited;
     into->nodes_polygonized += from->nodes_polygonized;
-    into->cells_covered += from->cells_covered;
     if (from->vertex_error > into->vertex_error)
         into->vertex_error = from->vertex_error;
     if (from->fit_error > into->fit_error)
