@@ -1,11 +1,15 @@
 /* collection.c: preloading volumes and hierarchies (see collection.h). */
 #include "collection.h"
 
+#include <ctype.h>
+#include <dirent.h>
 #include <errno.h>
+#include <inttypes.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "cli.h"
@@ -213,12 +217,68 @@ static void load_entry(srv_collection *c, size_t i, int on_demand)
     pthread_mutex_unlock(&c->lock);
 }
 
+/* A temporary file of iso_tree_save for a catalog id: "ID.isotree.tmp." and mkstemp's six
+ * letters or digits. Nothing else in the cache dir is ever removed. */
+static int is_tree_temporary(const srv_catalog *catalog, const char *name)
+{
+    static const char infix[] = ".isotree.tmp.";
+    const size_t tail = sizeof infix - 1 + 6, n = strlen(name);
+    if (n <= tail || strncmp(name + n - tail, infix, sizeof infix - 1))
+        return 0;
+    for (const char *p = name + n - 6; *p; p++)
+        if (!isalnum((unsigned char)*p))
+            return 0;
+    for (size_t i = 0; i < catalog->count; i++) {
+        const char *id = catalog->entries[i].id;
+        if (strlen(id) == n - tail && !strncmp(id, name, n - tail))
+            return 1;
+    }
+    return 0;
+}
+
+/* Removes the temporary hierarchy files a killed writer left (iso_tree_save renames its
+ * file into place, so only a crash or kill -9 between mkstemp and rename leaves one).
+ * Replicas may share the directory, so the writer may live in another process this one
+ * cannot see: a file goes only when it was last changed SRV_TEMP_STALE_S before this
+ * start. A writer writes and fsyncs in one go, so its file changes until moments before
+ * the rename; and were a slow writer's file removed all the same, its rename would fail
+ * and it would serve from memory, never leave a wrong file. Each decision is logged. */
+static void remove_stale_temporaries(const srv_collection *c, time_t started)
+{
+    const char *dir = c->options.cache_dir;
+    DIR *d = opendir(dir);
+    if (!d)
+        return; /* mkdir's message said why */
+    for (struct dirent *e; (e = readdir(d));) {
+        char path[4096];
+        struct stat st;
+        if (!is_tree_temporary(c->catalog, e->d_name) ||
+            snprintf(path, sizeof path, "%s/%s", dir, e->d_name) >= (int)sizeof path ||
+            lstat(path, &st) || !S_ISREG(st.st_mode))
+            continue;
+        long idle = (long)difftime(started, st.st_mtime);
+        if (idle < SRV_TEMP_STALE_S)
+            fprintf(stderr, "isoserve: %s: kept: changed %ld s ago, its writer may still be at "
+                    "work (stale after %d s)\n", path, idle, SRV_TEMP_STALE_S);
+        else if (unlink(path))
+            fprintf(stderr, "isoserve: %s: stale temporary file not removed: %s\n", path,
+                    strerror(errno));
+        else
+            fprintf(stderr, "isoserve: %s: removed, a stale temporary file (%" PRIdMAX " bytes, "
+                    "unchanged for %ld s: its writer is gone)\n", path, (intmax_t)st.st_size, idle);
+    }
+    closedir(d);
+}
+
 void srv_collection_preload(srv_collection *c)
 {
+    time_t started = time(NULL);
     const char *dir = c->options.cache_dir;
     if (dir && mkdir(dir, 0755) && errno != EEXIST)
         fprintf(stderr, "isoserve: --cache-dir %s: %s; hierarchies will not be cached\n", dir,
                 strerror(errno));
+    if (dir)
+        remove_stale_temporaries(c, started);
     for (size_t i = 0; i < c->total && !atomic_load(&c->stop); i++) {
         if (!c->options.skip || !c->options.skip[i])
             load_entry(c, i, 0);

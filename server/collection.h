@@ -19,6 +19,9 @@
 #include "volume.h"
 
 #define SRV_HISTOGRAM_BINS 256
+/* A hierarchy's temporary file unchanged for this long before a start has no writer left
+ * (see srv_collection_preload). */
+#define SRV_TEMP_STALE_S 60
 
 typedef struct srv_volume {
     const srv_catalog_entry *entry;   /* borrowed from the catalog */
@@ -65,11 +68,13 @@ enum { SRV_ENTRY_IDLE, SRV_ENTRY_LOADING, SRV_ENTRY_LOADED, SRV_ENTRY_FAILED };
  * copied (their strings and skip array must outlive it too). 0 or -1 (no memory). */
 int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
                         const srv_preload_options *options);
-/* Loads every entry of the catalog in order (but those the options skip): the volume,
- * then its hierarchy from the cache dir when that file is valid and newer than the volume,
- * else built (progress on the terminal) and written there atomically. A volume that fails
- * to load is reported and skipped. Sets ready at the end. Blocking: run it in a thread;
- * setting c->stop ends it after the volume at hand. */
+/* First removes from the cache dir the temporary hierarchy files of catalog ids that a
+ * killed writer left, unchanged for SRV_TEMP_STALE_S before now (each one logged, as are
+ * the younger ones it keeps). Then loads every entry of the catalog in order (but those
+ * the options skip): the volume, then its hierarchy from the cache dir when that file is
+ * valid and newer than the volume, else built (progress on the terminal) and written there
+ * atomically. A volume that fails to load is reported and skipped. Sets ready at the end.
+ * Blocking: run it in a thread; setting c->stop ends it after the volume at hand. */
 void srv_collection_preload(srv_collection *c);
 /* The published volume with this id, or NULL. Lock-free. */
 const srv_volume *srv_collection_find(const srv_collection *c, const char *id);

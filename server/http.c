@@ -375,7 +375,7 @@ static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_r
     srv_mesh_job *work = calloc(1, sizeof *work);
     if (!work || !(work->key = strdup(key))) {
         free(work);
-        return MHD_NO;
+        return fail(s, c, req, path, 503, "%s: out of memory starting the extraction", v->entry->id);
     }
     work->volume = v;
     work->request = mr;

@@ -56,6 +56,21 @@ static int encode(const proto_mesh_request *r, const iso_mesh *mesh, unsigned ch
     }
 }
 
+/* The problem body of a failed step. An allocation that failed is this request's
+ * trouble, not the server's: its memory is freed by now and the other requests go on, so
+ * it answers 503 (with Retry-After) naming the volume and the step that ran out. */
+static srv_body *failed(const srv_mesh_job *job, int rc, const iso_error *err,
+                        proto_problem *problem)
+{
+    const char *id = job->volume->entry->id, *why = err->message[0] ? err->message : iso_status_name(rc);
+    if (rc == ISO_E_NOMEM)
+        proto_problem_set(problem, 503, NULL, "%s: %s; a larger tolerance gives a smaller mesh",
+                          id, why);
+    else
+        proto_problem_set(problem, 500, NULL, "%s: %s", id, why);
+    return NULL;
+}
+
 srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
 {
     srv_mesh_job *job = arg;
@@ -92,15 +107,13 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     double encode_ms = iso_clock_ms() - start;
     if (rc) {
         iso_mesh_free(&mesh);
-        proto_problem_set(problem, rc == ISO_E_NOMEM ? 503 : 500, NULL, "%s: %s",
-                          job->volume->entry->id, err.message[0] ? err.message : iso_status_name(rc));
-        return NULL;
+        return failed(job, rc, &err, problem);
     }
     srv_body *body = srv_body_create(data, size);
     if (!body) {
         iso_mesh_free(&mesh);
-        proto_problem_set(problem, 503, NULL, "out of memory");
-        return NULL;
+        return failed(job, iso_error_set(&err, ISO_E_NOMEM, "out of memory keeping the body"),
+                      &err, problem);
     }
     body->content_type = proto_format_content_type(r->format);
     body->triangles = stats.triangles;

@@ -1,11 +1,13 @@
 /* sidecar.c: raw volumes with a JSON sidecar (see sidecar.h). */
 #include "sidecar.h"
 
+#include <inttypes.h>
 #include <jansson.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "nrrd.h"
@@ -141,6 +143,21 @@ static int read_geometry(const char *side, json_t *root, iso_nrrd_header *hdr, i
     return 0;
 }
 
+/* Raw samples after "header_bytes" bytes: a skip past the end of the file is said as such
+ * (a seek there fails with a bare EINVAL, or lands nowhere). Compressed data skips that
+ * many inflated bytes, which the file's size does not bound: the inflater says how many
+ * came out. */
+static int check_header_bytes(const char *side, const char *path, const iso_nrrd_header *hdr,
+                              iso_error *err)
+{
+    struct stat st;
+    if (hdr->encoding != ISO_NRRD_RAW || hdr->byte_skip <= 0 || stat(path, &st) ||
+        !S_ISREG(st.st_mode) || (uint64_t)hdr->byte_skip <= (uint64_t)st.st_size)
+        return 0;
+    return iso_error_set(err, ISO_E_TRUNCATED, "%s: \"header_bytes\" is %" PRId64 ", past the end "
+                         "of %s (%" PRIdMAX " bytes)", side, hdr->byte_skip, path, (intmax_t)st.st_size);
+}
+
 static int load_raw(const char *path, const iso_load_options *opt, iso_volume **out, iso_error *err)
 {
     char side[4096];
@@ -157,6 +174,8 @@ static int load_raw(const char *path, const iso_load_options *opt, iso_volume **
     if (!rc)
         rc = read_geometry(side, root, hdr, err);
     json_decref(root);
+    if (!rc)
+        rc = check_header_bytes(side, path, hdr, err);
     if (!rc && strlen(path) >= sizeof hdr->data_path)
         rc = iso_error_set(err, ISO_E_FORMAT, "%s: path too long", path);
     if (!rc) {

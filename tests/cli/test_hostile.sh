@@ -48,8 +48,14 @@ case_ fraction '{"dims": [4, 4, 4.5], "type": "uint8"}' "zeros 64" \
     'isoserve: fraction.raw.json: "dims"[2] = 4.5 is not a size of at least 2'
 case_ negative '{"dims": [4, -4, 4], "type": "uint8"}' "zeros 64" \
     'isoserve: negative.raw.json: "dims"[1] = -4 is not a size of at least 2'
-case_ skip '{"dims": [4, 4, 4], "type": "uint8", "header_bytes": 100}' "zeros 64" \
-    "isoserve: skip.raw: truncated raw data: expected 64 bytes of samples, found 0"
+case_ skip '{"dims": [4, 4, 4], "type": "uint8", "header_bytes": 10}' "zeros 64" \
+    "isoserve: skip.raw: truncated raw data: expected 64 bytes of samples, found 54"
+case_ skip_past '{"dims": [4, 4, 4], "type": "uint8", "header_bytes": 100}' "zeros 64" \
+    'isoserve: skip_past.raw.json: "header_bytes" is 100, past the end of skip_past.raw (64 bytes)'
+case_ skip_huge '{"dims": [4, 4, 4], "type": "uint8", "header_bytes": 9223372036854775807}' "zeros 64" \
+    'isoserve: skip_huge.raw.json: "header_bytes" is 9223372036854775807, past the end of skip_huge.raw (64 bytes)'
+case_ skip_gzip '{"dims": [4, 4, 4], "type": "uint8", "compression": "gzip", "header_bytes": 9223372036854775807}' \
+    "stored_gzip 64 999" "isoserve: skip_gzip.raw: truncated gzip data: expected 64 bytes of samples, found 0"
 case_ spacing '{"dims": [4, 4, 4], "type": "uint8", "spacing": [1, 0, 1]}' "zeros 64" \
     'isoserve: spacing.raw.json: "spacing"[1] = 0 must be positive'
 case_ notjson '[1, 2' "zeros 64" \

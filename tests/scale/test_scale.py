@@ -10,7 +10,9 @@ addresses, web root), all on 127.0.0.1. Checks:
   If-None-Match gets 304 through nginx;
 - after one replica is killed (SIGKILL, by PID) every volume is still served (on demand,
   hierarchy read from the shared cache dir; concurrent first requests share one load) and
-  the cached meshes are still HITs.
+  the cached meshes are still HITs;
+- with --token-file on the replicas, a mesh cached for an authorised client is refused
+  (the replica's 401) to a client without the token.
 Prints PASS/FAIL/SKIP lines (and INFO lines with numbers); exit status 1 on failure. Every
 process is stopped by its PID at the end, and listed in $ISO_SCALE_PIDS for the caller's
 trap."""
@@ -152,9 +154,11 @@ def nginx_conf(text, listen, upstreams, web_root):
 
 
 class Deployment:
-    def __init__(self, tmp, pid_file):
+    def __init__(self, tmp, pid_file, entries=None, extra_env=None):
+        """Replicas and nginx with their files under tmp; entries: the catalog (default
+        catalog_entries()); extra_env: more ISOSERVE_ variables for every replica."""
         self.tmp = tmp
-        self.entries = catalog_entries()
+        self.entries = entries or catalog_entries()
         catalog = os.path.join(tmp, "catalog.json")
         with open(catalog, "w") as f:
             json.dump({"volumes": self.entries}, f)
@@ -169,7 +173,8 @@ class Deployment:
             env = dict(os.environ, ISOSERVE_LISTEN=f"127.0.0.1:{port}",
                        ISOSERVE_SHARD=f"{k}/{REPLICAS}", ISOSERVE_SHARD_PEERS=",".join(self.peers),
                        ISOSERVE_CATALOG=catalog, ISOSERVE_CACHE_DIR=hierarchies,
-                       ISOSERVE_THREADS="2", ISOSERVE_CACHE_MB="64", ISOSERVE_DRAIN_SECONDS="5")
+                       ISOSERVE_THREADS="2", ISOSERVE_CACHE_MB="64", ISOSERVE_DRAIN_SECONDS="5",
+                       **(extra_env or {}))
             self.replicas.append(Process(f"replica{k}", [BIN, "serve"],
                                          os.path.join(tmp, f"replica{k}.log"), env, pid_file))
         for k, r in enumerate(self.replicas):
@@ -377,6 +382,52 @@ def run(d):
     check("new_meshes_of_lost_volumes_after_kill", new_mesh_after_kill)
 
 
+TOKEN = "nginx-test-token-0123456789abcdef"
+
+
+def token_behind_nginx(tmp, pid_file):
+    """Replicas with --token-file behind docker/nginx.conf: an authorised client's mesh is
+    cached and answered from the cache, and a client without the token, or with a wrong
+    one, still gets the replica's 401 for that cached mesh, never its bytes (nginx asks a
+    replica about every mesh request: auth_request)."""
+    os.mkdir(tmp)
+    token_file = os.path.join(tmp, "token")
+    with open(token_file, "w") as f:
+        f.write(TOKEN + "\n")
+    entries = [{"id": "sphere-24", "path": "field:sphere:24", "levels": [4]}]
+    d = Deployment(tmp, pid_file, entries, {"ISOSERVE_TOKEN_FILE": token_file})
+    try:
+        target = "/v1/volumes/sphere-24/mesh?level=4&tolerance=1&normals=none"
+        ok = {"Authorization": f"Bearer {TOKEN}"}
+        first = d.get(target, ok)
+        assert first.status == 200 and first.getheader("X-Cache-Status") == "MISS", (first.status, first.body[:200])
+        again = d.get(target, ok)
+        assert again.status == 200 and again.getheader("X-Cache-Status") == "HIT" and again.body == first.body
+        etag = first.getheader("ETag")
+
+        def refused(headers, detail):
+            r = d.get(target, headers)
+            assert r.status == 401 and r.body != first.body, (headers, r.status)
+            assert r.getheader("Content-Type") == "application/problem+json", r.getheader("Content-Type")
+            assert r.getheader("WWW-Authenticate") == 'Bearer realm="isoserve"', r.getheader("WWW-Authenticate")
+            assert json.loads(r.body) == {"type": "urn:isoserve:problem:unauthorized", "title": "Unauthorized",
+                                          "status": 401, "detail": detail,
+                                          "instance": "/v1/volumes/sphere-24/mesh"}, r.body
+        need = 'this server needs "Authorization: Bearer TOKEN"'
+        refused({}, need)
+        refused({"If-None-Match": etag}, need)  # not a 304 from the cache either
+        refused({"Authorization": "Bearer " + "x" * len(TOKEN)}, "the bearer token is not this server's")
+        r = d.get(target, dict(ok, **{"If-None-Match": etag}))
+        assert r.status == 304, r.status
+        r = d.get(target, ok)
+        assert r.status == 200 and r.getheader("X-Cache-Status") == "HIT" and r.body == first.body
+        assert d.get("/v1/volumes").status == 401 and d.get("/v1/volumes", ok).status == 200
+        assert TOKEN not in open(os.path.join(tmp, "nginx.log")).read(), "the token reached nginx's log"
+    finally:
+        rcs = d.stop()
+    assert all(rc == 0 for rc in rcs.values()), rcs
+
+
 def bad_options(tmp):
     env = {k: v for k, v in os.environ.items() if not k.startswith("ISOSERVE_")}
     cases = ((["--shard", "3/3", "--shard-peers", "a:1,b:2,c:3"], {}, "0 <= K < N"),
@@ -437,6 +488,7 @@ def main():
             if total:
                 print(f"INFO {RESULTS.label}.nginx_cache: {cache_status['HIT']} HIT, {cache_status['MISS']} MISS "
                       f"({100.0 * cache_status['HIT'] / total:.0f}% of mesh requests)", flush=True)
+    check("token_not_bypassed_by_nginx_cache", lambda: token_behind_nginx(os.path.join(tmp, "token"), pid_file))
     check("shard_option_errors", lambda: bad_options(tmp))
     check("flag_beats_environment", lambda: flag_beats_environment(tmp, pid_file))
     print(f"INFO {RESULTS.label}.seconds: {time.time() - start:.1f}", flush=True)

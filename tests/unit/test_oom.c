@@ -1,0 +1,315 @@
+/* test_oom.c: allocation failures along one mesh request's path (issue 7). The steps of
+ * server/mesh_job.c (extraction, exact or through the hierarchy or under a triangle budget;
+ * normals; the edge census; the Draco, glb, PLY and STL encoders) and the Draco decoder are
+ * run once to count their allocations, then once per allocation with exactly that one
+ * failing: each run must either succeed with the same mesh (the failure was absorbed, e.g.
+ * a helper thread that could not start) or return ISO_E_NOMEM with a message that says
+ * memory ran out; never another code, never a crash, and never a block left behind.
+ *
+ * The failures come from malloc, calloc and realloc defined here over glibc's own
+ * (__libc_malloc ...), which every library of the process calls, libstdc++'s operator new
+ * and so libdraco included: a failing operator new throws std::bad_alloc inside libdraco,
+ * which the extern "C" shim must turn into ISO_E_NOMEM. The sanitizer build's allocator
+ * is ASan's, which replaces these same symbols: there the test says SKIP. */
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "budget.h"
+#include "census.h"
+#include "check.h"
+#include "encode.h"
+#include "extract.h"
+#include "field.h"
+#include "normals.h"
+#include "tree.h"
+
+#if defined(__SANITIZE_ADDRESS__)
+#define OOM_INJECTION 0
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define OOM_INJECTION 0
+#endif
+#endif
+#ifndef OOM_INJECTION
+#define OOM_INJECTION 1
+#endif
+
+#if OOM_INJECTION
+/* ---- the failing allocator ---- */
+
+void *__libc_malloc(size_t size);
+void *__libc_calloc(size_t count, size_t size);
+void *__libc_realloc(void *p, size_t size);
+void __libc_free(void *p);
+
+static atomic_int armed;        /* 1: count allocations and frees */
+static atomic_long calls;       /* allocations asked for since armed */
+static atomic_long fail_at;     /* the one (0-based) that returns NULL; -1: none */
+static atomic_long live;        /* blocks allocated minus blocks freed since armed */
+
+/* 1 when this allocation must fail; counts it. */
+static int fails(void)
+{
+    if (!atomic_load(&armed))
+        return 0;
+    return atomic_fetch_add(&calls, 1) == atomic_load(&fail_at);
+}
+
+static void *counted(void *p)
+{
+    if (p && atomic_load(&armed))
+        atomic_fetch_add(&live, 1);
+    return p;
+}
+
+void *malloc(size_t size)
+{
+    return fails() ? NULL : counted(__libc_malloc(size));
+}
+
+void *calloc(size_t count, size_t size)
+{
+    return fails() ? NULL : counted(__libc_calloc(count, size));
+}
+
+/* realloc(NULL, n) is an allocation; realloc(p, n) moves a block (no count change) or
+ * fails leaving p alone; glibc's realloc(p, 0) frees p. */
+void *realloc(void *p, size_t size)
+{
+    if (fails())
+        return NULL;
+    void *q = __libc_realloc(p, size);
+    if (atomic_load(&armed)) {
+        if (!p && q)
+            atomic_fetch_add(&live, 1);
+        else if (p && size == 0)
+            atomic_fetch_sub(&live, 1);
+    }
+    return q;
+}
+
+void free(void *p)
+{
+    if (p && atomic_load(&armed))
+        atomic_fetch_sub(&live, 1);
+    __libc_free(p);
+}
+
+static void arm(long which)
+{
+    atomic_store(&calls, 0);
+    atomic_store(&live, 0);
+    atomic_store(&fail_at, which);
+    atomic_store(&armed, 1);
+}
+
+/* Stops counting; returns the allocations asked for since arm. */
+static long disarm(void)
+{
+    atomic_store(&armed, 0);
+    return atomic_load(&calls);
+}
+
+/* ---- one request's steps, as server/mesh_job.c runs them ---- */
+
+typedef enum { FMT_DRACO, FMT_GLB, FMT_PLY, FMT_STL } format;
+
+typedef struct request {
+    const char *name;
+    double level, tolerance;
+    size_t budget;     /* 0: none */
+    int normals;       /* 0, 2, 3 or 4 */
+    format fmt;
+} request;
+
+static int encode(format fmt, const iso_mesh *mesh, unsigned char **out, size_t *size,
+                  iso_error *err)
+{
+    switch (fmt) {
+    case FMT_GLB: return proto_encode_glb(mesh, NULL, out, size, err);
+    case FMT_PLY: return proto_encode_ply(mesh, out, size, err);
+    case FMT_STL: return proto_encode_stl(mesh, out, size, err);
+    default: return proto_encode_draco(mesh, NULL, out, size, err);
+    }
+}
+
+/* Extracts, adds normals, counts edges and encodes; frees everything before returning.
+ * *triangles and *bytes say what came out (on success). */
+static int run_request(const iso_tree *tree, const request *r, size_t *triangles, size_t *bytes,
+                       iso_error *err)
+{
+    iso_mesh mesh;
+    iso_mesh_init(&mesh);
+    iso_extract_params params = {.level = r->level, .tolerance = r->tolerance,
+                                 .space = ISO_SPACE_WORLD, .threads = 1};
+    iso_extract_stats stats;
+    iso_budget_result chosen;
+    int rc = r->budget ? iso_extract_budget(tree, &params, r->budget, &mesh, &stats, &chosen, err)
+                       : iso_extract(tree, &params, &mesh, &stats, err);
+    if (!rc && r->normals)
+        rc = iso_normals_compute(tree->vol, &mesh, r->normals, ISO_SPACE_WORLD, err);
+    iso_census census;
+    if (!rc)
+        rc = iso_census_compute(tree->vol, &mesh, ISO_SPACE_WORLD, &census, err);
+    unsigned char *data = NULL;
+    size_t size = 0;
+    if (!rc)
+        rc = encode(r->fmt, &mesh, &data, &size, err);
+    *triangles = mesh.triangle_count;
+    *bytes = size;
+    free(data);
+    iso_mesh_free(&mesh);
+    return rc;
+}
+
+/* ---- the sweep ---- */
+
+/* An 11x10x9 sphere field and its hierarchy, or NULL (a CHECK failed). */
+static iso_tree *sphere_tree(iso_volume **vol)
+{
+    static const size_t dims[3] = {11, 10, 9};
+    iso_error err = {0};
+    iso_tree *tree = NULL;
+    *vol = NULL;
+    CHECK_OK(iso_field_create("sphere", dims, 0, vol, &err), &err);
+    if (!*vol)
+        return NULL;
+    iso_vol_update_stats(*vol);
+    CHECK_OK(iso_tree_build(*vol, 1, NULL, NULL, &tree, &err), &err);
+    return tree;
+}
+
+/* What one run gives, compared between the clean run and those with a failure absorbed. */
+typedef struct outcome {
+    size_t triangles, bytes;
+} outcome;
+
+/* One run of the code under test: frees everything it allocates before returning. */
+typedef int (*run_fn)(const void *context, outcome *out, iso_error *err);
+
+static int run_request_fn(const void *context, outcome *out, iso_error *err)
+{
+    const struct { const iso_tree *tree; const request *r; } *c = context;
+    return run_request(c->tree, c->r, &out->triangles, &out->bytes, err);
+}
+
+typedef struct decode_input {
+    const unsigned char *data;
+    size_t size;
+} decode_input;
+
+static int run_decode_fn(const void *context, outcome *out, iso_error *err)
+{
+    const decode_input *in = context;
+    iso_mesh decoded;
+    int rc = proto_draco_decode(in->data, in->size, &decoded, err);
+    *out = (outcome){decoded.triangle_count, decoded.vertex_count};
+    iso_mesh_free(&decoded);
+    return rc;
+}
+
+/* Runs fn once per allocation it makes, that allocation failing: each run either fails
+ * with ISO_E_NOMEM saying so or gives the clean run's outcome, and leaves no block behind.
+ * At least one failure must reach the caller. */
+static void sweep(const char *name, run_fn fn, const void *context)
+{
+    iso_error err = {0};
+    outcome want = {0}, got = {0};
+    /* Unarmed first: whatever a library allocates once and keeps is allocated now. */
+    CHECK_OK(fn(context, &want, &err), &err);
+    arm(-1);
+    int rc = fn(context, &got, &err);
+    long leaked = atomic_load(&live), total = disarm();
+    CHECKF(rc == 0 && leaked == 0 && got.triangles == want.triangles && total > 0,
+           "%s: clean run: rc %d, %ld blocks left, %zu triangles, %ld allocations", name, rc,
+           leaked, got.triangles, total);
+    long nomem = 0;
+    for (long n = 0; n < total && !check_failed(); n++) {
+        memset(&err, 0, sizeof err);
+        got = (outcome){0};
+        arm(n);
+        rc = fn(context, &got, &err);
+        leaked = atomic_load(&live);
+        disarm();
+        if (rc == 0)
+            CHECKF(got.triangles == want.triangles && got.bytes == want.bytes,
+                   "%s, allocation %ld failing: succeeded with %zu triangles, %zu bytes; want %zu, %zu",
+                   name, n, got.triangles, got.bytes, want.triangles, want.bytes);
+        else
+            CHECKF(rc == ISO_E_NOMEM && strstr(err.message, "memory"),
+                   "%s, allocation %ld failing: code %d \"%s\", want ISO_E_NOMEM saying memory ran out",
+                   name, n, rc, err.message);
+        CHECKF(leaked == 0, "%s, allocation %ld of %ld failing (\"%s\"): %ld blocks left behind",
+               name, n, total, err.message, leaked);
+        nomem += rc != 0;
+    }
+    printf("  %s: %ld allocations, %ld failures answered ISO_E_NOMEM, %ld absorbed\n", name,
+           total, nomem, total - nomem);
+    CHECKF(nomem > 0, "%s: no allocation failure reached the caller", name);
+}
+
+static void test_request_path_allocation_failures(void)
+{
+    iso_volume *vol;
+    iso_tree *tree = sphere_tree(&vol);
+    /* Level 1.5 cuts the sphere inside the grid; each request takes another route through
+     * the steps, between them every encoder and normals order. */
+    static const request requests[] = {
+        {"exact, tricubic normals, draco", 1.5, 0, 0, 4, FMT_DRACO},
+        {"hierarchy, trilinear normals, glb", 1.5, 0.3, 0, 2, FMT_GLB},
+        {"budget 60, triquadratic normals, ply", 1.5, 0, 60, 3, FMT_PLY},
+        {"hierarchy, no normals, stl", 1.5, 0.3, 0, 0, FMT_STL},
+    };
+    for (size_t i = 0; tree && i < sizeof requests / sizeof requests[0] && !check_failed(); i++) {
+        struct { const iso_tree *tree; const request *r; } context = {tree, &requests[i]};
+        sweep(requests[i].name, run_request_fn, &context);
+    }
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+/* The decoder's side of the shim: libdraco allocates with operator new throughout. */
+static void test_draco_decode_allocation_failures(void)
+{
+    iso_volume *vol;
+    iso_tree *tree = sphere_tree(&vol);
+    iso_error err = {0};
+    iso_mesh mesh;
+    iso_mesh_init(&mesh);
+    iso_extract_params params = {.level = 1.5, .space = ISO_SPACE_WORLD, .threads = 1};
+    decode_input in = {0};
+    unsigned char *data = NULL;
+    if (tree) {
+        CHECK_OK(iso_extract(tree, &params, &mesh, NULL, &err), &err);
+        CHECK_OK(iso_normals_compute(vol, &mesh, 4, ISO_SPACE_WORLD, &err), &err);
+        CHECK_OK(proto_encode_draco(&mesh, NULL, &data, &in.size, &err), &err);
+    }
+    in.data = data;
+    if (data)
+        sweep("draco decode", run_decode_fn, &in);
+    free(data);
+    iso_mesh_free(&mesh);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+int main(void)
+{
+    CHECK_RUN(test_request_path_allocation_failures);
+    CHECK_RUN(test_draco_decode_allocation_failures);
+    return check_finish();
+}
+#else
+static void test_allocation_failures(void)
+{
+    check_skip("the sanitizer build's malloc is ASan's, which this test would have to replace");
+}
+
+int main(void)
+{
+    CHECK_RUN(test_allocation_failures);
+    return check_finish();
+}
+#endif
