@@ -408,7 +408,7 @@ static void coarse_free(coarse *c)
 {
     iso_fan_scratch_free(&c->scratch);
     iso_fan_output_free(&c->fans);
-    for (int t = 0; t < c->thread_count; t++) {
+    for (int t = 0; c->threads && t < c->thread_count; t++) {
         iso_fan_scratch_free(&c->threads[t].scratch);
         iso_fan_output_free(&c->threads[t].fans);
     }

@@ -178,20 +178,22 @@ static long find_segment(const iso_fan_scratch *s, uint64_t from)
     return -1;
 }
 
-/* Collects the loop starting at segment first into s->loop; returns its length, or 0 when
- * the chain does not close (cannot happen for a consistent face rule; refused anyway). */
-static size_t collect_loop(iso_fan_scratch *s, size_t first)
+/* Collects the loop starting at segment first into s->loop and sets *length to its
+ * length, 0 when the chain does not close (cannot happen for a consistent face rule;
+ * refused anyway). Returns 0 or ISO_E_NOMEM. */
+static int collect_loop(iso_fan_scratch *s, size_t first, size_t *length)
 {
     size_t n = 0;
     long at = (long)first;
     while (at >= 0 && !s->segments[at].used) {
         if (grow((void **)&s->loop, &s->loop_capacity, n + 1, sizeof *s->loop))
-            return 0;
+            return ISO_E_NOMEM;
         s->segments[at].used = 1;
         s->loop[n++] = (uint32_t)at;
         at = find_segment(s, s->segments[at].to);
     }
-    return at == (long)first ? n : 0;
+    *length = at == (long)first ? n : 0;
+    return 0;
 }
 
 /* ---- PASS 3: fans ---- */
@@ -370,7 +372,10 @@ int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
     for (size_t i = 0; i < s->segment_count && rc == 1; i++) {
         if (s->segments[i].used)
             continue;
-        size_t n = collect_loop(s, i);
+        size_t n;
+        rc = collect_loop(s, i, &n);
+        if (rc)
+            break;
         rc = fan_loop(vol, box, level, vertex_limit, s, n, out, result);
         result->loops++;
         if (rc == 1 && result->triangles > max_triangles)
