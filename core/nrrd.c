@@ -698,6 +698,14 @@ static int seek_to_samples(FILE *f, const iso_nrrd_header *hdr, const char *name
             return iso_error_set(err, ISO_E_IO, "%s: cannot seek: %s", name, strerror(errno));
         return ISO_OK;
     }
+    /* A skip past the end would fail with a bare EINVAL (or land nowhere): say so. */
+    struct stat st;
+    off_t at = ftello(f);
+    if (at >= 0 && fstat(fileno(f), &st) == 0 && S_ISREG(st.st_mode) &&
+        (uint64_t)hdr->byte_skip > (uint64_t)(st.st_size > at ? st.st_size - at : 0))
+        return iso_error_set(err, ISO_E_TRUNCATED, "%s: byte skip %" PRId64 " is past the end of the file (%" PRIdMAX
+                             " bytes, data from byte %" PRIdMAX ")", name, hdr->byte_skip, (intmax_t)st.st_size,
+                             (intmax_t)at);
     if (fseeko(f, (off_t)hdr->byte_skip, SEEK_CUR) != 0)
         return iso_error_set(err, ISO_E_IO, "%s: cannot seek: %s", name, strerror(errno));
     return ISO_OK;

@@ -89,6 +89,31 @@ static void test_nrrd_overflow_and_lies(void)
                 "data file: short.raw\n", NULL, 0, 0, ISO_E_TRUNCATED, want);
 }
 
+/* A byte skip past the end of the data is said as such, not as a failed seek. */
+static void test_nrrd_byte_skip_past_end(void)
+{
+    static const unsigned char ten[10] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10};
+    check_write_file(temp_path("skipped.raw"), ten, sizeof ten, NULL, 0);
+    char want[1200];
+    snprintf(want, sizeof want, "%s (data file of %%s): byte skip 9223372036854775807 is past the end of the "
+             "file (10 bytes, data from byte 0)", temp_path("skipped.raw"));
+    expect_file("huge_skip.nhdr", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n"
+                "byte skip: 9223372036854775807\ndata file: skipped.raw\n", NULL, 0, 0, ISO_E_TRUNCATED, want);
+    snprintf(want, sizeof want, "%s (data file of %%s): byte skip 11 is past the end of the file (10 bytes, "
+             "data from byte 0)", temp_path("skipped.raw"));
+    expect_file("past_skip.nhdr", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n"
+                "byte skip: 11\ndata file: skipped.raw\n", NULL, 0, 0, ISO_E_TRUNCATED, want);
+    /* Two bytes skipped leave eight: exactly the 2x2x2 samples, which load. */
+    iso_volume *vol = NULL;
+    iso_error err;
+    const char *fits = "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: raw\nbyte skip: 2\n"
+                       "data file: skipped.raw\n";
+    check_write_file(temp_path("fits.nhdr"), fits, strlen(fits), NULL, 0);
+    CHECK_OK(iso_load(temp_path("fits.nhdr"), NULL, &vol, &err), &err);
+    CHECK(vol && ((const unsigned char *)vol->data)[0] == 3 && ((const unsigned char *)vol->data)[7] == 10);
+    iso_vol_destroy(vol);
+}
+
 static void test_nrrd_truncated_gzip(void)
 {
     unsigned char samples[4096];
@@ -329,6 +354,7 @@ int main(void)
 {
     CHECK_RUN(test_nrrd_huge_header_refused_unread);
     CHECK_RUN(test_nrrd_overflow_and_lies);
+    CHECK_RUN(test_nrrd_byte_skip_past_end);
     CHECK_RUN(test_nrrd_truncated_gzip);
     CHECK_RUN(test_nifti_hostile_exact);
     CHECK_RUN(test_metaimage_hostile_exact);
