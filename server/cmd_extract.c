@@ -112,7 +112,7 @@ int srv_cmd_extract(int argc, char **argv)
     int rc = full_scan ? iso_extract_full_scan(s.vol, params.level, params.space, &mesh, &st, &err)
                        : iso_extract(s.tree, &params, &mesh, &st, &err);
     if (!rc && normals)
-        rc = iso_normals_compute(s.vol, &mesh, normals, params.space, &err);
+        rc = iso_normals_compute(s.vol, &mesh, normals, params.space, params.threads, &err);
     if (rc) {
         srv_close(&s);
         return srv_fail("%s: %s", opt.path, err.message);

@@ -76,7 +76,7 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
         return NULL;
     }
     if (!rc && r->normals && mesh.vertex_count)
-        rc = iso_normals_compute(job->volume->vol, &mesh, r->normals, ISO_SPACE_WORLD, &err);
+        rc = iso_normals_compute(job->volume->vol, &mesh, r->normals, ISO_SPACE_WORLD, 0, &err);
     iso_census census = {0};
     if (!rc)
         rc = iso_census_compute(job->volume->vol, &mesh, ISO_SPACE_WORLD, &census, &err);

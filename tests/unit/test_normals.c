@@ -62,13 +62,13 @@ static void test_ramp_exact_every_order(void)
                     mesh.positions[3 * v + c] = (float)w[c];
             }
             mesh.vertex_count = 3;
-            CHECK_OK(iso_normals_compute(vol, &mesh, order, (iso_space)(space ? ISO_SPACE_INDEX : ISO_SPACE_WORLD), &err), &err);
+            CHECK_OK(iso_normals_compute(vol, &mesh, order, (iso_space)(space ? ISO_SPACE_INDEX : ISO_SPACE_WORLD), 0, &err), &err);
             const double *want = space ? index_n : world_n;
             double len = sqrt(want[0] * want[0] + want[1] * want[1] + want[2] * want[2]);
             for (int v = 0; v < 3 && mesh.normals; v++)
                 for (int c = 0; c < 3; c++)
                     CHECK_NEAR(mesh.normals[3 * v + c], want[c] / len, 2e-6);
-            CHECK_OK(iso_normals_compute(vol, &mesh, 0, ISO_SPACE_WORLD, &err), &err);
+            CHECK_OK(iso_normals_compute(vol, &mesh, 0, ISO_SPACE_WORLD, 0, &err), &err);
             CHECK(mesh.normals == NULL);
             iso_mesh_free(&mesh);
         }
@@ -94,7 +94,7 @@ static void test_sphere_outward_unit_and_ordered(void)
     double mean[5] = {0}, worst[5] = {0};
     const double c = 23.5;
     for (int order = 2; order <= 4; order++) {
-        CHECK_OK(iso_normals_compute(vol, &mesh, order, ISO_SPACE_WORLD, &err), &err);
+        CHECK_OK(iso_normals_compute(vol, &mesh, order, ISO_SPACE_WORLD, 0, &err), &err);
         for (size_t v = 0; v < mesh.vertex_count && mesh.normals; v++) {
             const float *p = mesh.positions + 3 * v, *n = mesh.normals + 3 * v;
             double r[3] = {p[0] - c, p[1] - c, p[2] - c};
