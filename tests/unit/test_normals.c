@@ -1,7 +1,7 @@
 /* test_normals.c: B-spline gradient normals. Every order reproduces linear functions, so a
  * ramp gives its exact normal (index and world space, anisotropic spacing and a rotated
  * frame); on a sphere every normal is unit and points outward (toward lower values), and
- * the smoother orders are no worse than trilinear. */
+ * the smoother orders are no worse than trilinear; the thread count changes no bit. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -118,10 +118,42 @@ static void test_sphere_outward_unit_and_ordered(void)
     iso_vol_destroy(vol);
 }
 
+/* Threads share the vertices; every normal is its own vertex's, so the bytes agree. */
+static void test_threads_give_identical_normals(void)
+{
+    iso_error err;
+    iso_volume *vol = NULL;
+    iso_tree *tree = NULL;
+    CHECK_OK(iso_field_load("field:ml:80", NULL, &vol, &err), &err);
+    if (!vol)
+        return;
+    iso_vol_update_stats(vol);
+    CHECK_OK(iso_tree_build(vol, 0, NULL, NULL, &tree, &err), &err);
+    iso_mesh mesh;
+    iso_mesh_init(&mesh);
+    iso_extract_params params = {.level = 0.5};
+    CHECK_OK(iso_extract(tree, &params, &mesh, NULL, &err), &err);
+    CHECK(mesh.vertex_count > 40000); /* 45,304: three threads' minimum shares */
+    size_t bytes = mesh.vertex_count * 3 * sizeof(float);
+    float *one = malloc(bytes);
+    CHECK(one != NULL);
+    for (int order = 2; order <= 4 && one; order++) {
+        CHECK_OK(iso_normals_compute(vol, &mesh, order, ISO_SPACE_WORLD, 1, &err), &err);
+        memcpy(one, mesh.normals, bytes);
+        CHECK_OK(iso_normals_compute(vol, &mesh, order, ISO_SPACE_WORLD, 3, &err), &err);
+        CHECKF(!memcmp(one, mesh.normals, bytes), "order %d: 1 and 3 threads differ", order);
+    }
+    free(one);
+    iso_mesh_free(&mesh);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_names);
     CHECK_RUN(test_ramp_exact_every_order);
     CHECK_RUN(test_sphere_outward_unit_and_ordered);
+    CHECK_RUN(test_threads_give_identical_normals);
     return check_finish();
 }
