@@ -75,21 +75,34 @@ static void test_ramp_exact_every_order(void)
     iso_vol_destroy(vol);
 }
 
-/* The sphere field is R - |p - c|: the true outward normal is (p - c) / |p - c|. */
-static void test_sphere_outward_unit_and_ordered(void)
+/* Extracts field `name` at `level` into mesh; returns its volume (NULL on failure, a
+ * CHECK failure already recorded). The caller destroys the volume and frees the mesh. */
+static iso_volume *field_mesh(const char *name, double level, iso_mesh *mesh)
 {
     iso_error err;
     iso_volume *vol = NULL;
     iso_tree *tree = NULL;
-    CHECK_OK(iso_field_load("field:sphere:48", NULL, &vol, &err), &err);
+    iso_mesh_init(mesh);
+    CHECK_OK(iso_field_load(name, NULL, &vol, &err), &err);
     if (!vol)
-        return;
+        return NULL;
     iso_vol_update_stats(vol);
     CHECK_OK(iso_tree_build(vol, 0, NULL, NULL, &tree, &err), &err);
+    iso_extract_params params = {.level = level};
+    if (tree)
+        CHECK_OK(iso_extract(tree, &params, mesh, NULL, &err), &err);
+    iso_tree_destroy(tree);
+    return vol;
+}
+
+/* The sphere field is R - |p - c|: the true outward normal is (p - c) / |p - c|. */
+static void test_sphere_outward_unit_and_ordered(void)
+{
+    iso_error err;
     iso_mesh mesh;
-    iso_mesh_init(&mesh);
-    iso_extract_params params = {.level = 8.3};
-    CHECK_OK(iso_extract(tree, &params, &mesh, NULL, &err), &err);
+    iso_volume *vol = field_mesh("field:sphere:48", 8.3, &mesh);
+    if (!vol)
+        return;
     CHECK(mesh.vertex_count > 1000);
     double mean[5] = {0}, worst[5] = {0};
     const double c = 23.5;
@@ -114,7 +127,6 @@ static void test_sphere_outward_unit_and_ordered(void)
     CHECK(mean[3] <= mean[2] && mean[4] <= mean[2]);
     CHECK(mean[2] < 3.0 && mean[3] < 0.5 && mean[4] < 0.5);
     iso_mesh_free(&mesh);
-    iso_tree_destroy(tree);
     iso_vol_destroy(vol);
 }
 
@@ -122,17 +134,10 @@ static void test_sphere_outward_unit_and_ordered(void)
 static void test_threads_give_identical_normals(void)
 {
     iso_error err;
-    iso_volume *vol = NULL;
-    iso_tree *tree = NULL;
-    CHECK_OK(iso_field_load("field:ml:80", NULL, &vol, &err), &err);
+    iso_mesh mesh;
+    iso_volume *vol = field_mesh("field:ml:80", 0.5, &mesh);
     if (!vol)
         return;
-    iso_vol_update_stats(vol);
-    CHECK_OK(iso_tree_build(vol, 0, NULL, NULL, &tree, &err), &err);
-    iso_mesh mesh;
-    iso_mesh_init(&mesh);
-    iso_extract_params params = {.level = 0.5};
-    CHECK_OK(iso_extract(tree, &params, &mesh, NULL, &err), &err);
     CHECK(mesh.vertex_count > 40000); /* 45,304: three threads' minimum shares */
     size_t bytes = mesh.vertex_count * 3 * sizeof(float);
     float *one = malloc(bytes);
@@ -145,7 +150,6 @@ static void test_threads_give_identical_normals(void)
     }
     free(one);
     iso_mesh_free(&mesh);
-    iso_tree_destroy(tree);
     iso_vol_destroy(vol);
 }
 
