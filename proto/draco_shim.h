@@ -23,6 +23,8 @@ typedef struct proto_draco_info {
     /* Bounds of the decoded (dequantized) positions, bit-exact: glTF wants an accessor's
      * min/max to be those of the data a loader will see. Both 0 when points is 0. */
     float min[3], max[3];
+    /* The Draco speed used: the options' own, or what auto chose. */
+    int speed;
 } proto_draco_info;
 
 /* proto_encode_draco (encode.h) that also fills `info` (which may be NULL). */

@@ -36,7 +36,7 @@ typedef struct srv_request {
 
 static const char expose_headers[] =
     "ETag, X-Iso-Triangles, X-Iso-Vertices, X-Iso-Cells-Visited, X-Iso-Extract-Ms, "
-    "X-Iso-Encode-Ms, X-Iso-Error-Bound, X-Iso-Tolerance, X-Iso-Area-Mm2, X-Iso-Volume-Mm3, "
+    "X-Iso-Normals-Ms, X-Iso-Measure-Ms, X-Iso-Encode-Ms, X-Iso-Draco-Speed, X-Iso-Error-Bound, X-Iso-Tolerance, X-Iso-Area-Mm2, X-Iso-Volume-Mm3, "
     "X-Iso-Budget-Fits, X-Iso-Cache, X-Iso-Replica, X-Iso-Load";
 
 /* ---------------------------------------------------------------- responses */
@@ -324,7 +324,11 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
     add_number(r, "X-Iso-Vertices", "%.0f", (double)body->vertices);
     add_number(r, "X-Iso-Cells-Visited", "%.0f", (double)body->cells_visited);
     add_number(r, "X-Iso-Extract-Ms", "%.3f", body->extract_ms);
+    add_number(r, "X-Iso-Normals-Ms", "%.3f", body->normals_ms);
+    add_number(r, "X-Iso-Measure-Ms", "%.3f", body->measure_ms);
     add_number(r, "X-Iso-Encode-Ms", "%.3f", body->encode_ms);
+    if (body->draco_speed >= 0)
+        add_number(r, "X-Iso-Draco-Speed", "%.0f", body->draco_speed);
     add_number(r, "X-Iso-Error-Bound", "%.9g", body->error_bound);
     add_number(r, "X-Iso-Tolerance", "%.17g", body->tolerance);
     add_number(r, "X-Iso-Area-Mm2", "%.6g", body->area_mm2);

@@ -1,4 +1,4 @@
-/* mesh_job.c: extract, add normals, measure, encode (see mesh_job.h). */
+/* mesh_job.c: extract, add normals, measure, encode, each step timed (see mesh_job.h). */
 #include "mesh_job.h"
 
 #include <math.h>
@@ -36,13 +36,22 @@ static int extract(const srv_mesh_job *job, iso_mesh *mesh, iso_extract_stats *s
     return rc;
 }
 
-static int encode(const proto_mesh_request *r, const iso_mesh *mesh, unsigned char **out,
-                  size_t *size, iso_error *err)
+/* The Draco speed a request gets for this mesh (auto resolved), or -1 for PLY and STL. */
+static int draco_speed(const proto_mesh_request *r, const iso_mesh *mesh)
+{
+    if (r->format != PROTO_FORMAT_DRACO && r->format != PROTO_FORMAT_GLB)
+        return -1;
+    return r->speed == PROTO_DRACO_SPEED_AUTO ? proto_draco_auto_speed(mesh->triangle_count) : r->speed;
+}
+
+static int encode(const proto_mesh_request *r, const iso_mesh *mesh, int speed,
+                  unsigned char **out, size_t *size, iso_error *err)
 {
     proto_encode_options opt;
     proto_encode_options_init(&opt);
     opt.position_bits = r->position_bits;
     opt.normal_bits = r->normal_bits;
+    opt.speed = speed;
     switch (r->format) {
     case PROTO_FORMAT_GLB: return proto_encode_glb(mesh, &opt, out, size, err);
     case PROTO_FORMAT_PLY: return proto_encode_ply(mesh, out, size, err);
@@ -63,8 +72,9 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     unsigned char *data = NULL;
     size_t size = 0;
 
-    double start = iso_clock_ms();
+    double t0 = iso_clock_ms();
     int rc = extract(job, &mesh, &stats, &facts, &err);
+    double t1 = iso_clock_ms();
     /* Refused before normals and encoding, which cost several times the extraction's
      * memory for a large mesh; the refusal is not cached, so a later, larger limit answers. */
     if (!rc && job->max_triangles && stats.triangles > job->max_triangles) {
@@ -77,14 +87,17 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     }
     if (!rc && r->normals && mesh.vertex_count)
         rc = iso_normals_compute(job->volume->vol, &mesh, r->normals, ISO_SPACE_WORLD, 0, &err);
+    double t2 = iso_clock_ms();
     iso_census census = {0};
     if (!rc)
         rc = iso_census_compute(job->volume->vol, &mesh, ISO_SPACE_WORLD, &census, &err);
-    double extract_ms = iso_clock_ms() - start;
-    start = iso_clock_ms();
+    double area = rc ? 0 : iso_mesh_area(&mesh);
+    double enclosed = !rc && census.closed ? fabs(iso_mesh_enclosed_volume(&mesh)) : 0;
+    double t3 = iso_clock_ms();
+    int speed = draco_speed(r, &mesh);
     if (!rc)
-        rc = encode(r, &mesh, &data, &size, &err);
-    double encode_ms = iso_clock_ms() - start;
+        rc = encode(r, &mesh, speed, &data, &size, &err);
+    double t4 = iso_clock_ms();
     if (rc) {
         iso_mesh_free(&mesh);
         proto_problem_set(problem, rc == ISO_E_NOMEM ? 503 : 500, NULL, "%s: %s",
@@ -101,14 +114,17 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     body->triangles = stats.triangles;
     body->vertices = stats.vertices;
     body->cells_visited = stats.cells_visited;
-    body->extract_ms = extract_ms;
-    body->encode_ms = encode_ms;
+    body->extract_ms = t1 - t0;
+    body->normals_ms = t2 - t1;
+    body->measure_ms = t3 - t2;
+    body->encode_ms = t4 - t3;
+    body->draco_speed = speed;
     body->error_bound = stats.error_bound;
     body->tolerance = facts.tolerance;
     body->budget_fits = facts.budget_fits;
-    body->area_mm2 = iso_mesh_area(&mesh);
+    body->area_mm2 = area;
     body->closed = census.closed;
-    body->volume_mm3 = body->closed ? fabs(iso_mesh_enclosed_volume(&mesh)) : 0;
+    body->volume_mm3 = enclosed;
     iso_mesh_free(&mesh);
     if (job->cache)
         srv_cache_put(job->cache, job->key, body);
