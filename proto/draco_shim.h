@@ -1,5 +1,6 @@
 /* draco_shim.h: the C side of the Draco shim (draco_shim.cc) for encoders that need to
- * describe the Draco bytes they embed (glb.c): what a decoder will get out of them.
+ * describe the Draco bytes they embed (glb.c), and for callers that report them (the
+ * server's headers): what a decoder will get out of them, and the speed used.
  * proto_encode_draco and proto_draco_decode (encode.h) are implemented in the shim too. */
 #ifndef PROTO_DRACO_SHIM_H
 #define PROTO_DRACO_SHIM_H
@@ -31,6 +32,12 @@ typedef struct proto_draco_info {
 int proto_draco_encode_info(const iso_mesh *mesh, const proto_encode_options *opt,
                             unsigned char **out, size_t *out_size, proto_draco_info *info,
                             iso_error *err);
+
+/* proto_encode_glb (encode.h) that also fills `embedded` (which may be NULL) with what
+ * the embedded Draco stream holds (implemented in glb.c). */
+int proto_glb_encode_info(const iso_mesh *mesh, const proto_encode_options *opt,
+                          unsigned char **out, size_t *out_size, proto_draco_info *embedded,
+                          iso_error *err);
 
 #ifdef __cplusplus
 }
