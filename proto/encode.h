@@ -56,9 +56,9 @@ void proto_encode_options_init(proto_encode_options *opt);
  * PROTO_DRACO_AUTO_SEQUENTIAL triangles, 10 above. Measured on CThead skin (508k triangles,
  * normals, qp 14, qn 10; docs/performance.md): speed 8 is smaller than 5, 6 and 7 and
  * faster to encode and to decode than all three; 0 and 3 save 12% and 6% of the bytes for
- * 3.5x and 2x the encode time and 6x and 3.7x the decode time in the browser; 10 costs
- * 1.95x the bytes and encodes 2.5x faster, so only a mesh too large to encode at 8 within
- * an interactive request's budget (about 40 ms on one core) gets it. */
+ * 2.8x and 2x the encode time and 4.4x and 3x the decode time in the browser; 10 costs
+ * 1.95x the bytes and encodes 2-2.6x faster, so only a mesh too large to encode at 8 within
+ * an interactive request's budget (200k triangles: about 55 ms on one core) gets it. */
 #define PROTO_DRACO_AUTO_SEQUENTIAL 200000
 int proto_draco_auto_speed(size_t triangles);
 
@@ -94,9 +94,9 @@ int proto_encode_stl(const iso_mesh *mesh, unsigned char **out, size_t *out_size
  * order changes below speed 10 (see proto_encode_options). A mesh left with no triangles,
  * which Draco's mesh encoders refuse, becomes a tiny stream (22 bytes) that decodes to an
  * empty mesh: a POSITION attribute, no points, no faces (see draco_shim.cc). Cost per
- * triangle on one core, with normals: about 0.22 us at speed 8, 0.1 us at 10, 0.6 us at 5
- * and 1.1 us at 0; plus page faults on fresh allocations (the server keeps freed memory,
- * see cmd_serve.c). */
+ * triangle on one core, with normals (CThead skin): about 0.27 us at speed 8, 0.1 us at
+ * 10, 0.4 us at 5 and 0.9 us at 0; plus page faults on fresh allocations (the server
+ * keeps freed memory, see cmd_serve.c). */
 int proto_encode_draco(const iso_mesh *mesh, const proto_encode_options *opt,
                        unsigned char **out, size_t *out_size, iso_error *err);
 
