@@ -369,9 +369,10 @@ done:
 /* A mesh request allocates and frees tens of MB (the mesh, the edge census, Draco's
  * corner tables). With glibc's defaults the large blocks are fresh mmaps and freed memory
  * above 128 KiB is handed back, so every request faults its pages in again: 7,600 faults
- * per CThead skin request, a sixth of its time here. Blocks up to 32 MiB (glibc's limit)
- * now come from the heap, and freed memory stays for the next request: the process keeps
- * its peak. Returns of mallopt are ignored: it is a tuning, and sanitizers stub it. */
+ * per CThead skin request. Keeping them took Draco speed 5 from 280 to 220 ms of CPU on
+ * CThead skin (docs/performance.md). Blocks up to 32 MiB (glibc's limit) now come from the
+ * heap, and freed memory stays for the next request: the process keeps its peak. Returns
+ * of mallopt are ignored: it is a tuning, and sanitizers stub it. */
 static void keep_freed_memory(void)
 {
     mallopt(M_MMAP_THRESHOLD, 32 << 20);
