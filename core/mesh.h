@@ -53,7 +53,9 @@ double iso_mesh_area(const iso_mesh *mesh);
 double iso_mesh_enclosed_volume(const iso_mesh *mesh);
 
 /* Edge census after welding: edges used by one triangle, by three or more, and by exactly
- * two triangles in opposite directions. Allocates a temporary table. */
+ * two triangles in opposite directions. O(T) plus a sort of each vertex's few edges;
+ * allocates 24 bytes per triangle and 8 per vertex for the call. Returns 0, ISO_E_NOMEM,
+ * or ISO_E_ARGUMENT when an index is not below vertex_count (out is then undefined). */
 typedef struct iso_mesh_edges {
     size_t edges, open, nonmanifold, misoriented;
     size_t open_excused; /* open edges the classifier accepted (counted apart from open) */
@@ -66,8 +68,9 @@ int iso_mesh_count_edges_excusing(const iso_mesh *mesh, iso_mesh_edge_excuse_fn 
                                   void *context, iso_mesh_edges *out);
 
 /* Calls visit(context, lo, hi, forward, backward) once for every edge (lo < hi) with its
- * uses as lo->hi and as hi->lo, in no particular order. Allocates a temporary table of
- * ~4T slots of 16 bytes; returns 0 or ISO_E_NOMEM (nothing visited). */
+ * uses as lo->hi and as hi->lo, in order of lo, then hi. Allocates 24 bytes per triangle
+ * and 8 per vertex for the call; returns 0, ISO_E_NOMEM or ISO_E_ARGUMENT (an index not
+ * below vertex_count), nothing visited then. */
 typedef void (*iso_mesh_edge_visit_fn)(void *context, uint32_t lo, uint32_t hi,
                                        uint32_t forward, uint32_t backward);
 int iso_mesh_visit_edges(const iso_mesh *mesh, iso_mesh_edge_visit_fn visit, void *context);

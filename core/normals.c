@@ -12,8 +12,11 @@
 
 #include <assert.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include "parallel.h"
 
 static const char *const order_names[5] = {"none", NULL, "trilinear", "triquadratic", "tricubic"};
 
@@ -33,7 +36,7 @@ const char *iso_normals_name(int order)
 
 /* Weights w and derivative weights d of one axis at coordinate x; *first is the sample of
  * weight 0 (may lie outside 0..n-1: callers clamp). */
-static void basis(int order, double x, size_t n, long *first, double w[4], double d[4])
+static inline __attribute__((always_inline)) void basis(const int order, double x, size_t n, long *first, double w[4], double d[4])
 {
     if (order == 2) {
         double i = floor(x);
@@ -69,28 +72,90 @@ static size_t clamp_index(long i, size_t n)
     return i < 0 ? 0 : (size_t)i >= n ? n - 1 : (size_t)i;
 }
 
-/* The B-spline's gradient in index space at p. */
-static void gradient(const iso_volume *vol, int order, const double p[3], double g[3])
+/* The order^3 samples of the spline's support from first[] on, x fastest, into block:
+ * border samples repeated, NaN read as the volume's minimum. Row offsets are computed
+ * once per axis, and the voxel type is switched on once per vertex, not per sample. */
+#define GATHER(T)                                                                   \
+    do {                                                                            \
+        const T *data = (const T *)vol->data;                                       \
+        for (int k = 0; k < order; k++)                                             \
+            for (int j = 0; j < order; j++) {                                       \
+                const T *row = data + (z[k] * vol->dims[1] + y[j]) * vol->dims[0];  \
+                for (int i = 0; i < order; i++)                                     \
+                    *out++ = (double)row[x[i]];                                     \
+            }                                                                       \
+    } while (0)
+
+static inline __attribute__((always_inline)) void gather(const iso_volume *vol, const int order,
+                                                         const long first[3], double *block)
 {
-    double w[3][4], d[3][4];
+    size_t x[4], y[4], z[4];
+    for (int a = 0; a < order; a++) {
+        x[a] = clamp_index(first[0] + a, vol->dims[0]);
+        y[a] = clamp_index(first[1] + a, vol->dims[1]);
+        z[a] = clamp_index(first[2] + a, vol->dims[2]);
+    }
+    double *out = block;
+    switch (vol->type) {
+    case ISO_U8: GATHER(uint8_t); break;
+    case ISO_I8: GATHER(int8_t); break;
+    case ISO_U16: GATHER(uint16_t); break;
+    case ISO_I16: GATHER(int16_t); break;
+    case ISO_U32: GATHER(uint32_t); break;
+    case ISO_I32: GATHER(int32_t); break;
+    case ISO_F32: GATHER(float); break;
+    case ISO_F64: GATHER(double); break;
+    }
+    if (vol->has_nan)
+        for (int n = 0; n < order * order * order; n++)
+            if (block[n] != block[n])
+                block[n] = vol->value_min;
+}
+
+/* The B-spline's gradient in index space at p, separably: each x row of the block reduces
+ * to its value and x derivative, each y column of those to three partial sums, then z.
+ * About 2 order^3 + 3 order^2 + 6 multiply-adds instead of 3 order^3 products of four.
+ * Inlined into one copy per order (gradient_2/3/4) so that its loops unroll. */
+static inline __attribute__((always_inline)) void gradient_of(const iso_volume *vol, const int order,
+                                                              const double p[3], double g[3])
+{
+    double w[3][4], d[3][4], block[64];
     long first[3];
     for (int a = 0; a < 3; a++)
         basis(order, p[a], vol->dims[a], &first[a], w[a], d[a]);
+    gather(vol, order, first, block);
     g[0] = g[1] = g[2] = 0;
     for (int k = 0; k < order; k++) {
-        size_t z = clamp_index(first[2] + k, vol->dims[2]);
+        double value_xy = 0, dx_y = 0, x_dy = 0; /* f, df/dx, df/dy on this z plane */
         for (int j = 0; j < order; j++) {
-            size_t y = clamp_index(first[1] + j, vol->dims[1]);
+            const double *row = block + (k * order + j) * order;
+            double value_x = 0, dx = 0;
             for (int i = 0; i < order; i++) {
-                double v = iso_vol_get(vol, clamp_index(first[0] + i, vol->dims[0]), y, z);
-                if (v != v)
-                    v = vol->value_min;
-                g[0] += d[0][i] * w[1][j] * w[2][k] * v;
-                g[1] += w[0][i] * d[1][j] * w[2][k] * v;
-                g[2] += w[0][i] * w[1][j] * d[2][k] * v;
+                value_x += w[0][i] * row[i];
+                dx += d[0][i] * row[i];
             }
+            value_xy += w[1][j] * value_x;
+            x_dy += d[1][j] * value_x;
+            dx_y += w[1][j] * dx;
         }
+        g[0] += w[2][k] * dx_y;
+        g[1] += w[2][k] * x_dy;
+        g[2] += d[2][k] * value_xy;
     }
+}
+
+static void gradient_2(const iso_volume *vol, const double p[3], double g[3]) { gradient_of(vol, 2, p, g); }
+static void gradient_3(const iso_volume *vol, const double p[3], double g[3]) { gradient_of(vol, 3, p, g); }
+static void gradient_4(const iso_volume *vol, const double p[3], double g[3]) { gradient_of(vol, 4, p, g); }
+
+static void gradient(const iso_volume *vol, int order, const double p[3], double g[3])
+{
+    if (order == 2)
+        gradient_2(vol, p, g);
+    else if (order == 3)
+        gradient_3(vol, p, g);
+    else
+        gradient_4(vol, p, g);
 }
 
 /* The linear part A of index-to-world (columns: world steps of i, j, k) and its inverse. */
@@ -117,8 +182,58 @@ static int world_frame(const iso_volume *vol, double a[3][3], double inv[3][3], 
     return 0;
 }
 
+/* What every thread of one iso_normals_compute call shares. */
+typedef struct normals_job {
+    const iso_volume *vol;
+    iso_mesh *mesh;
+    int order;
+    iso_space space;
+    double inv[3][3], origin[3];
+} normals_job;
+
+static void normal_at(const normals_job *job, size_t v)
+{
+    const float *q = job->mesh->positions + 3 * v;
+    double p[3], g[3], n[3];
+    if (job->space == ISO_SPACE_WORLD)
+        for (int r = 0; r < 3; r++)
+            p[r] = job->inv[r][0] * (q[0] - job->origin[0]) + job->inv[r][1] * (q[1] - job->origin[1]) +
+                   job->inv[r][2] * (q[2] - job->origin[2]);
+    else
+        for (int c = 0; c < 3; c++)
+            p[c] = q[c];
+    gradient(job->vol, job->order, p, g);
+    if (g[0] == 0 && g[1] == 0 && g[2] == 0 && job->order != 2)
+        gradient(job->vol, 2, p, g);
+    /* World gradient = A^-T times the index gradient. */
+    for (int c = 0; c < 3; c++)
+        n[c] = job->space == ISO_SPACE_WORLD
+                   ? -(job->inv[0][c] * g[0] + job->inv[1][c] * g[1] + job->inv[2][c] * g[2])
+                   : -g[c];
+    double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!(len > 0) || !isfinite(len)) {
+        n[0] = n[1] = 0, n[2] = 1, len = 1;
+    }
+    for (int c = 0; c < 3; c++)
+        job->mesh->normals[3 * v + c] = (float)(n[c] / len);
+}
+
+/* Thread t of threads: a contiguous share of the vertices (each normal depends only on
+ * its own position, so the result does not depend on the split). */
+static void normals_share(void *context, int t, int threads)
+{
+    const normals_job *job = context;
+    size_t n = job->mesh->vertex_count;
+    size_t begin = n * (size_t)t / (size_t)threads, end = n * (size_t)(t + 1) / (size_t)threads;
+    for (size_t v = begin; v < end; v++)
+        normal_at(job, v);
+}
+
+/* Below this many vertices one thread does it all: starting threads would cost more. */
+#define NORMALS_PER_THREAD 16384
+
 int iso_normals_compute(const iso_volume *vol, iso_mesh *mesh, int order, iso_space space,
-                        iso_error *err)
+                        int threads, iso_error *err)
 {
     assert(vol && mesh);
     if (order == 0) {
@@ -128,37 +243,19 @@ int iso_normals_compute(const iso_volume *vol, iso_mesh *mesh, int order, iso_sp
     }
     if (order < 2 || order > 4)
         return iso_error_set(err, ISO_E_ARGUMENT, "normals: order %d is not 2, 3 or 4", order);
-    double a[3][3], inv[3][3], origin[3];
-    if (world_frame(vol, a, inv, origin))
+    normals_job job = {.vol = vol, .mesh = mesh, .order = order, .space = space};
+    double a[3][3];
+    if (world_frame(vol, a, job.inv, job.origin))
         return iso_error_set(err, ISO_E_ARGUMENT, "normals: the volume's index-to-world map is singular");
     size_t capacity = mesh->vertex_capacity > mesh->vertex_count ? mesh->vertex_capacity : mesh->vertex_count;
     float *normals = realloc(mesh->normals, (capacity ? capacity : 1) * 3 * sizeof *normals);
     if (!normals)
         return iso_error_set(err, ISO_E_NOMEM, "normals: out of memory for %zu vertices", mesh->vertex_count);
     mesh->normals = normals;
-    for (size_t v = 0; v < mesh->vertex_count; v++) {
-        double p[3], q[3], g[3], n[3];
-        for (int c = 0; c < 3; c++)
-            q[c] = mesh->positions[3 * v + c];
-        if (space == ISO_SPACE_WORLD)
-            for (int r = 0; r < 3; r++)
-                p[r] = inv[r][0] * (q[0] - origin[0]) + inv[r][1] * (q[1] - origin[1]) +
-                       inv[r][2] * (q[2] - origin[2]);
-        else
-            memcpy(p, q, sizeof p);
-        gradient(vol, order, p, g);
-        if (g[0] == 0 && g[1] == 0 && g[2] == 0 && order != 2)
-            gradient(vol, 2, p, g);
-        /* World gradient = A^-T times the index gradient. */
-        for (int c = 0; c < 3; c++)
-            n[c] = space == ISO_SPACE_WORLD ? -(inv[0][c] * g[0] + inv[1][c] * g[1] + inv[2][c] * g[2])
-                                            : -g[c];
-        double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        if (!(len > 0) || !isfinite(len)) {
-            n[0] = n[1] = 0, n[2] = 1, len = 1;
-        }
-        for (int c = 0; c < 3; c++)
-            normals[3 * v + c] = (float)(n[c] / len);
-    }
+    threads = iso_parallel_threads(threads);
+    size_t most = mesh->vertex_count / NORMALS_PER_THREAD + 1;
+    if ((size_t)threads > most)
+        threads = (int)most;
+    iso_parallel_run(threads, normals_share, &job);
     return 0;
 }

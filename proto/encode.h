@@ -29,9 +29,10 @@ enum {
     PROTO_NORMAL_BITS_MIN = 6,
     PROTO_NORMAL_BITS_MAX = 16,
     PROTO_NORMAL_BITS_DEFAULT = 10,
+    PROTO_DRACO_SPEED_AUTO = -1, /* proto_draco_auto_speed picks by triangle count */
     PROTO_DRACO_SPEED_MIN = 0,
     PROTO_DRACO_SPEED_MAX = 10,
-    PROTO_DRACO_SPEED_DEFAULT = 5
+    PROTO_DRACO_SPEED_DEFAULT = PROTO_DRACO_SPEED_AUTO
 };
 
 /* Draco options (PLY and OBJ are lossless and take none). */
@@ -41,14 +42,25 @@ typedef struct proto_encode_options {
     int position_bits;
     /* Normal quantization bits (octahedral), used only when the mesh has normals. */
     int normal_bits;
-    /* Draco encoding and decoding speed, 0 (smallest) .. 10 (fastest); Draco's compression
-     * level is 10 - speed. Below 10 Draco uses edgebreaker, which reorders vertices and
-     * triangles; 10 keeps their order but is several times larger. */
+    /* Draco encoding and decoding speed, 0 (smallest) .. 10 (fastest), or
+     * PROTO_DRACO_SPEED_AUTO; Draco's compression level is 10 - speed. Below 10 Draco uses
+     * edgebreaker, which reorders vertices and triangles; 10 is the sequential coder with
+     * compressed connectivity: order kept, about twice the bytes of 8, 2.5x faster. */
     int speed;
 } proto_encode_options;
 
-/* Fills the defaults: 14 position bits, 10 normal bits, speed 5. */
+/* Fills the defaults: 14 position bits, 10 normal bits, speed auto. */
 void proto_encode_options_init(proto_encode_options *opt);
+
+/* The speed PROTO_DRACO_SPEED_AUTO encodes a mesh of `triangles` with: 8 up to
+ * PROTO_DRACO_AUTO_SEQUENTIAL triangles, 10 above. Measured on CThead skin (508k triangles,
+ * normals, qp 14, qn 10; docs/performance.md): speed 8 is smaller than 5, 6 and 7 and
+ * faster to encode and to decode than all three; 0 and 3 save 12% and 6% of the bytes for
+ * 2.8x and 2x the encode time and 4.4x and 3x the decode time in the browser; 10 costs
+ * 1.95x the bytes and encodes 2-2.6x faster, so only a mesh too large to encode at 8 within
+ * an interactive request's budget (200k triangles: about 55 ms on one core) gets it. */
+#define PROTO_DRACO_AUTO_SEQUENTIAL 200000
+int proto_draco_auto_speed(size_t triangles);
 
 /* Checks that a mesh can be encoded: counts fit uint32 (PLY and glTF indices), every index
  * is below vertex_count and, when `finite` is set, every position is finite (Draco's
@@ -76,12 +88,15 @@ int proto_encode_stl(const iso_mesh *mesh, unsigned char **out, size_t *out_size
                      iso_error *err);
 
 /* A Draco mesh bitstream (libdraco 1.5.5, readable by draco3d 1.5.x). opt NULL means the
- * defaults; options out of range give ISO_E_ARGUMENT. Triangles with a repeated index and
+ * defaults; options out of range give ISO_E_ARGUMENT; speed auto is resolved on the count
+ * of triangles left once degenerate ones are dropped. Triangles with a repeated index and
  * vertices no other triangle uses are dropped, non-manifold vertices may be split, and
  * order changes below speed 10 (see proto_encode_options). A mesh left with no triangles,
  * which Draco's mesh encoders refuse, becomes a tiny stream (22 bytes) that decodes to an
- * empty mesh: a POSITION attribute, no points, no faces (see draco_shim.cc). Cost: about
- * 0.4 us per triangle at speed 5 (100k triangles in ~45 ms on one core). */
+ * empty mesh: a POSITION attribute, no points, no faces (see draco_shim.cc). Cost per
+ * triangle on one core, with normals (CThead skin): about 0.27 us at speed 8, 0.1 us at
+ * 10, 0.4 us at 5 and 0.9 us at 0; plus page faults on fresh allocations (the server
+ * keeps freed memory, see cmd_serve.c). */
 int proto_encode_draco(const iso_mesh *mesh, const proto_encode_options *opt,
                        unsigned char **out, size_t *out_size, iso_error *err);
 

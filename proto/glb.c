@@ -98,6 +98,13 @@ static size_t pad4(size_t n)
 int proto_encode_glb(const iso_mesh *mesh, const proto_encode_options *opt,
                      unsigned char **out, size_t *out_size, iso_error *err)
 {
+    return proto_glb_encode_info(mesh, opt, out, out_size, NULL, err);
+}
+
+int proto_glb_encode_info(const iso_mesh *mesh, const proto_encode_options *opt,
+                          unsigned char **out, size_t *out_size, proto_draco_info *embedded,
+                          iso_error *err)
+{
     assert(mesh && out && out_size);
     *out = NULL;
     *out_size = 0;
@@ -107,6 +114,8 @@ int proto_encode_glb(const iso_mesh *mesh, const proto_encode_options *opt,
     int rc = proto_draco_encode_info(mesh, opt, &draco, &draco_size, &info, err);
     if (rc)
         return rc;
+    if (embedded)
+        *embedded = info;
 
     glb_json json;
     json.len = 0;

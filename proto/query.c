@@ -92,9 +92,9 @@ const char *proto_format_name(proto_format format) { return format_names[format]
 const char *proto_format_content_type(proto_format format) { return format_types[format]; }
 
 /* The parameters, in the order the key lists them. */
-enum { P_LEVEL, P_TOLERANCE, P_NORMALS, P_FORMAT, P_QP, P_QN, P_BUDGET, P_CAP, P_COUNT };
+enum { P_LEVEL, P_TOLERANCE, P_NORMALS, P_FORMAT, P_QP, P_QN, P_SPEED, P_BUDGET, P_CAP, P_COUNT };
 static const char *const param_names[P_COUNT] = {"level", "tolerance", "normals", "format",
-                                                 "qp", "qn", "budget", "cap"};
+                                                 "qp", "qn", "speed", "budget", "cap"};
 
 static int parse_one(int which, const char *value, proto_mesh_request *out, proto_problem *problem)
 {
@@ -149,6 +149,19 @@ static int parse_one(int which, const char *value, proto_mesh_request *out, prot
             return -1;
         out->normal_bits = (int)n;
         return 0;
+    case P_SPEED:
+        if (value && !strcmp(value, "auto")) {
+            out->speed = PROTO_DRACO_SPEED_AUTO;
+            return 0;
+        }
+        if (value && strspn(value, "0123456789") != strlen(value))
+            return proto_problem_set(problem, 400, key, "speed must be auto or a whole number "
+                                     "from %d to %d, not \"%s\"", PROTO_DRACO_SPEED_MIN,
+                                     PROTO_DRACO_SPEED_MAX, shown(value, buf, sizeof buf));
+        if (parse_count(key, value, PROTO_DRACO_SPEED_MIN, PROTO_DRACO_SPEED_MAX, &n, problem))
+            return -1;
+        out->speed = (int)n;
+        return 0;
     case P_BUDGET:
     default:
         if (parse_count(key, value, 1, PROTO_BUDGET_MAX, &n, problem))
@@ -166,7 +179,8 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
     *out = (proto_mesh_request){.normals = PROTO_NORMALS_DEFAULT,
                                 .format = PROTO_FORMAT_DRACO,
                                 .position_bits = PROTO_POSITION_BITS_DEFAULT,
-                                .normal_bits = PROTO_NORMAL_BITS_DEFAULT};
+                                .normal_bits = PROTO_NORMAL_BITS_DEFAULT,
+                                .speed = PROTO_DRACO_SPEED_DEFAULT};
     for (size_t i = 0; i < count; i++) {
         const char *key = params[i].key ? params[i].key : "";
         int which = 0;
@@ -175,7 +189,7 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
         if (which == P_COUNT)
             return proto_problem_set(problem, 400, NULL,
                                      "unknown parameter \"%s\"; the mesh takes level, tolerance, "
-                                     "normals, format, qp, qn, budget and cap",
+                                     "normals, format, qp, qn, speed, budget and cap",
                                      shown(key, buf, sizeof buf));
         if (seen[which]++)
             return proto_problem_set(problem, 400, key, "%s is given more than once", key);
@@ -189,10 +203,16 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
 
 size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t size)
 {
+    /* PLY and STL are lossless: Draco's options do not change their bytes. */
+    int draco = req->format == PROTO_FORMAT_DRACO || req->format == PROTO_FORMAT_GLB;
+    char speed[8] = "auto";
+    if (draco && req->speed != PROTO_DRACO_SPEED_AUTO)
+        snprintf(speed, sizeof speed, "%d", req->speed);
     int n = snprintf(buf, size,
-                     "level=%.17g&tolerance=%.17g&normals=%s&format=%s&qp=%d&qn=%d&budget=%u&cap=%s",
+                     "level=%.17g&tolerance=%.17g&normals=%s&format=%s&qp=%d&qn=%d&speed=%s&budget=%u&cap=%s",
                      req->level, req->tolerance, iso_normals_name(req->normals),
                      format_names[req->format], req->position_bits,
-                     req->normals ? req->normal_bits : 0, req->budget, req->cap ? "true" : "false");
+                     req->normals ? req->normal_bits : 0, speed, req->budget,
+                     req->cap ? "true" : "false");
     return n < 0 ? 0 : (size_t)n;
 }

@@ -38,6 +38,7 @@ typedef struct proto_mesh_request {
     proto_format format;   /* default draco */
     int position_bits;     /* qp, default 14 */
     int normal_bits;       /* qn, default 10 */
+    int speed;             /* Draco speed 0..10, or PROTO_DRACO_SPEED_AUTO (-1, default) */
     uint32_t budget;       /* triangles; 0 = no budget */
     int cap;               /* cap=true: closed at the volume's border; default false */
 } proto_mesh_request;

@@ -24,6 +24,7 @@ srv_body *srv_body_create(unsigned char *data, size_t size)
     body->data = data;
     body->size = size;
     body->budget_fits = -1;
+    body->draco_speed = -1;
     return body;
 }
 

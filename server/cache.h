@@ -18,7 +18,9 @@ typedef struct srv_body {
     size_t size;
     const char *content_type;       /* static string */
     size_t triangles, vertices, cells_visited;
-    double extract_ms, encode_ms, error_bound, tolerance, area_mm2;
+    double extract_ms, normals_ms, measure_ms, encode_ms; /* the job's steps, in order */
+    double error_bound, tolerance, area_mm2;
+    int draco_speed;                /* the Draco speed used (draco and glb); -1 otherwise */
     double volume_mm3;              /* enclosed volume; meaningful only when closed */
     int closed;                     /* no open or non-manifold edge */
     int budget_fits;                /* -1: no budget asked; else 0 or 1 */

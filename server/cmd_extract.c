@@ -141,7 +141,7 @@ int srv_cmd_extract(int argc, char **argv)
         st.vertices = mesh.vertex_count;
     }
     if (!rc && normals)
-        rc = iso_normals_compute(s.vol, &mesh, normals, params.space, &err);
+        rc = iso_normals_compute(s.vol, &mesh, normals, params.space, params.threads, &err);
     if (rc) {
         srv_close(&s);
         return srv_fail("%s: %s", opt.path, err.message);

@@ -1,56 +1,112 @@
-"""HTTP benchmark: latency percentiles and throughput with wrk against cached and uncached
-mesh requests through a running isoserve, and Draco bytes against the raw float32 positions
-(and normals) plus uint32 indices of the same meshes. Prints a table and writes
-bench/results/http.json.
+"""HTTP benchmark: mesh requests through a running isoserve, uncached and cached, per request
+size. Prints tables and writes bench/results/http.json.
 
-Volumes: the shared CT head when ../shared/volumes is there, else the analytic phantoms of
-the default collection (so a user's clone can run it too)."""
+- Uncached, one request at a time (a new level each, so each extracts and encodes): client
+  latency, and the server's own split from the X-Iso-* headers: extraction, normals, measure
+  (edge census, area, volume), Draco encode; the Draco speed auto chose and the bytes.
+- Uncached throughput: wrk, 2 connections, every request a new level.
+- Cached: wrk -t2 -c16 (requests/s, p50, p99, and the bytes/s that makes), and 40 cached
+  requests one at a time (client latency p50). /healthz under the same wrk is the server's
+  per-request ceiling; a large cached body is bounded by bytes over loopback instead.
+- Draco speed against bytes for CThead skin: encode time per speed (the server's header),
+  bytes, and the browser decoder's time (npm draco3d in node, when installed).
+
+Volumes: the shared CT heads and the aneurism when ../shared/volumes is there, else an
+analytic field (so a user's clone can run it too). ISO_BENCH_BASELINE_BIN names a second
+binary (an older build) measured the same way in the same run, for side-by-side ratios.
+ISO_BENCH_SECONDS sets each wrk run's length (default 6)."""
 
 import http.client
 import json
 import os
 import re
+import shutil
 import signal
+import statistics
 import subprocess
 import sys
 import tempfile
 import time
 
 BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", "build/isoserve"))
+BASELINE = os.environ.get("ISO_BENCH_BASELINE_BIN")
 SHARED = os.environ.get("ISO_SHARED_VOLUMES", "../shared/volumes")
-DURATION = os.environ.get("ISO_BENCH_SECONDS", "8")
+DURATION = os.environ.get("ISO_BENCH_SECONDS", "6")
+UNCACHED_REPEAT = 7
+SPEEDS = (0, 3, 5, 6, 8, 10)
 
 
-def start(catalog):
-    proc = subprocess.Popen([BIN, "serve", "--catalog", catalog, "--listen", "127.0.0.1:0",
-                             "--cache-mb", "512"], stderr=subprocess.PIPE, text=True)
+def volumes_and_cases():
+    """The catalog's volumes {id: path} and the cases (label, id, level, tolerances)."""
+    ct = os.path.abspath(os.path.join(SHARED, "CThead_256x256x113_u16be.nhdr"))
+    if not os.path.exists(ct):
+        return {"ml": "field:ml:192"}, [("Marschner-Lobb 192^3", "ml", 0.5, (0,))]
+    vols = {"cthead": ct}
+    cases = []
+    small = os.path.abspath(os.path.join(SHARED, "headsq_quarter_64x64x93_u16le.nhdr"))
+    if os.path.exists(small):
+        vols["headsq"] = small
+        cases.append(("headsq skin (small)", "headsq", 500.5, (0,)))
+    sparse = os.path.abspath(os.path.join(SHARED, "aneurism_256x256x256_u8.nhdr"))
+    if os.path.exists(sparse):
+        vols["aneurism"] = sparse
+        cases.append(("aneurism (medium)", "aneurism", 120.5, (0,)))
+    # 163.6 is the top of bench_peer's tolerance ladder for CThead (4% of its value range):
+    # within 0.5 voxel at the 99th percentile of surface distance (docs/performance.md).
+    cases += [("CThead skin (large)", "cthead", 700.5, (0, 163.6)),
+              ("CThead bone (large)", "cthead", 1500.5, (0, 163.6))]
+    return vols, cases
+
+
+def start(binary, catalog):
+    proc = subprocess.Popen([binary, "serve", "--catalog", catalog, "--listen", "127.0.0.1:0",
+                             "--cache-mb", "1024"], stderr=subprocess.PIPE, text=True)
     port = None
     for line in proc.stderr:
         m = re.search(r"listening on http://127\.0\.0\.1:(\d+)/", line)
         if m:
             port = int(m.group(1))
             break
+    if port is None:
+        raise SystemExit(f"bench_http: {binary} did not start")
     # Keep reading stderr (the access log) so the daemon never blocks on a full pipe.
     subprocess.Popen(["cat"], stdin=proc.stderr, stdout=subprocess.DEVNULL)
     while True:
-        c = http.client.HTTPConnection("127.0.0.1", port)
-        c.request("GET", "/healthz")
-        if c.getresponse().status == 200:
-            return proc, port
+        try:
+            c = http.client.HTTPConnection("127.0.0.1", port)
+            c.request("GET", "/healthz")
+            if c.getresponse().status == 200:
+                return proc, port
+        except OSError:
+            pass
         time.sleep(0.1)
 
 
-def get(port, target):
-    c = http.client.HTTPConnection("127.0.0.1", port, timeout=300)
-    c.request("GET", target)
-    r = c.getresponse()
+def get(conn, target):
+    """(response, body, client ms) on a kept-alive connection."""
+    t0 = time.perf_counter()
+    conn.request("GET", target)
+    r = conn.getresponse()
     body = r.read()
-    return r, body
+    ms = (time.perf_counter() - t0) * 1000
+    if r.status != 200:
+        raise SystemExit(f"bench_http: {target}: {r.status} {body[:300]!r}")
+    return r, body, ms
 
 
-def wrk(port, target, lua, connections):
+def header(r, name):
+    v = r.getheader(name)
+    return None if v is None else float(v)
+
+
+def median(xs):
+    xs = [x for x in xs if x is not None]
+    return statistics.median(xs) if xs else None
+
+
+def wrk(port, target, lua, connections, threads=2):
     """Runs wrk; returns requests/s and latency percentiles in ms."""
-    args = ["wrk", "-t", "2", "-c", str(connections), "-d", f"{DURATION}s", "--latency",
+    args = ["wrk", "-t", str(threads), "-c", str(connections), "-d", f"{DURATION}s", "--latency",
             f"http://127.0.0.1:{port}{target}"]
     if lua:
         args[1:1] = ["-s", lua]
@@ -66,59 +122,161 @@ def wrk(port, target, lua, connections):
             "non_2xx": int(non2xx.group(1)) if non2xx else 0}
 
 
-def main():
-    tmp = tempfile.mkdtemp(prefix="isoserve-bench-")
-    ct = os.path.abspath(os.path.join(SHARED, "CThead_256x256x113_u16be.nhdr"))
-    if os.path.exists(ct):
-        cases = [("cthead", ct, 700.5, "CThead skin"), ("cthead", ct, 1500.5, "CThead bone")]
-    else:
-        cases = [("ml", "field:ml:192", 0.5, "Marschner-Lobb 192^3")]
-    catalog = os.path.join(tmp, "catalog.json")
-    json.dump({"volumes": [{"id": i, "path": p} for i, p in {(c[0], c[1]) for c in cases}]},
-              open(catalog, "w"))
+def uncached_one_at_a_time(conn, vid, level, tol, extra=""):
+    """UNCACHED_REPEAT requests, each at a level not asked before (same surface within
+    1e-3): medians of the client latency and of the server's steps; and the last body."""
+    rows, body = [], b""
+    for k in range(UNCACHED_REPEAT):
+        lvl = level + (k + 1) * 1e-4 + time.time() % 1 * 1e-7
+        r, body, ms = get(conn, f"/v1/volumes/{vid}/mesh?level={lvl:.9f}&tolerance={tol}{extra}")
+        if r.getheader("X-Iso-Cache") != "miss":
+            raise SystemExit(f"bench_http: {vid} {lvl}: expected a cache miss")
+        rows.append({"client_ms": ms, "bytes": len(body),
+                     "extract_ms": header(r, "X-Iso-Extract-Ms"),
+                     "normals_ms": header(r, "X-Iso-Normals-Ms"),
+                     "measure_ms": header(r, "X-Iso-Measure-Ms"),
+                     "encode_ms": header(r, "X-Iso-Encode-Ms"),
+                     "speed": header(r, "X-Iso-Draco-Speed"),
+                     "triangles": int(r.getheader("X-Iso-Triangles")),
+                     "vertices": int(r.getheader("X-Iso-Vertices"))})
+    out = {k: median([row[k] for row in rows]) for k in rows[0]}
+    out["client_p90_ms"] = sorted(row["client_ms"] for row in rows)[int(0.9 * (len(rows) - 1))]
+    return out, body
+
+
+def cached(conn, port, vid, level, tol):
+    target = f"/v1/volumes/{vid}/mesh?level={level}&tolerance={tol}"
+    r, body, _ = get(conn, target)
+    one = [get(conn, target)[2] for _ in range(40)]
+    w = wrk(port, target, None, 16)
+    w["one_at_a_time_p50_ms"] = median(one)
+    w["bytes"] = len(body)
+    w["bytes_per_s"] = w["requests_per_s"] * len(body)
+    return w
+
+
+def uncached_throughput(port, tmp, vid, level, tol):
     lua = os.path.join(tmp, "uncached.lua")
-    results = []
-    proc, port = start(catalog)
+    with open(lua, "w") as f:
+        f.write("local n = 0\nrequest = function()\n  n = n + 1\n"
+                f"  return wrk.format('GET', '/v1/volumes/{vid}/mesh?level=' .. "
+                f"string.format('%.9f', {level} + n * 1e-5 + math.random() * 1e-6) .. "
+                f"'&tolerance={tol}')\nend\n")
+    return wrk(port, f"/v1/volumes/{vid}/mesh?level={level}", lua, 2)
+
+
+def node_decode_ms(tmp, body):
+    """The browser's decoder (draco3d's wasm in node) on body: best of 3 ms, or None."""
+    module = os.path.abspath("web/node_modules/draco3d")
+    if not os.path.isdir(module) or not shutil.which("node"):
+        return None
+    path = os.path.join(tmp, "speed.drc")
+    open(path, "wb").write(body)
+    script = r"""
+const draco3d = require(process.argv[1]);
+const bytes = new Int8Array(require('fs').readFileSync(process.argv[2]));
+draco3d.createDecoderModule({}).then((m) => {
+  let best = 1e9;
+  for (let r = 0; r < 3; r++) {
+    const t0 = performance.now();
+    const dec = new m.Decoder(), mesh = new m.Mesh();
+    if (!dec.DecodeArrayToMesh(bytes, bytes.length, mesh).ok()) process.exit(1);
+    const n = mesh.num_points() * 3, p = m._malloc(n * 4);
+    for (const t of [m.POSITION, m.NORMAL]) {
+      const id = dec.GetAttributeId(mesh, t);
+      if (id >= 0) dec.GetAttributeDataArrayForAllPoints(mesh, dec.GetAttribute(mesh, id), m.DT_FLOAT32, n * 4, p);
+    }
+    m._free(p);
+    const q = m._malloc(mesh.num_faces() * 12);
+    dec.GetTrianglesUInt32Array(mesh, mesh.num_faces() * 12, q);
+    m._free(q);
+    m.destroy(mesh); m.destroy(dec);
+    best = Math.min(best, performance.now() - t0);
+  }
+  console.log(best.toFixed(2));
+});"""
+    out = subprocess.run(["node", "-e", script, module, path], capture_output=True, text=True, timeout=120)
+    return float(out.stdout) if out.returncode == 0 else None
+
+
+def speeds(conn, tmp, vid, level):
+    """Bytes and times per Draco speed (the server's own encode time, median)."""
+    rows = []
+    for sp in SPEEDS:
+        u, body = uncached_one_at_a_time(conn, vid, level + 0.01 * (sp + 1), 0, f"&speed={sp}")
+        rows.append({"speed": sp, "bytes": u["bytes"], "encode_ms": u["encode_ms"],
+                     "client_ms": u["client_ms"], "triangles": u["triangles"],
+                     "browser_decode_ms": node_decode_ms(tmp, body)})
+    return rows
+
+
+def run(binary, tmp, catalog, cases, with_speeds):
+    proc, port = start(binary, catalog)
+    results, speed_rows = [], []
     try:
-        for vid, _, level, label in cases:
-            for tol in (0, 100):
-                target = f"/v1/volumes/{vid}/mesh?level={level}&tolerance={tol}"
-                r, body = get(port, target)
-                if r.status != 200:
-                    raise SystemExit(f"bench_http: {target}: {r.status} {body[:300]!r}")
-                tri, ver = int(r.getheader("X-Iso-Triangles")), int(r.getheader("X-Iso-Vertices"))
-                raw = ver * 12 * 2 + tri * 12  # float32 positions and normals, uint32 indices
-                cached = wrk(port, target, None, 16)
-                # Uncached: every request a new level, so every one extracts and encodes.
-                with open(lua, "w") as f:
-                    f.write("local n = 0\nrequest = function()\n  n = n + 1\n"
-                            f"  return wrk.format('GET', '/v1/volumes/{vid}/mesh?level=' .. "
-                            f"string.format('%.6f', {level} + n * 1e-4 + math.random()) .. "
-                            f"'&tolerance={tol}')\nend\n")
-                uncached = wrk(port, target, lua, 4)
-                results.append({"case": label, "level": level, "tolerance": tol,
-                                "triangles": tri, "vertices": ver, "draco_bytes": len(body),
-                                "raw_bytes": raw, "draco_share": len(body) / raw,
-                                "extract_ms": float(r.getheader("X-Iso-Extract-Ms")),
-                                "encode_ms": float(r.getheader("X-Iso-Encode-Ms")),
-                                "cached": cached, "uncached": uncached,
-                                "cached_over_uncached_throughput":
-                                    cached["requests_per_s"] / max(uncached["requests_per_s"], 1e-9)})
+        conn = http.client.HTTPConnection("127.0.0.1", port, timeout=600)
+        ceiling = wrk(port, "/healthz", None, 16)
+        for label, vid, level, tolerances in cases:
+            for tol in tolerances:
+                print(f"  {os.path.basename(binary)}: {label}, tolerance {tol}", file=sys.stderr)
+                results.append({"case": label, "volume": vid, "level": level, "tolerance": tol,
+                                "uncached": uncached_one_at_a_time(conn, vid, level, tol)[0],
+                                "uncached_wrk": uncached_throughput(port, tmp, vid, level, tol),
+                                "cached": cached(conn, port, vid, level, tol)})
+        if with_speeds:  # on CThead skin, or the field
+            skin = [c for c in cases if c[0].startswith("CThead skin")] or cases
+            speed_rows = speeds(conn, tmp, skin[0][1], skin[0][2])
     finally:
         proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=60)
-    print(f"{'case':22} {'T':>4} {'triangles':>9} {'draco KB':>9} {'raw KB':>8} {'share':>6} "
-          f"{'cached r/s':>10} {'p50':>6} {'p99':>6} {'uncached r/s':>12} {'p50':>7} {'p99':>7} {'ratio':>6}")
-    for x in results:
-        c, u = x["cached"], x["uncached"]
-        print(f"{x['case']:22} {x['tolerance']:>4} {x['triangles']:>9} {x['draco_bytes'] / 1024:>9.0f} "
-              f"{x['raw_bytes'] / 1024:>8.0f} {x['draco_share']:>6.1%} {c['requests_per_s']:>10.0f} "
-              f"{c['p50_ms']:>6.2f} {c['p99_ms']:>6.2f} {u['requests_per_s']:>12.2f} {u['p50_ms']:>7.0f} "
-              f"{u['p99_ms']:>7.0f} {x['cached_over_uncached_throughput']:>6.0f}")
+    return {"binary": binary, "healthz": ceiling, "results": results, "speeds": speed_rows}
+
+
+def fmt(x, spec):
+    return "-" if x is None else format(x, spec)
+
+
+def print_run(run_result):
+    print(f"\n{run_result['binary']}: /healthz ceiling {run_result['healthz']['requests_per_s']:.0f} requests/s")
+    print(f"{'case':22} {'T':>6} {'triangles':>9} {'KB':>6} {'sp':>3} | {'uncached':>8} {'p90':>6} "
+          f"{'extract':>7} {'normals':>7} {'measure':>7} {'encode':>7} {'r/s':>5} | {'cached r/s':>10} "
+          f"{'p50':>5} {'p99':>6} {'GB/s':>5} {'1-by-1':>6}")
+    for x in run_result["results"]:
+        u, w, c = x["uncached"], x["uncached_wrk"], x["cached"]
+        print(f"{x['case']:22} {x['tolerance']:>6} {u['triangles']:>9} {c['bytes'] / 1024:>6.0f} "
+              f"{fmt(u['speed'], '>3.0f')} | {u['client_ms']:>8.1f} {u['client_p90_ms']:>6.1f} "
+              f"{fmt(u['extract_ms'], '>7.1f')} {fmt(u['normals_ms'], '>7.1f')} {fmt(u['measure_ms'], '>7.1f')} "
+              f"{fmt(u['encode_ms'], '>7.1f')} {w['requests_per_s']:>5.1f} | {c['requests_per_s']:>10.0f} "
+              f"{c['p50_ms']:>5.2f} {c['p99_ms']:>6.2f} {c['bytes_per_s'] / 1e9:>5.2f} "
+              f"{c['one_at_a_time_p50_ms']:>6.2f}")
+    if run_result["speeds"]:
+        print(f"{'speed':>5} {'KB':>7} {'encode ms':>9} {'request ms':>10} {'browser decode ms':>17}")
+        for s in run_result["speeds"]:
+            print(f"{s['speed']:>5} {s['bytes'] / 1024:>7.0f} {fmt(s['encode_ms'], '>9.1f')} "
+                  f"{s['client_ms']:>10.1f} {fmt(s['browser_decode_ms'], '>17.1f')}")
+
+
+def main():
+    tmp = tempfile.mkdtemp(prefix="isoserve-bench-")
+    vols, cases = volumes_and_cases()
+    catalog = os.path.join(tmp, "catalog.json")
+    json.dump({"volumes": [{"id": i, "path": p} for i, p in vols.items()]}, open(catalog, "w"))
+    runs = [run(BIN, tmp, catalog, cases, True)]
+    if BASELINE:
+        runs.append(run(os.path.abspath(BASELINE), tmp, catalog, cases, False))
+    for r in runs:
+        print_run(r)
+    if BASELINE:
+        print("\nratios, this build over the baseline, same run (uncached: baseline ms / ms; cached: r/s over r/s)")
+        for a, b in zip(runs[0]["results"], runs[1]["results"]):
+            print(f"{a['case']:22} {a['tolerance']:>6}  uncached {b['uncached']['client_ms'] / a['uncached']['client_ms']:>5.2f}x"
+                  f"  cached {a['cached']['requests_per_s'] / b['cached']['requests_per_s']:>5.2f}x"
+                  f"  bytes {a['cached']['bytes'] / b['cached']['bytes']:>5.2f}x")
     os.makedirs("bench/results", exist_ok=True)
     out = "bench/results/http.json"
-    json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-               "wrk_seconds": int(DURATION), "results": results}, open(out, "w"), indent=1)
+    json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "wrk_seconds": int(DURATION),
+               "load_average": os.getloadavg(), "runs": runs}, open(out, "w"), indent=1)
+    shutil.rmtree(tmp, ignore_errors=True)
     print(f"written {out}")
     return 0
 

@@ -108,6 +108,10 @@ async function main() {
       `${meshes.length} mesh responses (coarse first); stats: ${decode.replace(/\s+/g, ' ').slice(0, 160)}`);
     report('mesh_drawn', share > 0.02, `only ${(share * 100).toFixed(2)}% of pixels differ from the background`);
     report('stats_match_header', Number(triangles) > 0, `X-Iso-Triangles ${triangles}`);
+    const speed = final.headers()['x-iso-draco-speed'];
+    const shownSpeed = await page.textContent('#stat-speed');
+    report('stats_show_draco_speed', /^(8|10)$/.test(speed ?? '') && shownSpeed === speed,
+      `X-Iso-Draco-Speed ${speed}, shown ${shownSpeed}`);
     report('coarse_then_fine', meshes.length >= 2 && !meshes[0].url().includes('tolerance=1&'),
       meshes.map((r) => r.url()).join(' '));
     report('url_keeps_state', page.url().includes(`volume=${volume.id}`) && page.url().includes(`level=${volume.level}`), page.url());

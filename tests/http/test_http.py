@@ -151,6 +151,18 @@ def problem(r):
     return body
 
 
+def draco_decode(body, tmp, name):
+    """Decodes Draco bytes with Debian's draco_decoder: (positions N x 3, triangle count)."""
+    path = os.path.join(tmp, name + ".drc")
+    open(path, "wb").write(body)
+    out = os.path.join(tmp, name + "_decoded.ply")
+    subprocess.run(["draco_decoder", "-i", path, "-o", out], check=True, capture_output=True)
+    head, _, payload = open(out, "rb").read().partition(b"end_header\n")
+    nv = int(re.search(rb"element vertex (\d+)", head).group(1))
+    nt = int(re.search(rb"element face (\d+)", head).group(1))
+    return np.frombuffer(payload[:nv * 12], "<f4").reshape(nv, 3).astype(np.float64), nt
+
+
 # ---------------------------------------------------------------- the main server's tests
 
 def main_tests(s, tmp, blob):
@@ -210,17 +222,10 @@ def main_tests(s, tmp, blob):
     def mesh_draco():
         r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&normals=none&qp=12")
         assert r.status == 200 and r.getheader("Content-Type") == "application/x-draco"
-        path = os.path.join(tmp, "blob.drc")
-        open(path, "wb").write(r.body)
-        out = os.path.join(tmp, "blob_decoded.ply")
-        subprocess.run(["draco_decoder", "-i", path, "-o", out], check=True, capture_output=True)
-        data = open(out, "rb").read()
-        head, _, payload = data.partition(b"end_header\n")
-        nv = int(re.search(rb"element vertex (\d+)", head).group(1))
-        nt = int(re.search(rb"element face (\d+)", head).group(1))
+        dec, nt = draco_decode(r.body, tmp, "blob")
+        nv = len(dec)
         assert nv == int(r.getheader("X-Iso-Vertices")), (nv, r.getheader("X-Iso-Vertices"))
         assert nt == int(r.getheader("X-Iso-Triangles")) == state["nt"]
-        dec = np.frombuffer(payload[:nv * 12], "<f4").reshape(nv, 3).astype(np.float64)
         exact = state["pos"]
         extent = (exact.max(0) - exact.min(0)).max()
         half_step = extent / (2 ** 12 - 1) / 2
@@ -237,7 +242,7 @@ def main_tests(s, tmp, blob):
             assert cand, f"decoded vertex {p} has no exact vertex near it"
             worst = max(worst, np.abs(exact[cand] - p).max(axis=1).min())
         assert worst <= half_step * 1.01 + 1e-6, f"moved {worst} > half step {half_step}"
-        state["drc"] = path
+        state["drc"] = os.path.join(tmp, "blob.drc")
     check("mesh_draco_decodes_within_half_step", mesh_draco)
 
     def draco3d_node():
@@ -261,6 +266,29 @@ draco3d.createDecoderModule({}).then(m => {
         assert nt == state["nt"], (nt, state["nt"])
         assert nv == len(state["pos"]), (nv, len(state["pos"]))
     check("mesh_draco3d_node", draco3d_node)
+
+    # Draco's speed: auto (8 for this small mesh), or named; each its own cached body and
+    # ETag, each decoding to the mesh; 10 keeps the PLY's vertex order. The steps' times.
+    def draco_speeds():
+        base = f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&normals=none"
+        etags = set()
+        for asked, used in (("", "8"), ("&speed=auto", "8"), ("&speed=0", "0"), ("&speed=10", "10")):
+            r = s.get(base + asked)
+            assert r.status == 200 and r.getheader("X-Iso-Draco-Speed") == used, (asked, r.getheader("X-Iso-Draco-Speed"))
+            for h in ("X-Iso-Extract-Ms", "X-Iso-Normals-Ms", "X-Iso-Measure-Ms", "X-Iso-Encode-Ms"):
+                assert float(r.getheader(h)) >= 0, h
+            dec, nt = draco_decode(r.body, tmp, "speed" + used)
+            assert nt == state["nt"] and len(dec) == len(state["pos"]), (asked, nt, len(dec))
+            etags.add(r.getheader("ETag"))
+        assert len(etags) == 3, etags  # "" and "auto" are one request
+        extent = (state["pos"].max(0) - state["pos"].min(0)).max()
+        assert np.abs(dec - state["pos"]).max() <= extent / (2 ** 14 - 1) / 2 * 1.01  # in order
+        r = s.get(base + "&speed=3&format=ply")
+        assert r.status == 200 and r.getheader("X-Iso-Draco-Speed") is None
+        for bad in ("11", "fast", "-1"):
+            r = s.get(base + "&speed=" + bad)
+            assert r.status == 400 and problem(r)["parameter"] == "speed", (bad, r.body)
+    check("mesh_draco_speeds", draco_speeds)
 
     def mesh_glb():
         r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=glb")

@@ -1,7 +1,7 @@
 /* test_normals.c: B-spline gradient normals. Every order reproduces linear functions, so a
  * ramp gives its exact normal (index and world space, anisotropic spacing and a rotated
  * frame); on a sphere every normal is unit and points outward (toward lower values), and
- * the smoother orders are no worse than trilinear. */
+ * the smoother orders are no worse than trilinear; the thread count changes no bit. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -62,39 +62,52 @@ static void test_ramp_exact_every_order(void)
                     mesh.positions[3 * v + c] = (float)w[c];
             }
             mesh.vertex_count = 3;
-            CHECK_OK(iso_normals_compute(vol, &mesh, order, (iso_space)(space ? ISO_SPACE_INDEX : ISO_SPACE_WORLD), &err), &err);
+            CHECK_OK(iso_normals_compute(vol, &mesh, order, (iso_space)(space ? ISO_SPACE_INDEX : ISO_SPACE_WORLD), 0, &err), &err);
             const double *want = space ? index_n : world_n;
             double len = sqrt(want[0] * want[0] + want[1] * want[1] + want[2] * want[2]);
             for (int v = 0; v < 3 && mesh.normals; v++)
                 for (int c = 0; c < 3; c++)
                     CHECK_NEAR(mesh.normals[3 * v + c], want[c] / len, 2e-6);
-            CHECK_OK(iso_normals_compute(vol, &mesh, 0, ISO_SPACE_WORLD, &err), &err);
+            CHECK_OK(iso_normals_compute(vol, &mesh, 0, ISO_SPACE_WORLD, 0, &err), &err);
             CHECK(mesh.normals == NULL);
             iso_mesh_free(&mesh);
         }
     iso_vol_destroy(vol);
 }
 
-/* The sphere field is R - |p - c|: the true outward normal is (p - c) / |p - c|. */
-static void test_sphere_outward_unit_and_ordered(void)
+/* Extracts field `name` at `level` into mesh; returns its volume (NULL on failure, a
+ * CHECK failure already recorded). The caller destroys the volume and frees the mesh. */
+static iso_volume *field_mesh(const char *name, double level, iso_mesh *mesh)
 {
     iso_error err;
     iso_volume *vol = NULL;
     iso_tree *tree = NULL;
-    CHECK_OK(iso_field_load("field:sphere:48", NULL, &vol, &err), &err);
+    iso_mesh_init(mesh);
+    CHECK_OK(iso_field_load(name, NULL, &vol, &err), &err);
     if (!vol)
-        return;
+        return NULL;
     iso_vol_update_stats(vol);
     CHECK_OK(iso_tree_build(vol, 0, NULL, NULL, &tree, &err), &err);
+    iso_extract_params params = {.level = level};
+    if (tree)
+        CHECK_OK(iso_extract(tree, &params, mesh, NULL, &err), &err);
+    iso_tree_destroy(tree);
+    return vol;
+}
+
+/* The sphere field is R - |p - c|: the true outward normal is (p - c) / |p - c|. */
+static void test_sphere_outward_unit_and_ordered(void)
+{
+    iso_error err;
     iso_mesh mesh;
-    iso_mesh_init(&mesh);
-    iso_extract_params params = {.level = 8.3};
-    CHECK_OK(iso_extract(tree, &params, &mesh, NULL, &err), &err);
+    iso_volume *vol = field_mesh("field:sphere:48", 8.3, &mesh);
+    if (!vol)
+        return;
     CHECK(mesh.vertex_count > 1000);
     double mean[5] = {0}, worst[5] = {0};
     const double c = 23.5;
     for (int order = 2; order <= 4; order++) {
-        CHECK_OK(iso_normals_compute(vol, &mesh, order, ISO_SPACE_WORLD, &err), &err);
+        CHECK_OK(iso_normals_compute(vol, &mesh, order, ISO_SPACE_WORLD, 0, &err), &err);
         for (size_t v = 0; v < mesh.vertex_count && mesh.normals; v++) {
             const float *p = mesh.positions + 3 * v, *n = mesh.normals + 3 * v;
             double r[3] = {p[0] - c, p[1] - c, p[2] - c};
@@ -114,7 +127,29 @@ static void test_sphere_outward_unit_and_ordered(void)
     CHECK(mean[3] <= mean[2] && mean[4] <= mean[2]);
     CHECK(mean[2] < 3.0 && mean[3] < 0.5 && mean[4] < 0.5);
     iso_mesh_free(&mesh);
-    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+/* Threads share the vertices; every normal is its own vertex's, so the bytes agree. */
+static void test_threads_give_identical_normals(void)
+{
+    iso_error err;
+    iso_mesh mesh;
+    iso_volume *vol = field_mesh("field:ml:80", 0.5, &mesh);
+    if (!vol)
+        return;
+    CHECK(mesh.vertex_count > 40000); /* 45,304: three threads' minimum shares */
+    size_t bytes = mesh.vertex_count * 3 * sizeof(float);
+    float *one = malloc(bytes);
+    CHECK(one != NULL);
+    for (int order = 2; order <= 4 && one; order++) {
+        CHECK_OK(iso_normals_compute(vol, &mesh, order, ISO_SPACE_WORLD, 1, &err), &err);
+        memcpy(one, mesh.normals, bytes);
+        CHECK_OK(iso_normals_compute(vol, &mesh, order, ISO_SPACE_WORLD, 3, &err), &err);
+        CHECKF(!memcmp(one, mesh.normals, bytes), "order %d: 1 and 3 threads differ", order);
+    }
+    free(one);
+    iso_mesh_free(&mesh);
     iso_vol_destroy(vol);
 }
 
@@ -123,5 +158,6 @@ int main(void)
     CHECK_RUN(test_names);
     CHECK_RUN(test_ramp_exact_every_order);
     CHECK_RUN(test_sphere_outward_unit_and_ordered);
+    CHECK_RUN(test_threads_give_identical_normals);
     return check_finish();
 }

@@ -1,5 +1,6 @@
 /* test_oom.c: allocation failures along one mesh request's path (issue 7). The steps of
- * server/mesh_job.c (extraction, exact or through the hierarchy or under a triangle budget;
+ * server/mesh_job.c (extraction, exact or through the hierarchy or under a triangle budget,
+ * simplified by meshoptimizer when the faithful ladder cannot meet it;
  * normals; the edge census; the Draco, glb, PLY and STL encoders) and the Draco decoder are
  * run once to count their allocations, then once per allocation with exactly that one
  * failing: each run must either succeed with the same mesh (the failure was absorbed, e.g.
@@ -146,10 +147,10 @@ static int run_request(const iso_tree *tree, const request *r, size_t *triangles
                                  .space = ISO_SPACE_WORLD, .threads = 1};
     iso_extract_stats stats;
     iso_budget_result chosen;
-    int rc = r->budget ? iso_extract_budget(tree, &params, r->budget, &mesh, &stats, &chosen, err)
+    int rc = r->budget ? iso_extract_budget_faithful(tree, &params, r->budget, &mesh, &stats, &chosen, err)
                        : iso_extract(tree, &params, &mesh, &stats, err);
     if (!rc && r->normals)
-        rc = iso_normals_compute(tree->vol, &mesh, r->normals, ISO_SPACE_WORLD, err);
+        rc = iso_normals_compute(tree->vol, &mesh, r->normals, ISO_SPACE_WORLD, 0, err);
     iso_census census;
     if (!rc)
         rc = iso_census_compute(tree->vol, &mesh, ISO_SPACE_WORLD, &census, err);
@@ -283,7 +284,7 @@ static void test_draco_decode_allocation_failures(void)
     unsigned char *data = NULL;
     if (tree) {
         CHECK_OK(iso_extract(tree, &params, &mesh, NULL, &err), &err);
-        CHECK_OK(iso_normals_compute(vol, &mesh, 4, ISO_SPACE_WORLD, &err), &err);
+        CHECK_OK(iso_normals_compute(vol, &mesh, 4, ISO_SPACE_WORLD, 0, &err), &err);
         CHECK_OK(proto_encode_draco(&mesh, NULL, &data, &in.size, &err), &err);
     }
     in.data = data;

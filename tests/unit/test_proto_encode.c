@@ -723,7 +723,7 @@ static void test_draco_refuses_bad_options_and_meshes(void)
     size_t size = 1;
     proto_encode_options opt;
     make_mesh(&m, tet_pos, NULL, 4, tet_idx, 4);
-    const int bad[][3] = {{7, 10, 5}, {25, 10, 5}, {14, 5, 5}, {14, 17, 5}, {14, 10, -1},
+    const int bad[][3] = {{7, 10, 5}, {25, 10, 5}, {14, 5, 5}, {14, 17, 5}, {14, 10, -2},
                           {14, 10, 11}};
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         opt.position_bits = bad[i][0], opt.normal_bits = bad[i][1], opt.speed = bad[i][2];
@@ -769,6 +769,7 @@ static void test_draco_info_matches_decoder(void)
         CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
         CHECK_EQ(info.points, dec.vertex_count);
         CHECK_EQ(info.faces, dec.triangle_count);
+        CHECK_EQ(info.speed, opt.speed);
         CHECK_EQ(dec.triangle_count, 8);
         CHECK(dec.vertex_count >= 7 && dec.vertex_count <= 8);
         float lo[3], hi[3];
@@ -778,6 +779,51 @@ static void test_draco_info_matches_decoder(void)
         iso_mesh_free(&dec);
         free(buf);
     }
+    iso_mesh_free(&m);
+}
+
+/* Encodes m with speed `speed` (NULL options but the speed), checks the speed reported and
+ * the round trip, and returns the size. */
+static size_t encode_at_speed(const iso_mesh *m, int speed, int want, const char *what)
+{
+    iso_error err;
+    unsigned char *buf;
+    size_t size = 0;
+    proto_draco_info info;
+    proto_encode_options opt;
+    proto_encode_options_init(&opt);
+    opt.speed = speed;
+    CHECK_OK(proto_draco_encode_info(m, &opt, &buf, &size, &info, &err), &err);
+    CHECKF(info.speed == want, "%s: speed %d, want %d", what, info.speed, want);
+    CHECK_EQ(info.faces, m->triangle_count);
+    printf("  info: %s, %zu triangles, speed %d: %zu bytes (%.2f per triangle)\n", what,
+           m->triangle_count, info.speed, size, (double)size / (double)m->triangle_count);
+    free(buf);
+    draco_round_trip(m, &opt, 0.999);
+    return size;
+}
+
+/* Speed auto: 8 up to PROTO_DRACO_AUTO_SEQUENTIAL triangles, the sequential coder above with
+ * its indices delta- and entropy-coded (as varints they alone take 9 bytes per triangle
+ * here). A stream too small for Draco's sequential decoder (3 bytes per face) is made
+ * again: at 8 under auto, with raw indices at 10 by name. All decode back to the mesh. */
+static void test_draco_auto_speed(void)
+{
+    CHECK_EQ(proto_draco_auto_speed(0), 8);
+    CHECK_EQ(proto_draco_auto_speed(PROTO_DRACO_AUTO_SEQUENTIAL), 8);
+    CHECK_EQ(proto_draco_auto_speed(PROTO_DRACO_AUTO_SEQUENTIAL + 1), 10);
+    iso_mesh m;
+    make_torus(&m, 40, 30, 1);
+    encode_at_speed(&m, PROTO_DRACO_SPEED_AUTO, 8, "small torus");
+    iso_mesh_free(&m);
+    make_torus(&m, 402, 250, 1); /* 201,000 triangles */
+    size_t smooth = encode_at_speed(&m, PROTO_DRACO_SPEED_AUTO, 8, "smooth torus, too compressible");
+    size_t raw = encode_at_speed(&m, 10, 10, "smooth torus at 10");
+    CHECK(raw > 9 * m.triangle_count && smooth < 3 * m.triangle_count);
+    for (size_t i = 0; i < 3 * m.vertex_count; i++) /* +-0.5 of an 80-unit torus */
+        m.positions[i] += (float)((double)(rng() % 1001) / 1000.0 - 0.5);
+    size_t rough = encode_at_speed(&m, PROTO_DRACO_SPEED_AUTO, 10, "jittered torus");
+    CHECKF(rough >= 3 * m.triangle_count && rough < 6 * m.triangle_count, "%zu bytes", rough);
     iso_mesh_free(&m);
 }
 
@@ -1077,6 +1123,7 @@ int main(void)
     CHECK_RUN(test_draco_round_trip_small_meshes);
     CHECK_RUN(test_draco_round_trip_bits_and_speeds);
     CHECK_RUN(test_draco_speed_10_keeps_order);
+    CHECK_RUN(test_draco_auto_speed);
     CHECK_RUN(test_draco_100k_triangles);
     CHECK_RUN(test_draco_decodes_with_draco_decoder);
     CHECK_RUN(test_draco_refuses_bad_options_and_meshes);

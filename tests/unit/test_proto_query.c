@@ -10,6 +10,7 @@
 #include "budget.h"
 #include "check.h"
 #include "document.h"
+#include "encode.h"
 #include "field.h"
 #include "histogram.h"
 #include "query.h"
@@ -32,12 +33,20 @@ static void test_query_defaults_and_values(void)
     CHECK_EQ(parse(only_level, 1, &r, &pr), 0);
     CHECK(r.level == 700 && r.tolerance == 0 && r.normals == PROTO_NORMALS_DEFAULT);
     CHECK(r.format == PROTO_FORMAT_DRACO && r.position_bits == 14 && r.normal_bits == 10 && r.budget == 0);
+    CHECK_EQ(r.speed, PROTO_DRACO_SPEED_AUTO);
 
     proto_param all[] = {P("budget", "20000"), P("qn", "8"), P("qp", "11"), P("format", "glb"),
                          P("normals", "none"), P("tolerance", "2.5e1"), P("level", "-142.5")};
     CHECK_EQ(parse(all, COUNT(all), &r, &pr), 0);
     CHECK(r.level == -142.5 && r.tolerance == 25 && r.normals == 0 && r.format == PROTO_FORMAT_GLB);
     CHECK(r.position_bits == 11 && r.normal_bits == 8 && r.budget == 20000);
+    proto_param speeds[][2] = {{P("level", "1"), P("speed", "0")}, {P("level", "1"), P("speed", "10")},
+                               {P("level", "1"), P("speed", "auto")}};
+    const int want_speed[] = {0, 10, PROTO_DRACO_SPEED_AUTO};
+    for (size_t i = 0; i < COUNT(want_speed); i++) {
+        CHECK_EQ(parse(speeds[i], 2, &r, &pr), 0);
+        CHECK_EQ(r.speed, want_speed[i]);
+    }
     proto_param tri[] = {P("level", "1"), P("normals", "trilinear"), P("format", "ply")};
     CHECK_EQ(parse(tri, COUNT(tri), &r, &pr), 0);
     CHECK(r.normals == 2 && r.format == PROTO_FORMAT_PLY && r.cap == 0);
@@ -80,6 +89,10 @@ static void test_query_rejections(void)
         {{{"level", "1"}, {"qp", "25"}}, 2, "qp", "from 8 to 24"},
         {{{"level", "1"}, {"qp", "12.5"}}, 2, "qp", "whole number"},
         {{{"level", "1"}, {"qn", "17"}}, 2, "qn", "from 6 to 16"},
+        {{{"level", "1"}, {"speed", "11"}}, 2, "speed", "from 0 to 10"},
+        {{{"level", "1"}, {"speed", "fast"}}, 2, "speed", "auto or a whole number from 0 to 10"},
+        {{{"level", "1"}, {"speed", "-1"}}, 2, "speed", "auto or a whole number"},
+        {{{"level", "1"}, {"speed", NULL}}, 2, "speed", "needs a value"},
         {{{"level", "1"}, {"budget", "0"}}, 2, "budget", "from 1"},
         {{{"level", "1"}, {"budget", "-5"}}, 2, "budget", "whole number"},
         {{{"level", "1"}, {"budget", "99999999999999"}}, 2, "budget", "whole number"},
@@ -116,6 +129,15 @@ static void test_query_echo_is_bounded(void)
     CHECK(strstr(pr.detail, "...") != NULL);
 }
 
+/* The normalised key of a request that must parse. */
+static void key_of(const proto_param *p, size_t n, char *key, size_t size)
+{
+    proto_mesh_request r;
+    proto_problem pr;
+    CHECK_EQ(parse(p, n, &r, &pr), 0);
+    proto_mesh_request_key(&r, key, size);
+}
+
 /* Equal requests, however spelt, share a key; different ones do not. */
 static void test_query_key_normalises(void)
 {
@@ -125,33 +147,35 @@ static void test_query_key_normalises(void)
     proto_param d[] = {P("level", "700.5")};
     proto_param e[] = {P("level", "700"), P("normals", "none"), P("qn", "12")};
     proto_param f[] = {P("level", "700"), P("normals", "none")};
-    proto_mesh_request r;
-    proto_problem pr;
-    char ka[256], kb[256], kc[256], kd[256], ke[256], kf[256];
-    CHECK_EQ(parse(a, COUNT(a), &r, &pr), 0);
-    proto_mesh_request_key(&r, ka, sizeof ka);
-    CHECK_EQ(parse(b, COUNT(b), &r, &pr), 0);
-    proto_mesh_request_key(&r, kb, sizeof kb);
-    CHECK_EQ(parse(c, COUNT(c), &r, &pr), 0);
-    proto_mesh_request_key(&r, kc, sizeof kc);
-    CHECK_EQ(parse(d, COUNT(d), &r, &pr), 0);
-    proto_mesh_request_key(&r, kd, sizeof kd);
-    CHECK_EQ(parse(e, COUNT(e), &r, &pr), 0);
-    proto_mesh_request_key(&r, ke, sizeof ke);
-    CHECK_EQ(parse(f, COUNT(f), &r, &pr), 0);
-    proto_mesh_request_key(&r, kf, sizeof kf);
+    proto_param g[] = {P("level", "700"), P("cap", "true")};
+    /* The Draco speed changes Draco and glb bytes, not PLY's or STL's. */
+    proto_param h[] = {P("level", "700"), P("speed", "3")};
+    proto_param i[] = {P("level", "700"), P("speed", "3"), P("format", "ply")};
+    proto_param j[] = {P("level", "700"), P("format", "ply")};
+    char ka[256], kb[256], kc[256], kd[256], ke[256], kf[256], kg[256], kh[256], ki[256], kj[256];
+    key_of(a, COUNT(a), ka, sizeof ka);
+    key_of(b, COUNT(b), kb, sizeof kb);
+    key_of(c, COUNT(c), kc, sizeof kc);
+    key_of(d, COUNT(d), kd, sizeof kd);
+    key_of(e, COUNT(e), ke, sizeof ke);
+    key_of(f, COUNT(f), kf, sizeof kf);
+    key_of(g, COUNT(g), kg, sizeof kg);
+    key_of(h, COUNT(h), kh, sizeof kh);
+    key_of(i, COUNT(i), ki, sizeof ki);
+    key_of(j, COUNT(j), kj, sizeof kj);
     CHECKF(!strcmp(ka, kb) && !strcmp(ka, kc), "%s | %s | %s", ka, kb, kc);
     CHECK(strcmp(ka, kd) != 0);
     CHECKF(!strcmp(ke, kf), "normal bits do not matter without normals: %s | %s", ke, kf);
-    CHECK(!strcmp(ka, "level=700&tolerance=0&normals=tricubic&format=draco&qp=14&qn=10&budget=0&cap=false"));
+    CHECK(!strcmp(ka, "level=700&tolerance=0&normals=tricubic&format=draco&qp=14&qn=10&speed=auto&budget=0&cap=false"));
+    CHECK(strcmp(ka, kg) != 0);
+    CHECKF(strstr(kh, "&speed=3&") && strcmp(ka, kh), "%s", kh);
+    CHECKF(!strcmp(ki, kj), "%s | %s", ki, kj);
+    proto_mesh_request r;
+    proto_problem pr;
+    CHECK_EQ(parse(f, COUNT(f), &r, &pr), 0);
     char small[8];
     CHECK_EQ(proto_mesh_request_key(&r, small, sizeof small), strlen(kf));
     CHECK_EQ(strlen(small), 7);
-    proto_param g[] = {P("level", "700"), P("cap", "true")};
-    char kg[256];
-    CHECK_EQ(parse(g, COUNT(g), &r, &pr), 0);
-    proto_mesh_request_key(&r, kg, sizeof kg);
-    CHECK(strcmp(ka, kg) != 0);
 }
 
 /* The volume document parses back with every field the API promises. */
