@@ -13,13 +13,14 @@ mkdir -p build/fuzz/crashes
 rm -rf "$seeds"
 /usr/bin/python3 tests/fuzz/seeds.py "$seeds" build/isoserve || { echo "fuzz: seeds failed"; exit 1; }
 export TMPDIR=${TMPDIR:-/tmp}
+. tests/fuzz/options.sh
 status=0
 for t in "${targets[@]}"; do
     corpus=build/fuzz/corpus/$t
     mkdir -p "$corpus" "tests/fuzz/regressions/$t"
     log=build/fuzz/$t.log
-    ASAN_OPTIONS=detect_leaks=1 build/fuzz/fuzz_$t -max_total_time="$seconds" -timeout=10 \
-        -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="build/fuzz/crashes/$t-" \
+    build/fuzz/fuzz_$t -max_total_time="$seconds" -timeout=10 \
+        "${FUZZ_LIMITS[@]}" -print_final_stats=1 -artifact_prefix="build/fuzz/crashes/$t-" \
         "$corpus" "$seeds/$t" "tests/fuzz/regressions/$t" > "$log" 2>&1
     rc=$?
     execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$')

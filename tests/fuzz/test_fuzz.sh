@@ -7,6 +7,7 @@
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 [ -z "${ISO_SAN_SUFFIX:-}" ] || exit 0
+. tests/fuzz/options.sh
 status=0
 for t in query nrrd nifti metaimage tree draco; do
     if [ ! -x "build/fuzz/fuzz_$t" ]; then
@@ -16,7 +17,7 @@ for t in query nrrd nifti metaimage tree draco; do
     fi
     inputs=(tests/fuzz/regressions/$t/*)
     if [ -e "${inputs[0]}" ]; then
-        if out=$(ASAN_OPTIONS=detect_leaks=1 TMPDIR=${TMPDIR:-/tmp} "build/fuzz/fuzz_$t" "${inputs[@]}" 2>&1); then
+        if out=$(TMPDIR=${TMPDIR:-/tmp} "build/fuzz/fuzz_$t" "${FUZZ_LIMITS[@]}" "${inputs[@]}" 2>&1); then
             echo "PASS fuzz.${t}_regressions (${#inputs[@]} inputs)"
         else
             echo "FAIL fuzz.${t}_regressions: $(echo "$out" | grep -m1 -E 'ERROR|SUMMARY|runtime error')"
