@@ -4,9 +4,9 @@
  * (plus float rounding), f the trilinear interpolant of the full-resolution samples, and
  * error_bound <= tolerance unless a sample sits exactly on the level, where crossings are
  * moved ISO_MC_END_GAP of an edge off it (mc.h). Tolerance 0 gives marching cubes'
- * surface of the full-resolution data. At every tolerance the welded mesh is watertight:
- * open edges only on the volume's border (none with cap), two triangles per other edge in
- * opposite directions, no zero-area triangle (census.h).
+ * surface of the full-resolution data. At every tolerance the mesh is indexed (no
+ * position twice) and watertight: open edges only on the volume's border (none with cap),
+ * two triangles per other edge in opposite directions, no zero-area triangle (census.h).
  *
  * Samples equal to the level count as below it (inside = value > level); NaN samples
  * count as below every level. */
@@ -30,14 +30,17 @@ typedef struct iso_extract_params {
     int cap;           /* 1: close the surface at the volume's border, as if the volume were
                         * surrounded by values below the level (a closed, printable mesh) */
     iso_space space;   /* output positions in world mm (default) or index space */
-    int threads;       /* threads for the exact path (march.h); 0 = all cores. The mesh
-                        * does not depend on it. */
+    int threads;       /* threads for the brick kernel and the walk below bricks
+                        * (march.h); 0 = all cores. The mesh does not depend on it. */
 } iso_extract_params;
 
 typedef struct iso_extract_stats {
     size_t triangles, vertices;
-    size_t nodes_visited;   /* hierarchy nodes examined, stored and on the fly */
-    size_t cells_visited;   /* cells marched plus nodes fanned (the paper's column) */
+    size_t nodes_visited;   /* hierarchy nodes examined, stored and on the fly, plus the
+                             * bricks the kernel classified */
+    size_t cells_visited;   /* cells of the bricks the kernel classified, less those fans
+                             * cover, plus the nodes fanned (the paper's column, counted as
+                             * the kernel reads: 8 cells at a time, whole bricks) */
     size_t nodes_polygonized;/* nodes larger than a cell emitted whole, as fans */
     double extract_ms;
     double error_bound;     /* max |f(v) - level| over the vertices on the level (all but
