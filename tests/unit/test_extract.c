@@ -7,6 +7,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "census.h"
 #include "check.h"
 #include "surface.h"
 #include "extract.h"
@@ -28,8 +29,6 @@ static int extract(const iso_tree *tree, double level, double tolerance, iso_mes
     return rc;
 }
 
-/* Open edges that do not lie in the volume's outer faces (index space). */
-static size_t interior_open_edges(const iso_mesh *m, const iso_volume *vol);
 
 
 /* ---- the marching cubes table ---- */
@@ -103,7 +102,9 @@ static void test_mc_random_fields_watertight(void)
         CHECK_OK(iso_mesh_count_edges(&m, &e), &err);
         CHECK_EQ(e.nonmanifold, 0);
         CHECK_EQ(e.misoriented, 0);
-        CHECK_EQ(interior_open_edges(&m, vol), 0);
+        iso_census c;
+        CHECK_OK(iso_census_compute(vol, &m, ISO_SPACE_INDEX, &c, &err), &err);
+        CHECK_EQ(c.open_edges, 0);
         CHECK(surface_worst_vertex_error(vol, &m, level) <= fs.error_bound + surface_rounding_slack(vol));
         CHECK(fs.error_bound <= surface_tie_allowance(vol));
         iso_mesh_free(&m);
@@ -429,24 +430,6 @@ static void extract_threads(const iso_tree *tree, double level, double tolerance
     CHECK_OK(iso_extract(tree, &p, m, st, &err), &err);
 }
 
-typedef struct border_edge_context {
-    const iso_mesh *mesh;
-    const iso_volume *vol;
-} border_edge_context;
-
-/* 1 if edge (a, b) lies in one of the volume's outer faces (index space). */
-static int on_volume_border(void *context, uint32_t a, uint32_t b)
-{
-    const border_edge_context *bc = context;
-    const float *p = bc->mesh->positions + 3 * (size_t)a, *q = bc->mesh->positions + 3 * (size_t)b;
-    for (int d = 0; d < 3; d++) {
-        float top = (float)(bc->vol->dims[d] - 1);
-        if ((p[d] == 0 && q[d] == 0) || (p[d] == top && q[d] == top))
-            return 1;
-    }
-    return 0;
-}
-
 /* Fans name their loop vertices by grid edge and take the kernel's ids for them, so the
  * mesh comes out welded: welding again merges nothing, every vertex is used, every
  * interior edge has two triangles, and the bytes do not depend on the thread count. */
@@ -489,12 +472,11 @@ static void test_fans_join_the_kernel_without_weld(void)
             CHECK(iso_mesh_weld(&two) == 0);
             CHECKF(two.vertex_count == vertices && two.triangle_count == triangles,
                    "%s tol %g: welding merged %zu vertices", fields[f], share * range, vertices - two.vertex_count);
-            iso_mesh_edges e;
-            border_edge_context bc = {&one, vol};
-            CHECK(iso_mesh_count_edges_excusing(&one, on_volume_border, &bc, &e) == 0);
-            CHECKF(e.nonmanifold == 0 && e.misoriented == 0 && e.open == 0,
+            iso_census c;
+            CHECK_OK(iso_census_compute(vol, &one, ISO_SPACE_INDEX, &c, &err), &err);
+            CHECKF(c.nonmanifold_edges == 0 && c.misoriented_edges == 0 && c.open_edges == 0,
                    "%s tol %g: %zu nonmanifold, %zu misoriented, %zu open inside", fields[f], share * range,
-                   e.nonmanifold, e.misoriented, e.open);
+                   c.nonmanifold_edges, c.misoriented_edges, c.open_edges);
             iso_mesh_free(&one);
             iso_mesh_free(&two);
             iso_mesh_free(&five);
@@ -523,11 +505,11 @@ static void test_tolerance_on_one_cell_bricks(void)
         CHECKF(surface_worst_vertex_error(vol, &m, 0.5) <= st.error_bound + surface_rounding_slack(vol),
                "t=%g: vertex off by %g, bound %g", t, surface_worst_vertex_error(vol, &m, 0.5), st.error_bound);
         CHECK(st.error_bound <= t);
-        iso_mesh_edges e;
-        border_edge_context bc = {&m, vol};
-        CHECK(iso_mesh_count_edges_excusing(&m, on_volume_border, &bc, &e) == 0);
-        CHECKF(e.open + e.nonmanifold + e.misoriented == 0, "t=%g: %zu open inside, %zu nonmanifold, %zu misoriented",
-               t, e.open, e.nonmanifold, e.misoriented);
+        iso_census c;
+        CHECK_OK(iso_census_compute(vol, &m, ISO_SPACE_INDEX, &c, &err), &err);
+        CHECKF(c.open_edges + c.nonmanifold_edges + c.misoriented_edges == 0,
+               "t=%g: %zu open inside, %zu nonmanifold, %zu misoriented", t, c.open_edges, c.nonmanifold_edges,
+               c.misoriented_edges);
         iso_mesh_free(&m);
     }
     iso_tree_destroy(tree);
@@ -579,35 +561,6 @@ static void test_cthead_guarantee_and_trend(void)
     }
     iso_tree_destroy(tree);
     iso_vol_destroy(vol);
-}
-
-/* ---- helper defined late: boundary test needs the volume's dims ---- */
-
-static size_t interior_open_edges(const iso_mesh *m, const iso_volume *vol)
-{
-    /* Count edges used once whose two ends do not share an outer face of the volume. */
-    iso_mesh copy = *m;
-    size_t open_interior = 0;
-    for (size_t t = 0; t < copy.triangle_count; t++)
-        for (int e = 0; e < 3; e++) {
-            uint32_t a = copy.indices[3 * t + e], b = copy.indices[3 * t + (e + 1) % 3];
-            size_t uses = 0;
-            for (size_t u = 0; u < copy.triangle_count && uses < 2; u++)
-                for (int f = 0; f < 3; f++) {
-                    uint32_t x = copy.indices[3 * u + f], y = copy.indices[3 * u + (f + 1) % 3];
-                    if ((x == a && y == b) || (x == b && y == a))
-                        uses++;
-                }
-            if (uses != 1)
-                continue;
-            const float *p = copy.positions + 3 * (size_t)a, *q = copy.positions + 3 * (size_t)b;
-            int on_border = 0;
-            for (int d = 0; d < 3; d++)
-                if ((p[d] == 0 && q[d] == 0) || (p[d] == (float)(vol->dims[d] - 1) && q[d] == (float)(vol->dims[d] - 1)))
-                    on_border = 1;
-            open_interior += !on_border;
-        }
-    return open_interior;
 }
 
 int main(void)
