@@ -25,10 +25,14 @@
 #include "march.h"
 
 #include <assert.h>
+#include <math.h>
 #include <pthread.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "mc.h"
 #include "parallel.h"
@@ -81,43 +85,140 @@ static void make_tables(void)
 
 /* ---- one brick's inside bits, per voxel type ---- */
 
-#define DEFINE_INSIDE_ROWS(NAME, T)                                                             \
-    static void NAME(const iso_volume *vol, const size_t lo[3], const uint8_t n[3], double level, \
-                     uint16_t *rows)                                                            \
-    {                                                                                           \
-        const T *data = (const T *)vol->data;                                                   \
-        for (int z = 0; z < n[2]; z++)                                                          \
-            for (int y = 0; y < n[1]; y++) {                                                    \
-                const T *p = data + ((lo[2] + (size_t)z) * vol->dims[1] + lo[1] + (size_t)y) *  \
-                                        vol->dims[0] + lo[0];                                   \
-                unsigned bits = 0;                                                              \
-                for (int x = 0; x < n[0]; x++)                                                  \
-                    bits |= (unsigned)((double)p[x] > level) << x; /* NaN: outside */           \
-                rows[z * S + y] = (uint16_t)bits;                                               \
-            }                                                                                   \
+/* The level as each type compares against it. An integer sample is above the level
+ * exactly when it is above the level's floor, so integer data is compared as integers,
+ * and 8- and 16-bit rows 8 samples at a time where SSE2 is there (x86-64 always has it):
+ * the inside bits were 12% of the exact path's instructions one double compare at a time. */
+typedef struct threshold {
+    double level;      /* floating types: above when sample > level; NaN never is */
+    int64_t floor;     /* integer types: above when sample > floor */
+#ifdef __SSE2__
+    __m128i bias;      /* 8- and 16-bit: added to samples (and floor) to compare as signed */
+    __m128i lanes;     /* floor + bias in every lane */
+#endif
+} threshold;
+
+/* Below the type's smallest value every sample is above; at or past its largest none is. */
+typedef enum { SOME_ABOVE, ALL_ABOVE, NONE_ABOVE } threshold_reach;
+
+static threshold_reach make_threshold(iso_voxel_type type, double level, threshold *th)
+{
+    memset(th, 0, sizeof *th);
+    th->level = level;
+    if (type == ISO_F32 || type == ISO_F64)
+        return SOME_ABOVE;
+    int64_t lowest, highest;
+    switch (type) {
+    case ISO_U8: lowest = 0, highest = UINT8_MAX; break;
+    case ISO_I8: lowest = INT8_MIN, highest = INT8_MAX; break;
+    case ISO_U16: lowest = 0, highest = UINT16_MAX; break;
+    case ISO_I16: lowest = INT16_MIN, highest = INT16_MAX; break;
+    case ISO_U32: lowest = 0, highest = UINT32_MAX; break;
+    default: lowest = INT32_MIN, highest = INT32_MAX; break;
+    }
+    double f = floor(level);
+    if (f < (double)lowest)
+        return ALL_ABOVE;
+    if (f >= (double)highest)
+        return NONE_ABOVE;
+    th->floor = (int64_t)f;
+#ifdef __SSE2__
+    if (type == ISO_U8 || type == ISO_I8) {
+        int bias = type == ISO_U8 ? -128 : 0;
+        th->bias = _mm_set1_epi8((char)bias);
+        th->lanes = _mm_set1_epi8((char)(th->floor + bias));
+    } else if (type == ISO_U16 || type == ISO_I16) {
+        int bias = type == ISO_U16 ? -32768 : 0;
+        th->bias = _mm_set1_epi16((short)bias);
+        th->lanes = _mm_set1_epi16((short)(th->floor + bias));
+    }
+#endif
+    return SOME_ABOVE;
+}
+
+#define DEFINE_SCALAR_ROW(NAME, T, TEST)                              \
+    static inline unsigned NAME(const T *p, int n, const threshold *th) \
+    {                                                                 \
+        unsigned bits = 0;                                            \
+        for (int x = 0; x < n; x++)                                   \
+            bits |= (unsigned)(TEST) << x;                            \
+        return bits;                                                  \
     }
 
-DEFINE_INSIDE_ROWS(inside_u8, uint8_t)
-DEFINE_INSIDE_ROWS(inside_i8, int8_t)
-DEFINE_INSIDE_ROWS(inside_u16, uint16_t)
-DEFINE_INSIDE_ROWS(inside_i16, int16_t)
-DEFINE_INSIDE_ROWS(inside_u32, uint32_t)
-DEFINE_INSIDE_ROWS(inside_i32, int32_t)
-DEFINE_INSIDE_ROWS(inside_f32, float)
-DEFINE_INSIDE_ROWS(inside_f64, double)
+DEFINE_SCALAR_ROW(scalar_u8, uint8_t, p[x] > th->floor)
+DEFINE_SCALAR_ROW(scalar_i8, int8_t, p[x] > th->floor)
+DEFINE_SCALAR_ROW(scalar_u16, uint16_t, p[x] > th->floor)
+DEFINE_SCALAR_ROW(scalar_i16, int16_t, p[x] > th->floor)
+DEFINE_SCALAR_ROW(row_u32, uint32_t, p[x] > th->floor)
+DEFINE_SCALAR_ROW(row_i32, int32_t, p[x] > th->floor)
+DEFINE_SCALAR_ROW(row_f32, float, (double)p[x] > th->level) /* NaN: outside */
+DEFINE_SCALAR_ROW(row_f64, double, p[x] > th->level)
+
+/* A full row of S samples: bits 0-7 from one vector compare, bit 8 alone. */
+#ifdef __SSE2__
+#define VECTOR_ROW(NAME, T, LOAD, COMPARE, PACK, SCALAR)                                   \
+    static inline unsigned NAME(const T *p, int n, const threshold *th)                    \
+    {                                                                                      \
+        if (n != S)                                                                        \
+            return SCALAR(p, n, th);                                                       \
+        __m128i above = COMPARE(_mm_add_epi##PACK(LOAD, th->bias), th->lanes);            \
+        unsigned low = (unsigned)_mm_movemask_epi8(PACK == 16 ? _mm_packs_epi16(above, above) : above) & 0xFFu; \
+        return low | (unsigned)(p[S - 1] > th->floor) << (S - 1);                          \
+    }
+VECTOR_ROW(row_u8, uint8_t, _mm_loadl_epi64((const __m128i *)p), _mm_cmpgt_epi8, 8, scalar_u8)
+VECTOR_ROW(row_i8, int8_t, _mm_loadl_epi64((const __m128i *)p), _mm_cmpgt_epi8, 8, scalar_i8)
+VECTOR_ROW(row_u16, uint16_t, _mm_loadu_si128((const __m128i *)p), _mm_cmpgt_epi16, 16, scalar_u16)
+VECTOR_ROW(row_i16, int16_t, _mm_loadu_si128((const __m128i *)p), _mm_cmpgt_epi16, 16, scalar_i16)
+#else
+#define row_u8 scalar_u8
+#define row_i8 scalar_i8
+#define row_u16 scalar_u16
+#define row_i16 scalar_i16
+#endif
+
+#define DEFINE_INSIDE_ROWS(NAME, T, ROW)                                                       \
+    static void NAME(const iso_volume *vol, const size_t lo[3], const uint8_t n[3],            \
+                     const threshold *th, uint16_t *rows)                                      \
+    {                                                                                          \
+        const T *data = (const T *)vol->data;                                                  \
+        for (int z = 0; z < n[2]; z++)                                                         \
+            for (int y = 0; y < n[1]; y++) {                                                   \
+                const T *p = data + ((lo[2] + (size_t)z) * vol->dims[1] + lo[1] + (size_t)y) * \
+                                        vol->dims[0] + lo[0];                                  \
+                rows[z * S + y] = (uint16_t)ROW(p, n[0], th);                                  \
+            }                                                                                  \
+    }
+
+DEFINE_INSIDE_ROWS(inside_u8, uint8_t, row_u8)
+DEFINE_INSIDE_ROWS(inside_i8, int8_t, row_i8)
+DEFINE_INSIDE_ROWS(inside_u16, uint16_t, row_u16)
+DEFINE_INSIDE_ROWS(inside_i16, int16_t, row_i16)
+DEFINE_INSIDE_ROWS(inside_u32, uint32_t, row_u32)
+DEFINE_INSIDE_ROWS(inside_i32, int32_t, row_i32)
+DEFINE_INSIDE_ROWS(inside_f32, float, row_f32)
+DEFINE_INSIDE_ROWS(inside_f64, double, row_f64)
 
 static void inside_rows(const iso_volume *vol, const size_t lo[3], const uint8_t n[3], double level,
                         uint16_t *rows)
 {
+    threshold th;
+    threshold_reach reach = make_threshold(vol->type, level, &th);
+    if (reach != SOME_ABOVE) {
+        uint16_t all = reach == ALL_ABOVE ? (uint16_t)((1u << n[0]) - 1) : 0;
+        for (int z = 0; z < n[2]; z++)
+            for (int y = 0; y < n[1]; y++)
+                rows[z * S + y] = all;
+        return;
+    }
     switch (vol->type) {
-    case ISO_U8: inside_u8(vol, lo, n, level, rows); break;
-    case ISO_I8: inside_i8(vol, lo, n, level, rows); break;
-    case ISO_U16: inside_u16(vol, lo, n, level, rows); break;
-    case ISO_I16: inside_i16(vol, lo, n, level, rows); break;
-    case ISO_U32: inside_u32(vol, lo, n, level, rows); break;
-    case ISO_I32: inside_i32(vol, lo, n, level, rows); break;
-    case ISO_F32: inside_f32(vol, lo, n, level, rows); break;
-    case ISO_F64: inside_f64(vol, lo, n, level, rows); break;
+    case ISO_U8: inside_u8(vol, lo, n, &th, rows); break;
+    case ISO_I8: inside_i8(vol, lo, n, &th, rows); break;
+    case ISO_U16: inside_u16(vol, lo, n, &th, rows); break;
+    case ISO_I16: inside_i16(vol, lo, n, &th, rows); break;
+    case ISO_U32: inside_u32(vol, lo, n, &th, rows); break;
+    case ISO_I32: inside_i32(vol, lo, n, &th, rows); break;
+    case ISO_F32: inside_f32(vol, lo, n, &th, rows); break;
+    case ISO_F64: inside_f64(vol, lo, n, &th, rows); break;
     }
 }
 
@@ -133,27 +234,35 @@ static void brick_origin_u32(const active_brick *ab, uint32_t lo[3])
         lo[d] = ab->brick[d] * ISO_BRICK_CELLS;
 }
 
-/* Cells x of the row of cells at (y, z) that are neither all inside nor all outside. */
-static unsigned mixed_row(const uint16_t *inside, const uint8_t n[3], int y, int z)
+/* The four sample rows around the row of cells at (y, z): a, b at z (y and y + 1), c, d at
+ * z + 1. A cell's case and the row's mixed cells are shifts of these, read once per row. */
+typedef struct cell_row {
+    unsigned a, b, c, d;
+} cell_row;
+
+static inline cell_row cell_row_at(const uint16_t *inside, int y, int z)
 {
-    unsigned a = inside[z * S + y], b = inside[z * S + y + 1];
-    unsigned c = inside[(z + 1) * S + y], d = inside[(z + 1) * S + y + 1];
-    unsigned any = a | b | c | d, all = a & b & c & d;
+    cell_row q = {inside[z * S + y], inside[z * S + y + 1], inside[(z + 1) * S + y], inside[(z + 1) * S + y + 1]};
+    return q;
+}
+
+/* Cells x of the row that are neither all inside nor all outside. */
+static inline unsigned row_mixed(cell_row q, int samples_x)
+{
+    unsigned any = q.a | q.b | q.c | q.d, all = q.a & q.b & q.c & q.d;
     unsigned full = all & (all >> 1), empty = ~any & ~(any >> 1);
-    return ~(full | empty) & ((1u << (n[0] - 1)) - 1);
+    return ~(full | empty) & ((1u << (samples_x - 1)) - 1);
+}
+
+static inline unsigned row_case(cell_row q, int x)
+{
+    return (q.a >> x & 3) | (q.b >> x & 3) << 2 | (q.c >> x & 3) << 4 | (q.d >> x & 3) << 6;
 }
 
 /* The cells of the row this brick marches: mixed and not covered by a caller's fan. */
-static unsigned mixed_cells(const active_brick *ab, int y, int z)
+static inline unsigned mixed_cells(const active_brick *ab, cell_row q, int y, int z)
 {
-    return mixed_row(ab->inside, ab->n, y, z) & ~(unsigned)ab->covered[z][y];
-}
-
-static unsigned cell_case(const uint16_t *inside, int x, int y, int z)
-{
-    unsigned a = inside[z * S + y] >> x, b = inside[z * S + y + 1] >> x;
-    unsigned c = inside[(z + 1) * S + y] >> x, d = inside[(z + 1) * S + y + 1] >> x;
-    return (a & 3) | (b & 3) << 2 | (c & 3) << 4 | (d & 3) << 6;
+    return row_mixed(q, ab->n[0]) & ~(unsigned)ab->covered[z][y];
 }
 
 /* ---- PASS 2: classify ---- */
@@ -168,7 +277,7 @@ static int cover_brick(march_job *job, int t, active_brick *ab)
     view.inside = ab->inside;
     for (int z = 0; z + 1 < ab->n[2]; z++)
         for (int y = 0; y + 1 < ab->n[1]; y++)
-            view.mixed[z][y] = (uint8_t)mixed_row(ab->inside, ab->n, y, z);
+            view.mixed[z][y] = (uint8_t)row_mixed(cell_row_at(ab->inside, y, z), ab->n[0]);
     int rc = job->cover(job->cover_context, t, &view);
     memcpy(ab->covered, view.covered, sizeof ab->covered);
     job->extra_vertices[t] += view.extra_vertices;
@@ -214,9 +323,11 @@ static void classify(march_job *job, int t, active_brick *ab)
     const iso_mc_case *cases = iso_mc_cases();
     uint32_t triangles = 0;
     for (int z = 0; z + 1 < ab->n[2]; z++)
-        for (int y = 0; y + 1 < ab->n[1]; y++)
-            for (unsigned m = mixed_cells(ab, y, z); m; m &= m - 1)
-                triangles += cases[cell_case(ab->inside, __builtin_ctz(m), y, z)].triangle_count;
+        for (int y = 0; y + 1 < ab->n[1]; y++) {
+            cell_row q = cell_row_at(ab->inside, y, z);
+            for (unsigned m = mixed_cells(ab, q, y, z); m; m &= m - 1)
+                triangles += cases[row_case(q, __builtin_ctz(m))].triangle_count;
+        }
     ab->triangles = triangles;
 }
 
@@ -358,33 +469,43 @@ static void fill_shared_ids(const march_job *job, const active_brick *ab, id_tab
         }
 }
 
-/* Offsets of each cube edge's low corner, as a row step and an x step. */
-static int edge_row[12], edge_x[12], edge_axis[12];
+/* Per case, each triangle corner as an offset into an id_table from the entry of the
+ * cell's own corner 0 (axis 0, its row, its x): a corner is then one load. */
+#define MAX_CORNERS 15
+static uint16_t case_corner[256][MAX_CORNERS];
 
 static void learn_edges(void)
 {
+    const iso_mc_case *cases = iso_mc_cases();
+    int offset[12];
     for (int e = 0; e < 12; e++) {
-        int lo = iso_mc_edge_corner[e][0];
-        edge_x[e] = lo & 1;
-        edge_row[e] = (lo >> 1 & 1) + (lo >> 2 & 1) * S;
-        edge_axis[e] = e / 4;
+        int lo = iso_mc_edge_corner[e][0], axis = e / 4;
+        offset[e] = (axis * ROWS + (lo >> 1 & 1) + (lo >> 2 & 1) * S) * S + (lo & 1);
+    }
+    for (int c = 0; c < 256; c++) {
+        assert(3 * cases[c].triangle_count <= MAX_CORNERS);
+        for (int k = 0; k < 3 * cases[c].triangle_count; k++)
+            case_corner[c][k] = (uint16_t)offset[cases[c].edges[k]];
     }
 }
 
 static void emit_triangles(const march_job *job, const active_brick *ab, const id_table *table)
 {
     const iso_mc_case *cases = iso_mc_cases();
+    const uint32_t *ids = &table->at[0][0][0];
     uint32_t *out = job->mesh->indices + 3 * ab->first_triangle;
     for (int z = 0; z + 1 < ab->n[2]; z++)
-        for (int y = 0; y + 1 < ab->n[1]; y++)
-            for (unsigned m = mixed_cells(ab, y, z); m; m &= m - 1) {
-                int x = __builtin_ctz(m), r = z * S + y;
-                const iso_mc_case *cs = cases + cell_case(ab->inside, x, y, z);
-                for (int k = 0; k < 3 * cs->triangle_count; k++) {
-                    int e = cs->edges[k];
-                    *out++ = table->at[edge_axis[e]][r + edge_row[e]][x + edge_x[e]];
-                }
+        for (int y = 0; y + 1 < ab->n[1]; y++) {
+            cell_row q = cell_row_at(ab->inside, y, z);
+            for (unsigned m = mixed_cells(ab, q, y, z); m; m &= m - 1) {
+                int x = __builtin_ctz(m);
+                unsigned c = row_case(q, x);
+                const uint32_t *cell = ids + (z * S + y) * S + x;
+                const uint16_t *corner = case_corner[c];
+                for (int k = 0; k < 3 * cases[c].triangle_count; k++)
+                    *out++ = cell[corner[k]];
             }
+        }
     assert(out == job->mesh->indices + 3 * (ab->first_triangle + ab->triangles));
 }
 
@@ -596,9 +717,11 @@ size_t iso_march_box_triangles(const iso_march_brick *brick, const uint32_t lo[3
     size_t count = 0;
     unsigned span = ((1u << hi[0]) - 1) & ~((1u << lo[0]) - 1);
     for (uint32_t z = lo[2]; z < hi[2]; z++)
-        for (uint32_t y = lo[1]; y < hi[1]; y++)
+        for (uint32_t y = lo[1]; y < hi[1]; y++) {
+            cell_row q = cell_row_at(brick->inside, (int)y, (int)z);
             for (unsigned m = brick->mixed[z][y] & span; m; m &= m - 1)
-                count += cases[cell_case(brick->inside, __builtin_ctz(m), (int)y, (int)z)].triangle_count;
+                count += cases[row_case(q, __builtin_ctz(m))].triangle_count;
+        }
     return count;
 }
 

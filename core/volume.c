@@ -319,17 +319,6 @@ double iso_vol_min_spacing(const iso_volume *vol)
     return s;
 }
 
-void iso_vol_index_to_world(const iso_volume *vol, const double index[3], double world[3])
-{
-    double scaled[3];
-    assert(vol && index && world);
-    for (int c = 0; c < 3; c++)
-        scaled[c] = index[c] * vol->spacing[c];
-    for (int r = 0; r < 3; r++)
-        world[r] = vol->origin[r] + vol->direction[r][0] * scaled[0] +
-                   vol->direction[r][1] * scaled[1] + vol->direction[r][2] * scaled[2];
-}
-
 void iso_vol_affine(const iso_volume *vol, double affine[3][4])
 {
     double zero[3] = {0, 0, 0}, origin[3];

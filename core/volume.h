@@ -101,8 +101,17 @@ void iso_vol_update_stats(iso_volume *vol);
 /* The smallest of the three spacings: mm per voxel where a length in mm must be stated
  * in voxels without understating it along any axis. */
 double iso_vol_min_spacing(const iso_volume *vol);
-/* Index space (i,j,k may be fractional) to world millimetres. */
-void iso_vol_index_to_world(const iso_volume *vol, const double index[3], double world[3]);
+/* Index space (i,j,k may be fractional) to world millimetres. Inline because the brick
+ * kernel places every vertex through it: a call per vertex was 7% of its time. */
+static inline void iso_vol_index_to_world(const iso_volume *vol, const double index[3], double world[3])
+{
+    double scaled[3];
+    for (int c = 0; c < 3; c++)
+        scaled[c] = index[c] * vol->spacing[c];
+    for (int r = 0; r < 3; r++)
+        world[r] = vol->origin[r] + vol->direction[r][0] * scaled[0] +
+                   vol->direction[r][1] * scaled[1] + vol->direction[r][2] * scaled[2];
+}
 /* Sets spacing, direction and origin from a 3x4 affine [A | origin] (world = A index +
  * origin): spacing = the column lengths, direction = the unit columns. Refuses (with
  * ISO_E_FORMAT, `what` naming the source in the message) a non-finite or singular A.

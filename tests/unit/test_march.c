@@ -97,6 +97,39 @@ static void test_random_fields_match_full_scan(void)
     }
 }
 
+/* Every voxel type, with samples at the ends of its range and levels on, between and
+ * next to them: the kernel compares integers with the level's floor, 8 at a time, and
+ * must agree with the full scan's double compare everywhere. 21 x 11 x 10 samples: full
+ * 9-sample rows and a partial last brick along x. */
+static void test_every_type_at_its_range_ends(void)
+{
+    static const struct {
+        iso_voxel_type type;
+        double lowest, highest;
+    } types[] = {
+        {ISO_U8, 0, 255}, {ISO_I8, -128, 127}, {ISO_U16, 0, 65535}, {ISO_I16, -32768, 32767},
+        {ISO_U32, 0, 4294967295.0}, {ISO_I32, -2147483648.0, 2147483647.0},
+        {ISO_F32, -1e30, 1e30}, {ISO_F64, -1e300, 1e300},
+    };
+    for (size_t t = 0; t < sizeof types / sizeof *types && !check_failed(); t++) {
+        double lo = types[t].lowest, hi = types[t].highest, mid = floor((lo + hi) / 2);
+        /* Values: both ends, the middle and its neighbours: unsigned types cross their
+         * signed half there, which the vector compare handles by a bias. */
+        const double values[] = {lo, lo + 1, mid - 1, mid, mid + 1, hi - 1, hi};
+        const size_t count = sizeof values / sizeof *values;
+        iso_volume *vol = surface_make_volume(21, 11, 10, types[t].type);
+        for (size_t k = 0; k < 10; k++)
+            for (size_t j = 0; j < 11; j++)
+                for (size_t i = 0; i < 21; i++)
+                    iso_vol_set(vol, i, j, k, values[(size_t)(surface_uniform() * (double)count)]);
+        iso_vol_update_stats(vol);
+        const double levels[] = {lo, lo + 0.5, mid - 1, mid - 0.5, mid, mid + 0.25, hi - 1, hi - 0.5};
+        for (size_t l = 0; l < sizeof levels / sizeof *levels && !check_failed(); l++)
+            check_same_as_full_scan(vol, levels[l]);
+        iso_vol_destroy(vol);
+    }
+}
+
 /* A single sample above the level at (8, 8, 8), the corner of 8 bricks: an octahedron of
  * 6 vertices and 8 triangles whose edges are owned by 7 different bricks. Only the 8
  * bricks holding that sample are active. */
@@ -172,6 +205,7 @@ static void test_cthead_matches_full_scan(void)
 int main(void)
 {
     CHECK_RUN(test_random_fields_match_full_scan);
+    CHECK_RUN(test_every_type_at_its_range_ends);
     CHECK_RUN(test_octahedron_across_eight_bricks);
     CHECK_RUN(test_threads_give_identical_meshes);
     CHECK_RUN(test_cthead_matches_full_scan);
