@@ -64,6 +64,7 @@ typedef struct iso_march {
     int32_t *slot;     /* per brick of the grid: its index in active, or -1 */
     iso_mesh *mesh;
     int world;         /* positions in world mm rather than index space */
+    int axis_aligned;  /* the volume's direction is the identity */
     const uint8_t *skip;
     iso_march_cover_fn cover;
     void *cover_context;
@@ -376,16 +377,28 @@ static void classify_share(void *context, int t, int threads)
 /* ---- PASS 4: generate ---- */
 
 /* The vertex's float index position, then, if asked, world mm from that float position
- * exactly as the other extraction paths place theirs (iso_vol_index_to_world). */
+ * exactly as the other extraction paths place theirs (iso_vol_index_to_world). With an
+ * identity direction that map is origin + index * spacing to the bit (the other terms
+ * add +0 to a sum that cannot be -0, indices being >= 0), without its six products. */
 static void store_position(const march_job *job, const size_t c[3], int axis, double t, float *p)
 {
     double index[3], world[3];
     for (int d = 0; d < 3; d++)
         index[d] = (float)((double)c[d] + (d == axis ? t : 0.0));
-    if (job->world)
-        iso_vol_index_to_world(job->vol, index, world);
+    if (!job->world) {
+        for (int d = 0; d < 3; d++)
+            p[d] = (float)index[d];
+        return;
+    }
+    const iso_volume *vol = job->vol;
+    if (job->axis_aligned) {
+        for (int d = 0; d < 3; d++)
+            p[d] = (float)(vol->origin[d] + index[d] * vol->spacing[d]);
+        return;
+    }
+    iso_vol_index_to_world(vol, index, world);
     for (int d = 0; d < 3; d++)
-        p[d] = (float)(job->world ? world[d] : index[d]);
+        p[d] = (float)world[d];
 }
 
 /* The vertex id of every crossing edge of one brick's sample box, [axis][z * 9 + y][x],
@@ -673,6 +686,10 @@ int iso_march_begin(const iso_volume *vol, const iso_bricks *bricks, double leve
     job->level = level;
     job->mesh = mesh;
     job->world = options->world;
+    job->axis_aligned = 1;
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++)
+            job->axis_aligned &= vol->direction[r][c] == (r == c);
     job->skip = options->skip;
     job->cover = options->cover;
     job->cover_context = options->cover_context;

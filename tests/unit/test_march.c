@@ -130,6 +130,48 @@ static void test_every_type_at_its_range_ends(void)
     }
 }
 
+/* World positions are the index positions, as floats, through iso_vol_index_to_world to
+ * the bit, with an identity direction (the kernel's shortcut) and with a rotated one. */
+static void test_world_positions_are_the_index_map(void)
+{
+    const double spacing[3] = {0.9570312, 0.6, 1.5}, origin[3] = {-12.25, 3.5, 100.125};
+    const double rotated[3][3] = {{0.6, -0.8, 0}, {0.8, 0.6, 0}, {0, 0, 1}};
+    for (int rotate = 0; rotate < 2 && !check_failed(); rotate++) {
+        iso_volume *vol = surface_make_volume(23, 19, 17, ISO_I16);
+        for (size_t k = 0; k < 17; k++)
+            for (size_t j = 0; j < 19; j++)
+                for (size_t i = 0; i < 23; i++)
+                    iso_vol_set(vol, i, j, k, floor(surface_uniform() * 2000) - 1000);
+        iso_vol_update_stats(vol);
+        memcpy(vol->spacing, spacing, sizeof spacing);
+        memcpy(vol->origin, origin, sizeof origin);
+        if (rotate)
+            memcpy(vol->direction, rotated, sizeof rotated);
+        iso_bricks bricks;
+        iso_error err;
+        iso_mesh index, world;
+        iso_mesh_init(&index);
+        iso_mesh_init(&world);
+        iso_march_stats st;
+        CHECK_OK(iso_bricks_build(vol, 1, &bricks, &err), &err);
+        CHECK_OK(iso_march_bricks(vol, &bricks, -142, 1, 0, 1, &index, &st, &err), &err);
+        CHECK_OK(iso_march_bricks(vol, &bricks, -142, 1, 1, 1, &world, &st, &err), &err);
+        CHECK(index.vertex_count > 1000 && index.vertex_count == world.vertex_count);
+        size_t differ = 0;
+        for (size_t v = 0; v < index.vertex_count; v++) {
+            double p[3] = {index.positions[3 * v], index.positions[3 * v + 1], index.positions[3 * v + 2]}, w[3];
+            iso_vol_index_to_world(vol, p, w);
+            for (int d = 0; d < 3; d++)
+                differ += (float)w[d] != world.positions[3 * v + d];
+        }
+        CHECKF(differ == 0, "rotated %d: %zu coordinates differ from iso_vol_index_to_world", rotate, differ);
+        iso_mesh_free(&index);
+        iso_mesh_free(&world);
+        iso_bricks_free(&bricks);
+        iso_vol_destroy(vol);
+    }
+}
+
 /* A single sample above the level at (8, 8, 8), the corner of 8 bricks: an octahedron of
  * 6 vertices and 8 triangles whose edges are owned by 7 different bricks. Only the 8
  * bricks holding that sample are active. */
@@ -206,6 +248,7 @@ int main(void)
 {
     CHECK_RUN(test_random_fields_match_full_scan);
     CHECK_RUN(test_every_type_at_its_range_ends);
+    CHECK_RUN(test_world_positions_are_the_index_map);
     CHECK_RUN(test_octahedron_across_eight_bricks);
     CHECK_RUN(test_threads_give_identical_meshes);
     CHECK_RUN(test_cthead_matches_full_scan);
