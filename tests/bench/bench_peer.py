@@ -44,8 +44,10 @@ CASES = [  # file, level, label
     ("aneurism_256x256x256_u8.nhdr", 120, "aneurism"),
     ("engine_256x256x128_u8.nhdr", 80, "engine"),
 ]
-# Tolerances as shares of the value range: the ladder the distances are measured on.
-LADDER = (0.0025, 0.005, 0.01, 0.02, 0.05)
+# Tolerances as shares of the value range: the ladder the distances are measured on. It
+# climbs past 5% because on CT the surface stays within 0.5 voxel (p99) up to about 20%:
+# a ladder that stops early would call a smaller tolerance "the largest faithful one".
+LADDER = (0.0025, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.4)
 
 
 def tune_malloc():
