@@ -383,6 +383,9 @@ static void classify_share(void *context, int t, int threads)
 static void store_position(const march_job *job, const size_t c[3], int axis, double t, float *p)
 {
     double index[3], world[3];
+    /* One expression per coordinate: GCC 12.2's SLP vectorizer at -O2 dropped the float
+     * rounding of `index[axis] += t; index[d] = (float)index[d];` (test_march's world
+     * positions test catches that). */
     for (int d = 0; d < 3; d++)
         index[d] = (float)((double)c[d] + (d == axis ? t : 0.0));
     if (!job->world) {
