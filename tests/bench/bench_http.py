@@ -51,10 +51,11 @@ def volumes_and_cases():
     if os.path.exists(sparse):
         vols["aneurism"] = sparse
         cases.append(("aneurism (medium)", "aneurism", 120.5, (0,)))
-    # 163.6 is the top of bench_peer's tolerance ladder for CThead (4% of its value range):
-    # within 0.5 voxel at the 99th percentile of surface distance (docs/performance.md).
-    cases += [("CThead skin (large)", "cthead", 700.5, (0, 163.6)),
-              ("CThead bone (large)", "cthead", 1500.5, (0, 163.6))]
+    # 654 (20% of CThead's value range) is the largest tolerance of bench_peer's ladder within
+    # 0.5 voxel at the 99th percentile of surface distance, for skin (p99 0.44) and bone
+    # (0.31); 163.6 (5%) was the old ladder's top (docs/performance.md).
+    cases += [("CThead skin (large)", "cthead", 700.5, (0, 163.6, 654)),
+              ("CThead bone (large)", "cthead", 1500.5, (0, 163.6, 654))]
     return vols, cases
 
 
