@@ -382,12 +382,11 @@ static void classify_share(void *context, int t, int threads)
  * add +0 to a sum that cannot be -0, indices being >= 0), without its six products. */
 static void store_position(const march_job *job, const size_t c[3], int axis, double t, float *p)
 {
-    double index[3], world[3];
-    /* One expression per coordinate: GCC 12.2's SLP vectorizer at -O2 dropped the float
-     * rounding of `index[axis] += t; index[d] = (float)index[d];` (test_march's world
-     * positions test catches that). */
-    for (int d = 0; d < 3; d++)
-        index[d] = (float)((double)c[d] + (d == axis ? t : 0.0));
+    /* Rounded once, in one expression per coordinate: GCC 12.2's SLP vectorizer at -O2
+     * dropped the float rounding of `index[axis] += t; index[d] = (float)index[d];` over
+     * the array (test_march's world positions test catches that). */
+    double index[3] = {(float)c[0], (float)c[1], (float)c[2]}, world[3];
+    index[axis] = (float)((double)c[axis] + t);
     if (!job->world) {
         for (int d = 0; d < 3; d++)
             p[d] = (float)index[d];
