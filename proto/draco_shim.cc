@@ -8,6 +8,7 @@
 #include <draco/core/quantization_utils.h>
 #include <draco/mesh/mesh.h>
 
+#include <algorithm>
 #include <cassert>
 #include <cstdint>
 #include <cstdlib>
@@ -84,6 +85,8 @@ int encode_empty(unsigned char **out, size_t *out_size, proto_draco_info *info, 
 // The bounds a decoder will see: Draco quantizes on the grid ComputeParameters derives from
 // the attribute (origin = min, one range = the largest extent) with these same Quantizer and
 // Dequantizer classes, so running them here reproduces the decoded values bit for bit.
+// Each step (float subtraction, round to the grid, scale, float addition) is monotone, so
+// the decoded bounds are the raw bounds quantized: six values, not every point's three.
 bool decoded_bounds(const draco::PointAttribute &att, int bits, float min[3], float max[3])
 {
     draco::AttributeQuantizationTransform aq;
@@ -96,15 +99,17 @@ bool decoded_bounds(const draco::PointAttribute &att, int bits, float min[3], fl
     if (!dq.Init(aq.range(), max_q))
         return false;
     const float *v = reinterpret_cast<const float *>(att.buffer()->data());
-    for (size_t i = 0; i < att.size(); i++)
+    float lo[3] = {v[0], v[1], v[2]}, hi[3] = {v[0], v[1], v[2]};
+    for (size_t i = 1; i < att.size(); i++)
         for (int c = 0; c < 3; c++) {
-            float m = aq.min_value(c);
-            float d = dq.DequantizeFloat(q.QuantizeFloat(v[3 * i + c] - m)) + m;
-            if (i == 0 || d < min[c])
-                min[c] = d;
-            if (i == 0 || d > max[c])
-                max[c] = d;
+            lo[c] = std::min(lo[c], v[3 * i + c]);
+            hi[c] = std::max(hi[c], v[3 * i + c]);
         }
+    for (int c = 0; c < 3; c++) {
+        float m = aq.min_value(c);
+        min[c] = dq.DequantizeFloat(q.QuantizeFloat(lo[c] - m)) + m;
+        max[c] = dq.DequantizeFloat(q.QuantizeFloat(hi[c] - m)) + m;
+    }
     return true;
 }
 
