@@ -6,6 +6,7 @@
 #include <draco/compression/decode.h>
 #include <draco/compression/encode.h>
 #include <draco/core/quantization_utils.h>
+#include <draco/core/varint_encoding.h>
 #include <draco/mesh/mesh.h>
 
 #include <algorithm>
@@ -17,6 +18,10 @@
 #include <memory>
 #include <new>
 #include <vector>
+
+extern "C" {
+#include "parallel.h"
+}
 
 namespace {
 
@@ -34,18 +39,22 @@ int exception_status(iso_error *err, const char *what, int code)
     }
 }
 
+int copy_bytes(const char *data, size_t size, unsigned char **out, size_t *out_size, iso_error *err)
+{
+    // malloc(0) may return NULL; a Draco stream is never empty, but stay safe.
+    unsigned char *bytes = static_cast<unsigned char *>(std::malloc(size ? size : 1));
+    if (!bytes)
+        return iso_error_set(err, ISO_E_NOMEM, "draco: no memory for %zu output bytes", size);
+    std::memcpy(bytes, data, size);
+    *out = bytes;
+    *out_size = size;
+    return 0;
+}
+
 int copy_out(const draco::EncoderBuffer &buf, unsigned char **out, size_t *out_size,
              iso_error *err)
 {
-    // malloc(0) may return NULL; a Draco stream is never empty, but stay safe.
-    unsigned char *bytes = static_cast<unsigned char *>(std::malloc(buf.size() ? buf.size() : 1));
-    if (!bytes)
-        return iso_error_set(err, ISO_E_NOMEM, "draco: no memory for %zu output bytes",
-                             buf.size());
-    std::memcpy(bytes, buf.data(), buf.size());
-    *out = bytes;
-    *out_size = buf.size();
-    return 0;
+    return copy_bytes(buf.data(), buf.size(), out, out_size, err);
 }
 
 int add_float3(draco::Mesh &dm, draco::GeometryAttribute::Type type, size_t count)
@@ -248,69 +257,171 @@ void number_by_first_use(const iso_mesh *mesh, draco::Mesh &dm, numbering &n)
     n.faces = fi.value();
 }
 
+// Writes the used vertices' positions (and normals) into dm's new attributes; their ids
+// in *pos and *nrm (-1: no normals).
+int add_attributes(const iso_mesh *mesh, const numbering &num, draco::Mesh &dm, int *pos,
+                   int *nrm, iso_error *err)
+{
+    const uint32_t unused = UINT32_MAX;
+    dm.set_num_points(num.used);
+    *pos = add_float3(dm, draco::GeometryAttribute::POSITION, num.used);
+    *nrm = mesh->normals ? add_float3(dm, draco::GeometryAttribute::NORMAL, num.used) : -1;
+    if (*pos < 0 || (mesh->normals && *nrm < 0))
+        return iso_error_set(err, ISO_E_NOMEM, "draco encode: cannot add attributes");
+    float *p = reinterpret_cast<float *>(dm.attribute(*pos)->buffer()->data());
+    float *n = *nrm >= 0 ? reinterpret_cast<float *>(dm.attribute(*nrm)->buffer()->data()) : nullptr;
+    for (size_t v = 0; v < mesh->vertex_count; v++) {
+        const uint32_t at = num.remap[v];
+        if (at == unused)
+            continue;
+        std::memcpy(p + 3 * static_cast<size_t>(at), mesh->positions + 3 * v, 3 * sizeof(float));
+        if (n)
+            std::memcpy(n + 3 * static_cast<size_t>(at), mesh->normals + 3 * v, 3 * sizeof(float));
+    }
+    return 0;
+}
+
+// One half of a split encode: its own encoder, buffer and error, as it runs on its own
+// thread.
+struct half {
+    const draco::Mesh *dm;
+    const proto_encode_options *opt;
+    draco::Encoder enc;
+    draco::EncoderBuffer buf;
+    iso_error err = {};
+    int rc = 0;
+};
+
+void encode_half(void *context, int t, int threads)
+{
+    (void)threads;
+    half *h = static_cast<half *>(context) + t;
+    try {
+        h->rc = run_encoder(*h->dm, h->opt, 10, true, &h->enc, &h->buf, &h->err);
+    } catch (...) {
+        h->rc = exception_status(&h->err, "encode", ISO_E_UNSUPPORTED);
+    }
+}
+
+// A Draco header: "DRACO", version (2 bytes), encoder type, method, flags (2 bytes).
+const size_t draco_header_bytes = 11;
+
+// The sequential coder writes connectivity and attributes one after the other, each from
+// its own data: the indices from the faces, the attributes in point order (linear
+// sequencer, delta prediction at speed 10) whatever the faces. So the two run on two
+// threads as two streams, `conn` (the faces, no attributes: it ends with a zero count of
+// attribute encoders) and `attrs` (the attributes, no faces: its connectivity is the
+// counts 0 and `points`, then the method byte), and the stream is conn's head and
+// connectivity followed by attrs' attributes: the bytes one encoder writes
+// (test_draco_split_matches_one_encoder). Returns false, with *out untouched, if the
+// halves do not have that layout.
+bool splice(const draco::EncoderBuffer &conn, const draco::EncoderBuffer &attrs,
+            uint32_t points, std::vector<char> *out)
+{
+    draco::EncoderBuffer counts;
+    draco::EncodeVarint(static_cast<uint32_t>(0), &counts);
+    draco::EncodeVarint(points, &counts);
+    counts.Encode(static_cast<uint8_t>(0)); // compressed indices, none
+    const size_t head = draco_header_bytes, skip = head + counts.size();
+    if (conn.size() <= head || attrs.size() < skip || conn.data()[conn.size() - 1] != 0 ||
+        std::memcmp(conn.data(), attrs.data(), head) != 0 ||
+        std::memcmp(attrs.data() + head, counts.data(), counts.size()) != 0)
+        return false;
+    out->reserve(conn.size() - 1 + attrs.size() - skip);
+    out->assign(conn.data(), conn.data() + conn.size() - 1);
+    out->insert(out->end(), attrs.data() + skip, attrs.data() + attrs.size());
+    return true;
+}
+
 int encode(const iso_mesh *mesh, const proto_encode_options *opt, unsigned char **out,
            size_t *out_size, proto_draco_info *info, iso_error *err)
 {
     // PASS 1 (reads indices, writes remap and the Draco faces).
-    const size_t nv = mesh->vertex_count, nt = mesh->triangle_count;
-    const uint32_t unused = UINT32_MAX;
+    const size_t nt = mesh->triangle_count;
     draco::Mesh dm;
     numbering num;
-    num.remap.assign(nv, unused);
+    num.remap.assign(mesh->vertex_count, UINT32_MAX);
     dm.SetNumFaces(nt);
     if (opt->speed == 10)
         number_in_order(mesh, dm, num);
     else
         number_by_first_use(mesh, dm, num);
     const size_t faces = num.faces;
-    const uint32_t used = num.used;
-    const std::vector<uint32_t> &remap = num.remap;
     if (faces == 0)
         return encode_empty(out, out_size, info, err);
     dm.SetNumFaces(faces);
-
-    // PASS 2 (reads the mesh, writes the Draco attributes): used vertices.
-    dm.set_num_points(used);
-    int pos = add_float3(dm, draco::GeometryAttribute::POSITION, used);
-    int nrm = mesh->normals ? add_float3(dm, draco::GeometryAttribute::NORMAL, used) : -1;
-    if (pos < 0 || (mesh->normals && nrm < 0))
-        return iso_error_set(err, ISO_E_NOMEM, "draco encode: cannot add attributes");
-    draco::DataBuffer *pbuf = dm.attribute(pos)->buffer();
-    draco::DataBuffer *nbuf = nrm >= 0 ? dm.attribute(nrm)->buffer() : nullptr;
-    for (size_t v = 0; v < nv; v++) {
-        if (remap[v] == unused)
-            continue;
-        const int64_t at = static_cast<int64_t>(remap[v]) * 3 * sizeof(float);
-        pbuf->Write(at, mesh->positions + 3 * v, 3 * sizeof(float));
-        if (nbuf)
-            nbuf->Write(at, mesh->normals + 3 * v, 3 * sizeof(float));
-    }
-
     int speed = opt->speed == PROTO_DRACO_SPEED_AUTO ? proto_draco_auto_speed(faces) : opt->speed;
+    const bool split = speed == 10 && iso_parallel_threads(opt->threads) > 1;
+
+    // PASS 2 (reads the mesh, writes the Draco attributes): used vertices, into a mesh of
+    // their own when connectivity and attributes are encoded apart.
+    draco::Mesh points;
+    draco::Mesh &attrs = split ? points : dm;
+    int pos, nrm, rc = add_attributes(mesh, num, attrs, &pos, &nrm, err);
+    if (rc)
+        return rc;
+    if (split)
+        dm.set_num_points(num.used);
+
     draco::Encoder first, second, *enc = &first;
     draco::EncoderBuffer buf;
-    int rc = run_encoder(dm, opt, speed, speed == 10, enc, &buf, err);
-    if (!rc && speed == 10 && !sequential_decodable(buf.size(), faces, used)) {
+    std::vector<char> spliced;
+    bool done = false;
+    if (split) {
+        half halves[2];
+        halves[0].dm = &dm, halves[1].dm = &points;
+        halves[0].opt = halves[1].opt = opt;
+        iso_parallel_run(2, encode_half, halves);
+        for (const half &h : halves)
+            if (h.rc) {
+                *err = h.err;
+                return h.rc;
+            }
+        done = splice(halves[0].buf, halves[1].buf, num.used, &spliced);
+    }
+    // One mesh for one encoder, if one has to run: the faces join the attributes.
+    draco::Mesh &whole = split ? points : dm;
+    bool joined = !split;
+    auto join = [&]() {
+        if (joined)
+            return;
+        points.SetNumFaces(faces);
+        for (draco::FaceIndex f(0); f < faces; ++f)
+            points.SetFace(f, dm.face(f));
+        joined = true;
+    };
+    if (!done) {
+        join();
+        rc = run_encoder(whole, opt, speed, speed == 10, enc, &buf, err);
+        if (rc)
+            return rc;
+    }
+    size_t size = done ? spliced.size() : buf.size();
+    if (speed == 10 && !sequential_decodable(size, faces, num.used)) {
         // Auto promises no order, so it takes edgebreaker's compact stream; speed 10 asked
         // by name keeps its order with raw indices.
         speed = opt->speed == PROTO_DRACO_SPEED_AUTO ? 8 : 10;
         enc = &second;
         buf.Clear();
-        rc = run_encoder(dm, opt, speed, false, enc, &buf, err);
+        done = false;
+        join();
+        rc = run_encoder(whole, opt, speed, false, enc, &buf, err);
+        if (rc)
+            return rc;
     }
-    if (rc)
-        return rc;
 
     if (info) {
         std::memset(info, 0, sizeof *info);
-        info->points = enc->num_encoded_points();
-        info->faces = enc->num_encoded_faces();
-        info->position_id = static_cast<int>(dm.attribute(pos)->unique_id());
-        info->normal_id = nrm >= 0 ? static_cast<int>(dm.attribute(nrm)->unique_id()) : -1;
+        info->points = done ? num.used : enc->num_encoded_points();
+        info->faces = done ? faces : enc->num_encoded_faces();
+        info->position_id = static_cast<int>(whole.attribute(pos)->unique_id());
+        info->normal_id = nrm >= 0 ? static_cast<int>(whole.attribute(nrm)->unique_id()) : -1;
         info->speed = speed;
-        if (!decoded_bounds(*dm.attribute(pos), opt->position_bits, info->min, info->max))
+        if (!decoded_bounds(*whole.attribute(pos), opt->position_bits, info->min, info->max))
             return iso_error_set(err, ISO_E_UNSUPPORTED, "draco encode: no quantization grid");
     }
+    if (done)
+        return copy_bytes(spliced.data(), spliced.size(), out, out_size, err);
     return copy_out(buf, out, out_size, err);
 }
 

@@ -907,6 +907,56 @@ done:
     iso_mesh_free(&m);
 }
 
+/* The sequential coder on two threads (connectivity and attributes apart, joined) writes
+ * the bytes one thread writes: under auto and at speed 10 by name, with and without
+ * normals; and they decode back to the mesh. Auto without normals makes a joined stream
+ * under 3 bytes a face, which goes to edgebreaker (speed 8) as on one thread. */
+static void test_draco_split_matches_one_encoder(void)
+{
+    iso_mesh m;
+    make_torus(&m, 402, 250, 1); /* 201,000 triangles: auto takes the sequential coder */
+    for (size_t i = 0; i < 3 * m.vertex_count; i++) /* rough enough for 3 bytes a face */
+        m.positions[i] += (float)((double)(rng() % 3001) / 1000.0 - 1.5);
+    shuffle_vertices(&m);
+    for (int pass = 0; pass < 4 && !check_failed(); pass++) {
+        if (pass == 2) { /* the same without normals */
+            free(m.normals);
+            m.normals = NULL;
+        }
+        proto_encode_options opt;
+        proto_encode_options_init(&opt);
+        opt.speed = pass % 2 ? 10 : PROTO_DRACO_SPEED_AUTO;
+        unsigned char *one = NULL, *two = NULL;
+        size_t one_size = 0, two_size = 0;
+        proto_draco_info one_info, two_info;
+        iso_error err;
+        opt.threads = 1;
+        CHECK_OK(proto_draco_encode_info(&m, &opt, &one, &one_size, &one_info, &err), &err);
+        opt.threads = 2;
+        CHECK_OK(proto_draco_encode_info(&m, &opt, &two, &two_size, &two_info, &err), &err);
+        if (!check_failed()) {
+            CHECKF(one_size == two_size && memcmp(one, two, one_size) == 0,
+                   "pass %d: %zu bytes on one thread, %zu on two", pass, one_size, two_size);
+            CHECK(memcmp(&one_info, &two_info, sizeof one_info) == 0);
+            printf("  info: split pass %d: speed %d, %zu bytes\n", pass, two_info.speed, two_size);
+            CHECK_EQ(two_info.speed, pass == 2 ? 8 : 10);
+            CHECK_EQ(two_info.points, 100500);
+            CHECK_EQ(two_info.faces, 201000);
+        }
+        iso_mesh dec;
+        if (!check_failed()) {
+            CHECK_OK(proto_draco_decode(two, two_size, &dec, &err), &err);
+            if (!check_failed()) {
+                check_draco_match(&m, &dec, opt.position_bits, 0.9999);
+                iso_mesh_free(&dec);
+            }
+        }
+        free(one);
+        free(two);
+    }
+    iso_mesh_free(&m);
+}
+
 static void test_draco_decoder_refuses_garbage(void)
 {
     iso_mesh m, dec;
@@ -1205,6 +1255,7 @@ int main(void)
     CHECK_RUN(test_draco_speed_10_keeps_order);
     CHECK_RUN(test_draco_auto_speed);
     CHECK_RUN(test_draco_auto_numbers_by_first_use);
+    CHECK_RUN(test_draco_split_matches_one_encoder);
     CHECK_RUN(test_draco_100k_triangles);
     CHECK_RUN(test_draco_decodes_with_draco_decoder);
     CHECK_RUN(test_draco_refuses_bad_options_and_meshes);
