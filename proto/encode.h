@@ -47,6 +47,10 @@ typedef struct proto_encode_options {
      * edgebreaker, which reorders vertices and triangles; 10 is the sequential coder with
      * compressed connectivity: order kept, about twice the bytes of 8, 2.5x faster. */
     int speed;
+    /* Threads for the sequential coder (speed 10): 0 = all cores, 1 = one. With two or more
+     * it encodes the connectivity and the attributes on two threads and joins them into
+     * the stream one thread writes, byte for byte. Other speeds use one thread. */
+    int threads;
 } proto_encode_options;
 
 /* Fills the defaults: 14 position bits, 10 normal bits, speed auto. */

@@ -16,6 +16,7 @@ void proto_encode_options_init(proto_encode_options *opt)
     opt->position_bits = PROTO_POSITION_BITS_DEFAULT;
     opt->normal_bits = PROTO_NORMAL_BITS_DEFAULT;
     opt->speed = PROTO_DRACO_SPEED_DEFAULT;
+    opt->threads = 0;
 }
 
 static int all_finite(const float *v, size_t n)

@@ -827,6 +827,136 @@ static void test_draco_auto_speed(void)
     iso_mesh_free(&m);
 }
 
+/* Renumbers m's vertices by a random permutation: the same surface, indices all over. */
+static void shuffle_vertices(iso_mesh *m)
+{
+    size_t n = m->vertex_count;
+    uint32_t *perm = malloc((n ? n : 1) * sizeof *perm);
+    float *pos = malloc((n ? n : 1) * 3 * sizeof *pos);
+    float *nrm = m->normals ? malloc(n * 3 * sizeof *nrm) : NULL;
+    CHECK(perm && pos && (nrm || !m->normals));
+    if (check_failed()) {
+        free(perm), free(pos), free(nrm);
+        return;
+    }
+    for (size_t i = 0; i < n; i++)
+        perm[i] = (uint32_t)i;
+    for (size_t i = n; i > 1; i--) {
+        size_t j = rng() % i;
+        uint32_t s = perm[i - 1];
+        perm[i - 1] = perm[j], perm[j] = s;
+    }
+    for (size_t v = 0; v < n; v++) {
+        memcpy(pos + 3 * perm[v], m->positions + 3 * v, 3 * sizeof *pos);
+        if (nrm)
+            memcpy(nrm + 3 * perm[v], m->normals + 3 * v, 3 * sizeof *nrm);
+    }
+    for (size_t i = 0; i < 3 * m->triangle_count; i++)
+        m->indices[i] = perm[m->indices[i]];
+    memcpy(m->positions, pos, n * 3 * sizeof *pos);
+    if (nrm)
+        memcpy(m->normals, nrm, n * 3 * sizeof *nrm);
+    free(perm), free(pos), free(nrm);
+}
+
+/* Under auto the sequential coder gets the points numbered in the order triangles first
+ * use them (each triangle started at its cheapest corner), whatever the mesh's own order:
+ * the decoded indices never skip ahead, the mesh decodes back whole, and the index deltas
+ * of a shuffled mesh shrink. speed=10 by name keeps the shuffled order (and its bytes). */
+static void test_draco_auto_numbers_by_first_use(void)
+{
+    iso_mesh m, dec;
+    iso_error err;
+    unsigned char *buf = NULL, *kept = NULL;
+    size_t size = 0, kept_size = 0;
+    proto_encode_options opt;
+    proto_encode_options_init(&opt);
+    make_torus(&m, 402, 250, 1); /* 201,000 triangles: auto takes the sequential coder */
+    for (size_t i = 0; i < 3 * m.vertex_count; i++)
+        m.positions[i] += (float)((double)(rng() % 1001) / 1000.0 - 0.5);
+    shuffle_vertices(&m);
+    proto_draco_info info;
+    CHECK_OK(proto_draco_encode_info(&m, &opt, &buf, &size, &info, &err), &err);
+    opt.speed = 10;
+    CHECK_OK(proto_encode_draco(&m, &opt, &kept, &kept_size, &err), &err);
+    if (check_failed())
+        goto done;
+    CHECK_EQ(info.speed, 10);
+    CHECK_EQ(info.points, 100500);
+    CHECK_EQ(info.faces, 201000);
+    printf("  info: shuffled torus, 201000 triangles: auto %zu bytes, speed=10 in the mesh's "
+           "order %zu bytes\n", size, kept_size);
+    CHECKF(size * 10 < kept_size * 7, "auto %zu bytes, kept order %zu", size, kept_size);
+    CHECK_OK(proto_draco_decode(buf, size, &dec, &err), &err);
+    if (check_failed())
+        goto done;
+    uint32_t next = 0;
+    size_t ahead = 0;
+    for (size_t i = 0; i < 3 * dec.triangle_count; i++) {
+        ahead += dec.indices[i] > next;
+        if (dec.indices[i] == next)
+            next++;
+    }
+    CHECKF(ahead == 0, "%zu indices skip ahead of first use", ahead);
+    CHECK_EQ(next, 100500);
+    check_draco_match(&m, &dec, opt.position_bits, 0.9999);
+    iso_mesh_free(&dec);
+done:
+    free(buf);
+    free(kept);
+    iso_mesh_free(&m);
+}
+
+/* The sequential coder on two threads (connectivity and attributes apart, joined) writes
+ * the bytes one thread writes: under auto and at speed 10 by name, with and without
+ * normals; and they decode back to the mesh. Auto without normals makes a joined stream
+ * under 3 bytes a face, which goes to edgebreaker (speed 8) as on one thread. */
+static void test_draco_split_matches_one_encoder(void)
+{
+    iso_mesh m;
+    make_torus(&m, 402, 250, 1); /* 201,000 triangles: auto takes the sequential coder */
+    for (size_t i = 0; i < 3 * m.vertex_count; i++) /* rough enough for 3 bytes a face */
+        m.positions[i] += (float)((double)(rng() % 3001) / 1000.0 - 1.5);
+    shuffle_vertices(&m);
+    for (int pass = 0; pass < 4 && !check_failed(); pass++) {
+        if (pass == 2) { /* the same without normals */
+            free(m.normals);
+            m.normals = NULL;
+        }
+        proto_encode_options opt;
+        proto_encode_options_init(&opt);
+        opt.speed = pass % 2 ? 10 : PROTO_DRACO_SPEED_AUTO;
+        unsigned char *one = NULL, *two = NULL;
+        size_t one_size = 0, two_size = 0;
+        proto_draco_info one_info, two_info;
+        iso_error err;
+        opt.threads = 1;
+        CHECK_OK(proto_draco_encode_info(&m, &opt, &one, &one_size, &one_info, &err), &err);
+        opt.threads = 2;
+        CHECK_OK(proto_draco_encode_info(&m, &opt, &two, &two_size, &two_info, &err), &err);
+        if (!check_failed()) {
+            CHECKF(one_size == two_size && memcmp(one, two, one_size) == 0,
+                   "pass %d: %zu bytes on one thread, %zu on two", pass, one_size, two_size);
+            CHECK(memcmp(&one_info, &two_info, sizeof one_info) == 0);
+            printf("  info: split pass %d: speed %d, %zu bytes\n", pass, two_info.speed, two_size);
+            CHECK_EQ(two_info.speed, pass == 2 ? 8 : 10);
+            CHECK_EQ(two_info.points, 100500);
+            CHECK_EQ(two_info.faces, 201000);
+        }
+        iso_mesh dec;
+        if (!check_failed()) {
+            CHECK_OK(proto_draco_decode(two, two_size, &dec, &err), &err);
+            if (!check_failed()) {
+                check_draco_match(&m, &dec, opt.position_bits, 0.9999);
+                iso_mesh_free(&dec);
+            }
+        }
+        free(one);
+        free(two);
+    }
+    iso_mesh_free(&m);
+}
+
 static void test_draco_decoder_refuses_garbage(void)
 {
     iso_mesh m, dec;
@@ -1124,6 +1254,8 @@ int main(void)
     CHECK_RUN(test_draco_round_trip_bits_and_speeds);
     CHECK_RUN(test_draco_speed_10_keeps_order);
     CHECK_RUN(test_draco_auto_speed);
+    CHECK_RUN(test_draco_auto_numbers_by_first_use);
+    CHECK_RUN(test_draco_split_matches_one_encoder);
     CHECK_RUN(test_draco_100k_triangles);
     CHECK_RUN(test_draco_decodes_with_draco_decoder);
     CHECK_RUN(test_draco_refuses_bad_options_and_meshes);
