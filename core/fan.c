@@ -50,21 +50,36 @@ typedef struct face {
     int axis, b, c;          /* the face is normal to axis; b, c span it, (b, c, axis) right-handed */
     uint32_t fixed;          /* the face's coordinate along axis */
     uint32_t lo[3], n[3];    /* its sample box: origin and sample counts (n[axis] = 1) */
+    size_t stride[3];        /* samples between neighbours along each axis (0 along axis) */
     const double *samples;   /* x fastest */
 } face;
 
 static double face_value(const face *f, const uint32_t p[3])
 {
-    return f->samples[((size_t)(p[2] - f->lo[2]) * f->n[1] + (p[1] - f->lo[1])) * f->n[0] +
-                      (p[0] - f->lo[0])];
+    return f->samples[(p[0] - f->lo[0]) * f->stride[0] + (p[1] - f->lo[1]) * f->stride[1] +
+                      (p[2] - f->lo[2]) * f->stride[2]];
+}
+
+/* The key of the grid edge from low along axis d (fan.h). */
+static uint64_t edge_key(const face *f, const uint32_t low[3], int d)
+{
+    const size_t *dims = f->vol->dims;
+    return (((uint64_t)low[2] * dims[1] + low[1]) * dims[0] + low[0]) * 3 + (uint64_t)d;
+}
+
+/* The grid edge between neighbouring samples p and q: its low end and axis. */
+static const uint32_t *edge_between(const face *f, const uint32_t p[3], const uint32_t q[3], int *d)
+{
+    *d = p[f->b] != q[f->b] ? f->b : f->c;
+    return p[*d] < q[*d] ? p : q;
 }
 
 /* The crossing on the grid edge between neighbouring samples p and q. */
 static void crossing(const face *f, const uint32_t p[3], const uint32_t q[3], uint64_t *key,
                      float position[3], double *error)
 {
-    int d = p[f->b] != q[f->b] ? f->b : f->c;
-    const uint32_t *low = p[d] < q[d] ? p : q, *high = p[d] < q[d] ? q : p;
+    int d;
+    const uint32_t *low = edge_between(f, p, q, &d), *high = low == p ? q : p;
     double a = face_value(f, low), b = face_value(f, high);
     double t = iso_mc_edge_t(a, b, f->level);
     for (int k = 0; k < 3; k++)
@@ -72,54 +87,51 @@ static void crossing(const face *f, const uint32_t p[3], const uint32_t q[3], ui
     *error = iso_mc_edge_error(a, b, t, f->level);
     if (!(*error >= 0))
         *error = 0; /* a NaN end: no level to be off from */
-    const size_t *dims = f->vol->dims;
-    *key = (((uint64_t)low[2] * dims[1] + low[1]) * dims[0] + low[0]) * 3 + (uint64_t)d;
+    *key = edge_key(f, low, d);
 }
 
-static int add_segment(iso_fan_scratch *s, const face *f, const uint32_t from[2][3],
-                       const uint32_t to[2][3])
+/* A segment ends where the next one starts, which computes the crossing's position: here
+ * only its key is needed. */
+static uint64_t crossing_key(const face *f, const uint32_t p[3], const uint32_t q[3])
 {
-    if (grow((void **)&s->segments, &s->segment_capacity, s->segment_count + 1, sizeof *s->segments))
-        return ISO_E_NOMEM;
-    iso_fan_segment *g = s->segments + s->segment_count++;
-    float unused[3];
-    double unused_error;
-    crossing(f, from[0], from[1], &g->from, g->from_position, &g->from_error);
-    crossing(f, to[0], to[1], &g->to, unused, &unused_error);
-    g->used = 0;
-    return 0;
+    int d;
+    const uint32_t *low = edge_between(f, p, q, &d);
+    return edge_key(f, low, d);
 }
 
-/* One data cell of the face with corner (ib, ic), its corners walked counter-clockwise
- * seen from outside the node: marching cubes' own face rule, so the cell on the other
- * side of the face, of any size, produces the same segments reversed. */
-static int march_square(iso_fan_scratch *s, const face *f, int high_side, uint32_t ib, uint32_t ic)
+/* One crossed data cell of the face with corner (ib, ic), its corners walked
+ * counter-clockwise seen from outside the node: marching cubes' own face rule, so the
+ * cell on the other side of the face, of any size, produces the same segments reversed.
+ * inside[i]: whether corner i (in that walk) is above the level. */
+static int march_square(iso_fan_scratch *s, const face *f, int high_side, uint32_t ib, uint32_t ic,
+                        const int inside[4])
 {
     static const int bc[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
     uint32_t q[4][3];
-    int inside[4];
     for (int i = 0; i < 4; i++) {
         int at = high_side ? i : 3 - i;
         q[i][f->axis] = f->fixed;
         q[i][f->b] = ib + (uint32_t)bc[at][0];
         q[i][f->c] = ic + (uint32_t)bc[at][1];
-        inside[i] = face_value(f, q[i]) > f->level;
     }
     int from_side[2], to_side[2];
     int segments = iso_mc_face_segments(inside, from_side, to_side);
+    if (grow((void **)&s->segments, &s->segment_capacity, s->segment_count + (size_t)segments,
+             sizeof *s->segments))
+        return ISO_E_NOMEM;
     for (int r = 0; r < segments; r++) {
-        int best = from_side[r], entered = to_side[r];
-        uint32_t from[2][3], to[2][3];
-        memcpy(from[0], q[best], sizeof from[0]);
-        memcpy(from[1], q[(best + 1) % 4], sizeof from[1]);
-        memcpy(to[0], q[entered], sizeof to[0]);
-        memcpy(to[1], q[(entered + 1) % 4], sizeof to[1]);
-        if (add_segment(s, f, from, to))
-            return ISO_E_NOMEM;
+        int from = from_side[r], to = to_side[r];
+        iso_fan_segment *g = s->segments + s->segment_count++;
+        crossing(f, q[from], q[(from + 1) % 4], &g->from, g->from_position, &g->from_error);
+        g->to = crossing_key(f, q[to], q[(to + 1) % 4]);
+        g->used = 0;
     }
     return 0;
 }
 
+/* Marches one face: the samples are compared with the level as the squares go, and only
+ * a square whose corners straddle it (few: the surface is a curve on the face) builds its
+ * corners and segments. */
 static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *box,
                       double level, int axis, int high_side)
 {
@@ -131,16 +143,38 @@ static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *
         hi[d] = d == axis ? f.fixed : box->hi[d];
         f.lo[d] = (uint32_t)lo[d];
         f.n[d] = (uint32_t)(hi[d] - lo[d] + 1);
+        f.stride[d] = d == 0 ? 1 : d == 1 ? f.n[0] : (size_t)f.n[0] * f.n[1];
         count *= f.n[d];
     }
+    f.stride[axis] = 0;
     if (grow((void **)&s->face, &s->face_capacity, count, sizeof *s->face))
         return ISO_E_NOMEM;
     iso_vol_read_box(vol, lo, hi, s->face);
     f.samples = s->face;
-    for (uint32_t ic = box->lo[f.c]; ic < box->hi[f.c]; ic++)
-        for (uint32_t ib = box->lo[f.b]; ib < box->hi[f.b]; ib++)
-            if (march_square(s, &f, high_side, ib, ic))
-                return ISO_E_NOMEM;
+    size_t sb = f.stride[f.b], sc = f.stride[f.c], nb = f.n[f.b], nc = f.n[f.c];
+    for (size_t c = 0; c + 1 < nc; c++) {
+        const double *row = f.samples + c * sc, *next = row + sc;
+        /* Corners (b, c), (b, c + 1) of the square at hand; (b + 1, ...) of the next. */
+        int low0 = row[0] > level, low1 = next[0] > level;
+        for (size_t b = 0; b + 1 < nb; b++) {
+            int high0 = row[(b + 1) * sb] > level, high1 = next[(b + 1) * sb] > level;
+            if ((low0 + low1 + high0 + high1) & 3) { /* not all four on one side */
+                /* The walk's corners are (0,0) (1,0) (1,1) (0,1) in (b, c), reversed on
+                 * the low side. */
+                int inside[4] = {low0, high0, high1, low1};
+                if (!high_side) {
+                    inside[0] = low1;
+                    inside[1] = high1;
+                    inside[2] = high0;
+                    inside[3] = low0;
+                }
+                if (march_square(s, &f, high_side, f.lo[f.b] + (uint32_t)b, f.lo[f.c] + (uint32_t)c, inside))
+                    return ISO_E_NOMEM;
+            }
+            low0 = high0;
+            low1 = high1;
+        }
+    }
     return 0;
 }
 
