@@ -232,6 +232,33 @@ static int collect_loop(iso_fan_scratch *s, size_t first, size_t *length)
 
 /* ---- PASS 3: fans ---- */
 
+#define READ_CORNERS(T)                                                                  \
+    do {                                                                                 \
+        const T *p = (const T *)vol->data + at;                                          \
+        c[0] = p[0], c[1] = p[1], c[2] = p[ny], c[3] = p[ny + 1];                        \
+        c[4] = p[nz], c[5] = p[nz + 1], c[6] = p[nz + ny], c[7] = p[nz + ny + 1];        \
+    } while (0)
+
+/* The 8 samples of the cell with low corner `cell` (inside the volume), corner k at
+ * offset (k & 1, (k >> 1) & 1, (k >> 2) & 1): one index and one type switch, not eight. */
+static void cell_corners(const iso_volume *vol, const size_t cell[3], double c[8])
+{
+    size_t at = iso_vol_index(vol, cell[0], cell[1], cell[2]);
+    size_t ny = vol->dims[0], nz = vol->dims[0] * vol->dims[1]; /* the y and z strides */
+    assert(cell[0] + 1 < vol->dims[0] && cell[1] + 1 < vol->dims[1] && cell[2] + 1 < vol->dims[2]);
+    switch (vol->type) {
+    case ISO_U8: READ_CORNERS(uint8_t); break;
+    case ISO_I8: READ_CORNERS(int8_t); break;
+    case ISO_U16: READ_CORNERS(uint16_t); break;
+    case ISO_I16: READ_CORNERS(int16_t); break;
+    case ISO_U32: READ_CORNERS(uint32_t); break;
+    case ISO_I32: READ_CORNERS(int32_t); break;
+    case ISO_F32: READ_CORNERS(float); break;
+    case ISO_F64:
+    default: READ_CORNERS(double); break; /* the types are all above */
+    }
+}
+
 /* f and its gradient at index-space point p (the trilinear of the cell holding p). */
 static double field_at(const iso_volume *vol, const double p[3], double gradient[3])
 {
@@ -246,8 +273,7 @@ static double field_at(const iso_volume *vol, const double p[3], double gradient
         cell[d] = (size_t)x;
         u[d] = p[d] - x;
     }
-    for (int k = 0; k < 8; k++)
-        c[k] = iso_vol_get(vol, cell[0] + (k & 1), cell[1] + ((k >> 1) & 1), cell[2] + ((k >> 2) & 1));
+    cell_corners(vol, cell, c);
     double x00 = c[0] + (c[1] - c[0]) * u[0], x10 = c[2] + (c[3] - c[2]) * u[0];
     double x01 = c[4] + (c[5] - c[4]) * u[0], x11 = c[6] + (c[7] - c[6]) * u[0];
     double y0 = x00 + (x10 - x00) * u[1], y1 = x01 + (x11 - x01) * u[1];
