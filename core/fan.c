@@ -20,7 +20,7 @@ struct iso_fan_segment {
 
 void iso_fan_scratch_free(iso_fan_scratch *s)
 {
-    free(s->face);
+    free(s->inside);
     free(s->segments);
     free(s->slots);
     free(s->loop);
@@ -49,15 +49,11 @@ typedef struct face {
     double level;
     int axis, b, c;          /* the face is normal to axis; b, c span it, (b, c, axis) right-handed */
     uint32_t fixed;          /* the face's coordinate along axis */
-    uint32_t lo[3], n[3];    /* its sample box: origin and sample counts (n[axis] = 1) */
-    size_t stride[3];        /* samples between neighbours along each axis (0 along axis) */
-    const double *samples;   /* x fastest */
 } face;
 
-static double face_value(const face *f, const uint32_t p[3])
+static double sample_at(const face *f, const uint32_t p[3])
 {
-    return f->samples[(p[0] - f->lo[0]) * f->stride[0] + (p[1] - f->lo[1]) * f->stride[1] +
-                      (p[2] - f->lo[2]) * f->stride[2]];
+    return iso_vol_sample(f->vol, iso_vol_index(f->vol, p[0], p[1], p[2]));
 }
 
 /* The key of the grid edge from low along axis d (fan.h). */
@@ -80,7 +76,7 @@ static void crossing(const face *f, const uint32_t p[3], const uint32_t q[3], ui
 {
     int d;
     const uint32_t *low = edge_between(f, p, q, &d), *high = low == p ? q : p;
-    double a = face_value(f, low), b = face_value(f, high);
+    double a = sample_at(f, low), b = sample_at(f, high);
     double t = iso_mc_edge_t(a, b, f->level);
     for (int k = 0; k < 3; k++)
         position[k] = (float)((double)low[k] + (k == d ? t : 0.0));
@@ -106,13 +102,15 @@ static uint64_t crossing_key(const face *f, const uint32_t p[3], const uint32_t 
 static int march_square(iso_fan_scratch *s, const face *f, int high_side, uint32_t ib, uint32_t ic,
                         const int inside[4])
 {
-    static const int bc[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+    /* (b, c) offsets of the walk's corners: counter-clockwise from the high side,
+     * reversed on the low side. */
+    static const uint32_t walk[2][4][2] = {{{0, 1}, {1, 1}, {1, 0}, {0, 0}},
+                                           {{0, 0}, {1, 0}, {1, 1}, {0, 1}}};
     uint32_t q[4][3];
     for (int i = 0; i < 4; i++) {
-        int at = high_side ? i : 3 - i;
         q[i][f->axis] = f->fixed;
-        q[i][f->b] = ib + (uint32_t)bc[at][0];
-        q[i][f->c] = ic + (uint32_t)bc[at][1];
+        q[i][f->b] = ib + walk[high_side][i][0];
+        q[i][f->c] = ic + walk[high_side][i][1];
     }
     int from_side[2], to_side[2];
     int segments = iso_mc_face_segments(inside, from_side, to_side);
@@ -129,50 +127,87 @@ static int march_square(iso_fan_scratch *s, const face *f, int high_side, uint32
     return 0;
 }
 
-/* Marches one face: the samples are compared with the level as the squares go, and only
- * a square whose corners straddle it (few: the surface is a curve on the face) builds its
- * corners and segments. */
+#define INSIDE_BITS(T)                                                                     \
+    for (size_t c = 0; c < nc; c++) {                                                      \
+        const T *p = (const T *)vol->data + at + c * step_c;                               \
+        for (size_t w = 0, b = 0; w < words; w++) {                                        \
+            uint64_t word = 0;                                                             \
+            for (size_t end = nb - b < 64 ? nb : b + 64, k = 0; b < end; b++, k++)         \
+                word |= (uint64_t)((double)p[b * step_b] > level) << k;                    \
+            bits[c * words + w] = word;                                                    \
+        }                                                                                  \
+    }
+
+/* Bit b of row c of bits (words per row): face sample (b, c) above the level (NaN is
+ * not), (b, c) counted from the face's low corner `at` along the volume strides step_b,
+ * step_c. The same doubles and comparison as everywhere else, with one type switch. */
+static void inside_bits(const iso_volume *vol, double level, size_t at, size_t step_b, size_t step_c,
+                        size_t nb, size_t nc, size_t words, uint64_t *bits)
+{
+    switch (vol->type) {
+    case ISO_U8: INSIDE_BITS(uint8_t); break;
+    case ISO_I8: INSIDE_BITS(int8_t); break;
+    case ISO_U16: INSIDE_BITS(uint16_t); break;
+    case ISO_I16: INSIDE_BITS(int16_t); break;
+    case ISO_U32: INSIDE_BITS(uint32_t); break;
+    case ISO_I32: INSIDE_BITS(int32_t); break;
+    case ISO_F32: INSIDE_BITS(float); break;
+    case ISO_F64: INSIDE_BITS(double); break;
+    }
+}
+
+/* Word w of a bit row shifted down by one: bit b says sample b + 1. */
+static uint64_t next_bits(const uint64_t *row, size_t w, size_t words)
+{
+    return (row[w] >> 1) | (w + 1 < words ? row[w + 1] << 63 : 0);
+}
+
+/* Marches one face. Its samples become bit rows (above the level or not), and the squares
+ * whose corners straddle the level (few: the surface is a curve on the face) come out of
+ * word operations, in the order b fastest; only those build corners and segments. */
 static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *box,
                       double level, int axis, int high_side)
 {
     face f = {.vol = vol, .level = level, .axis = axis, .b = (axis + 1) % 3, .c = (axis + 2) % 3};
     f.fixed = high_side ? box->hi[axis] : box->lo[axis];
-    size_t lo[3], hi[3], count = 1;
-    for (int d = 0; d < 3; d++) {
-        lo[d] = d == axis ? f.fixed : box->lo[d];
-        hi[d] = d == axis ? f.fixed : box->hi[d];
-        f.lo[d] = (uint32_t)lo[d];
-        f.n[d] = (uint32_t)(hi[d] - lo[d] + 1);
-        f.stride[d] = d == 0 ? 1 : d == 1 ? f.n[0] : (size_t)f.n[0] * f.n[1];
-        count *= f.n[d];
-    }
-    f.stride[axis] = 0;
-    if (grow((void **)&s->face, &s->face_capacity, count, sizeof *s->face))
+    size_t stride[3] = {1, vol->dims[0], vol->dims[0] * vol->dims[1]};
+    size_t nb = box->hi[f.b] - box->lo[f.b] + 1, nc = box->hi[f.c] - box->lo[f.c] + 1;
+    size_t words = (nb + 63) / 64;
+    if (grow((void **)&s->inside, &s->inside_capacity, nc * words, sizeof *s->inside))
         return ISO_E_NOMEM;
-    iso_vol_read_box(vol, lo, hi, s->face);
-    f.samples = s->face;
-    size_t sb = f.stride[f.b], sc = f.stride[f.c], nb = f.n[f.b], nc = f.n[f.c];
+    uint32_t corner[3];
+    corner[axis] = f.fixed;
+    corner[f.b] = box->lo[f.b];
+    corner[f.c] = box->lo[f.c];
+    inside_bits(vol, level, iso_vol_index(vol, corner[0], corner[1], corner[2]), stride[f.b], stride[f.c],
+                nb, nc, words, s->inside);
     for (size_t c = 0; c + 1 < nc; c++) {
-        const double *row = f.samples + c * sc, *next = row + sc;
-        /* Corners (b, c), (b, c + 1) of the square at hand; (b + 1, ...) of the next. */
-        int low0 = row[0] > level, low1 = next[0] > level;
-        for (size_t b = 0; b + 1 < nb; b++) {
-            int high0 = row[(b + 1) * sb] > level, high1 = next[(b + 1) * sb] > level;
-            if ((low0 + low1 + high0 + high1) & 3) { /* not all four on one side */
-                /* The walk's corners are (0,0) (1,0) (1,1) (0,1) in (b, c), reversed on
-                 * the low side. */
-                int inside[4] = {low0, high0, high1, low1};
-                if (!high_side) {
-                    inside[0] = low1;
-                    inside[1] = high1;
-                    inside[2] = high0;
-                    inside[3] = low0;
+        const uint64_t *row = s->inside + c * words, *next = row + words;
+        for (size_t w = 0; w < words; w++) {
+            uint64_t low0 = row[w], low1 = next[w];
+            uint64_t high0 = next_bits(row, w, words), high1 = next_bits(next, w, words);
+            /* Square b has corners b, b + 1 of both rows: crossed unless all four agree. */
+            uint64_t crossed = (low0 ^ high0) | (low1 ^ high1) | (low0 ^ low1);
+            size_t squares = nb - 1 - 64 * w; /* squares from this word on */
+            if (squares < 64)
+                crossed &= (UINT64_C(1) << squares) - 1;
+            while (crossed) {
+                int k = __builtin_ctzll(crossed);
+                crossed &= crossed - 1;
+                int l0 = (int)(low0 >> k & 1), l1 = (int)(low1 >> k & 1);
+                int h0 = (int)(high0 >> k & 1), h1 = (int)(high1 >> k & 1);
+                /* The walk's corners, as march_square lists them. */
+                int inside[4] = {l1, h1, h0, l0};
+                if (high_side) {
+                    inside[0] = l0;
+                    inside[1] = h0;
+                    inside[2] = h1;
+                    inside[3] = l1;
                 }
-                if (march_square(s, &f, high_side, f.lo[f.b] + (uint32_t)b, f.lo[f.c] + (uint32_t)c, inside))
+                uint32_t ib = box->lo[f.b] + (uint32_t)(64 * w + (size_t)k), ic = box->lo[f.c] + (uint32_t)c;
+                if (march_square(s, &f, high_side, ib, ic, inside))
                     return ISO_E_NOMEM;
             }
-            low0 = high0;
-            low1 = high1;
         }
     }
     return 0;
@@ -414,6 +449,19 @@ static int fan_loop(const iso_volume *vol, const iso_box *box, double level, dou
     return 1;
 }
 
+/* The fewest triangles s crossings can fan into: each starts one segment, so closed loops
+ * of at least three vertices share them, a loop of three giving one triangle and a longer
+ * loop n (around its centre). Loops of three are the cheapest; a remainder of one or two
+ * crossings makes one of them a 4- or 5-loop. Below three crossings no fan is possible:
+ * SIZE_MAX. */
+static size_t fewest_triangles(size_t s)
+{
+    if (s < 3)
+        return SIZE_MAX;
+    static const size_t remainder[3] = {0, 3, 4};
+    return s / 3 + remainder[s % 3];
+}
+
 int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
                        double vertex_limit, size_t max_triangles, iso_fan_scratch *s,
                        iso_fan_output *out, iso_fan_result *result)
@@ -425,6 +473,10 @@ int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
         for (int side = 0; side < 2; side++)
             if (march_face(s, vol, box, level, axis, side))
                 return ISO_E_NOMEM;
+    /* Refusals the crossings decide already, before linking and fanning: no loop at all
+     * (a closed piece inside), loops too short, or more triangles than allowed. */
+    if (fewest_triangles(s->segment_count) > max_triangles || s->segment_count < 3)
+        return 0;
     if (index_segments(s))
         return ISO_E_NOMEM;
     size_t centres_before = out->centre_count, triangles_before = out->triangle_count;

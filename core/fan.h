@@ -34,8 +34,8 @@
  * zeroed; iso_fan_scratch_free releases it. */
 typedef struct iso_fan_segment iso_fan_segment;
 typedef struct iso_fan_scratch {
-    double *face;                 /* one face's samples */
-    size_t face_capacity;
+    uint64_t *inside;             /* one face's samples above the level: a bit row per line */
+    size_t inside_capacity;
     iso_fan_segment *segments;
     size_t segment_count, segment_capacity;
     uint32_t *slots;              /* open addressing: segment by its start vertex's edge */
