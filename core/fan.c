@@ -3,6 +3,7 @@
 
 #include <assert.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -24,6 +25,7 @@ void iso_fan_scratch_free(iso_fan_scratch *s)
     free(s->segments);
     free(s->slots);
     free(s->loop);
+    free(s->lengths);
     memset(s, 0, sizeof *s);
 }
 
@@ -95,12 +97,36 @@ static uint64_t crossing_key(const face *f, const uint32_t p[3], const uint32_t 
     return edge_key(f, low, d);
 }
 
+/* iso_mc_face_segments for the 16 corner cases, indexed by sum of inside[i] << i: the
+ * face rule is asked once, not per square. */
+typedef struct face_case {
+    int segments, from[2], to[2];
+} face_case;
+
+static face_case face_table[16];
+static pthread_once_t face_table_once = PTHREAD_ONCE_INIT;
+
+static void build_face_table(void)
+{
+    for (int index = 0; index < 16; index++) {
+        int inside[4] = {index & 1, index >> 1 & 1, index >> 2 & 1, index >> 3 & 1};
+        face_case *fc = face_table + index;
+        fc->segments = iso_mc_face_segments(inside, fc->from, fc->to);
+    }
+}
+
+static const face_case *face_cases(void)
+{
+    pthread_once(&face_table_once, build_face_table);
+    return face_table;
+}
+
 /* One crossed data cell of the face with corner (ib, ic), its corners walked
  * counter-clockwise seen from outside the node: marching cubes' own face rule, so the
  * cell on the other side of the face, of any size, produces the same segments reversed.
- * inside[i]: whether corner i (in that walk) is above the level. */
-static int march_square(iso_fan_scratch *s, const face *f, int high_side, uint32_t ib, uint32_t ic,
-                        const int inside[4])
+ * inside[i]: whether corner i (in that walk) is above the level; table: face_cases(). */
+static int march_square(iso_fan_scratch *s, const face *f, const face_case *table, int high_side,
+                        uint32_t ib, uint32_t ic, const int inside[4])
 {
     /* (b, c) offsets of the walk's corners: counter-clockwise from the high side,
      * reversed on the low side. */
@@ -112,8 +138,9 @@ static int march_square(iso_fan_scratch *s, const face *f, int high_side, uint32
         q[i][f->b] = ib + walk[high_side][i][0];
         q[i][f->c] = ic + walk[high_side][i][1];
     }
-    int from_side[2], to_side[2];
-    int segments = iso_mc_face_segments(inside, from_side, to_side);
+    const face_case *fc = table + (inside[0] | inside[1] << 1 | inside[2] << 2 | inside[3] << 3);
+    const int *from_side = fc->from, *to_side = fc->to;
+    int segments = fc->segments;
     if (grow((void **)&s->segments, &s->segment_capacity, s->segment_count + (size_t)segments,
              sizeof *s->segments))
         return ISO_E_NOMEM;
@@ -175,6 +202,7 @@ static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *
     size_t words = (nb + 63) / 64;
     if (grow((void **)&s->inside, &s->inside_capacity, nc * words, sizeof *s->inside))
         return ISO_E_NOMEM;
+    const face_case *table = face_cases();
     uint32_t corner[3];
     corner[axis] = f.fixed;
     corner[f.b] = box->lo[f.b];
@@ -205,7 +233,7 @@ static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *
                     inside[3] = l1;
                 }
                 uint32_t ib = box->lo[f.b] + (uint32_t)(64 * w + (size_t)k), ic = box->lo[f.c] + (uint32_t)c;
-                if (march_square(s, &f, high_side, ib, ic, inside))
+                if (march_square(s, &f, table, high_side, ib, ic, inside))
                     return ISO_E_NOMEM;
             }
         }
@@ -247,22 +275,53 @@ static long find_segment(const iso_fan_scratch *s, uint64_t from)
     return -1;
 }
 
-/* Collects the loop starting at segment first into s->loop and sets *length to its
- * length, 0 when the chain does not close (cannot happen for a consistent face rule;
- * refused anyway). Returns 0 or ISO_E_NOMEM. */
-static int collect_loop(iso_fan_scratch *s, size_t first, size_t *length)
+/* Collects the loop starting at segment first into loop and sets *length to its length,
+ * 0 when the chain does not close (cannot happen for a consistent face rule; refused
+ * anyway). loop has room for every segment not yet used. */
+static void collect_loop(iso_fan_scratch *s, size_t first, uint32_t *loop, size_t *length)
 {
     size_t n = 0;
     long at = (long)first;
     while (at >= 0 && !s->segments[at].used) {
-        if (grow((void **)&s->loop, &s->loop_capacity, n + 1, sizeof *s->loop))
-            return ISO_E_NOMEM;
         s->segments[at].used = 1;
-        s->loop[n++] = (uint32_t)at;
+        loop[n++] = (uint32_t)at;
         at = find_segment(s, s->segments[at].to);
     }
     *length = at == (long)first ? n : 0;
-    return 0;
+}
+
+/* Triangles a loop of n >= 3 vertices fans into. */
+static size_t loop_triangles(size_t n)
+{
+    return n == 3 ? 1 : n;
+}
+
+/* Links every segment into loops, one after another in s->loop, their lengths in
+ * s->lengths: 1 done, 0 refused (a loop that does not close or has fewer than three
+ * vertices, or more than max_triangles in all: the fans would be refused for it),
+ * ISO_E_NOMEM. */
+static int link_loops(iso_fan_scratch *s, size_t max_triangles)
+{
+    if (index_segments(s) ||
+        grow((void **)&s->loop, &s->loop_capacity, s->segment_count, sizeof *s->loop) ||
+        grow((void **)&s->lengths, &s->length_capacity, s->segment_count / 3, sizeof *s->lengths))
+        return ISO_E_NOMEM;
+    size_t filled = 0, triangles = 0;
+    s->loop_count = 0;
+    for (size_t i = 0; i < s->segment_count; i++) {
+        if (s->segments[i].used)
+            continue;
+        size_t n;
+        collect_loop(s, i, s->loop + filled, &n);
+        if (n < 3)
+            return 0;
+        triangles += loop_triangles(n);
+        if (triangles > max_triangles)
+            return 0;
+        filled += n;
+        s->lengths[s->loop_count++] = (uint32_t)n;
+    }
+    return 1;
 }
 
 /* ---- PASS 3: fans ---- */
@@ -300,7 +359,8 @@ static double field_at(const iso_volume *vol, const double p[3], double gradient
     size_t cell[3];
     double u[3], c[8];
     for (int d = 0; d < 3; d++) {
-        double x = floor(p[d]);
+        /* floor, as a conversion: below 0 (and NaN) the cell is clamped to 0 anyway. */
+        double x = p[d] > 0 ? (double)(size_t)p[d] : 0;
         if (x > (double)vol->dims[d] - 2)
             x = (double)vol->dims[d] - 2;
         if (x < 0)
@@ -325,13 +385,13 @@ static double field_at(const iso_volume *vol, const double p[3], double gradient
 /* The loop's centroid, moved by Newton steps on f toward the level, kept inside box.
  * Returns |f(centre) - level| (NaN when f is NaN there). */
 static double place_centre(const iso_volume *vol, const iso_box *box, double level,
-                           const iso_fan_scratch *s, size_t n, double centre[3])
+                           const iso_fan_scratch *s, const uint32_t *loop, size_t n, double centre[3])
 {
     for (int d = 0; d < 3; d++)
         centre[d] = 0;
     for (size_t i = 0; i < n; i++)
         for (int d = 0; d < 3; d++)
-            centre[d] += s->segments[s->loop[i]].from_position[d];
+            centre[d] += s->segments[loop[i]].from_position[d];
     for (int d = 0; d < 3; d++)
         centre[d] /= (double)n;
     double g[3], r = field_at(vol, centre, g) - level;
@@ -406,36 +466,34 @@ static int add_centre(iso_fan_output *out, const double centre[3], uint64_t *ref
     return 0;
 }
 
-/* Emits the loop in s->loop (n vertices): 1 done, 0 refused, ISO_E_NOMEM. Triangles are
+/* Emits the loop (n >= 3 vertices, segment indices): 1 done, 0 refused, ISO_E_NOMEM. Triangles are
  * (centre, next, this): each face segment this -> next is then used as next -> this, the
  * direction marching cubes' own triangles give it. */
 static int fan_loop(const iso_volume *vol, const iso_box *box, double level, double vertex_limit,
-                    const iso_fan_scratch *s, size_t n, iso_fan_output *out, iso_fan_result *result)
+                    const iso_fan_scratch *s, const uint32_t *loop, size_t n, iso_fan_output *out, iso_fan_result *result)
 {
-    if (n < 3)
-        return 0;
     for (size_t i = 0; i < n; i++)
-        if (s->segments[s->loop[i]].from_error > result->vertex_error)
-            result->vertex_error = s->segments[s->loop[i]].from_error;
+        if (s->segments[loop[i]].from_error > result->vertex_error)
+            result->vertex_error = s->segments[loop[i]].from_error;
     if (n == 3) {
-        const float *a = s->segments[s->loop[0]].from_position, *b = s->segments[s->loop[1]].from_position,
-                    *c = s->segments[s->loop[2]].from_position;
+        const float *a = s->segments[loop[0]].from_position, *b = s->segments[loop[1]].from_position,
+                    *c = s->segments[loop[2]].from_position;
         if (!sound_triangle(vol, c, b, a))
             return 0;
         result->triangles++;
-        return emit_triangle(out, s->segments[s->loop[2]].from, s->segments[s->loop[1]].from,
-                             s->segments[s->loop[0]].from) ? ISO_E_NOMEM : 1;
+        return emit_triangle(out, s->segments[loop[2]].from, s->segments[loop[1]].from,
+                             s->segments[loop[0]].from) ? ISO_E_NOMEM : 1;
     }
     double centre[3];
-    double error = place_centre(vol, box, level, s, n, centre);
+    double error = place_centre(vol, box, level, s, loop, n, centre);
     if (!(error <= vertex_limit))
         return 0;
     if (error > result->vertex_error)
         result->vertex_error = error;
     float c[3] = {(float)centre[0], (float)centre[1], (float)centre[2]};
     for (size_t i = 0; i < n; i++) {
-        const float *here = s->segments[s->loop[i]].from_position;
-        const float *next = s->segments[s->loop[(i + 1) % n]].from_position;
+        const float *here = s->segments[loop[i]].from_position;
+        const float *next = s->segments[loop[(i + 1) % n]].from_position;
         if (!sound_triangle(vol, c, next, here))
             return 0;
     }
@@ -443,9 +501,9 @@ static int fan_loop(const iso_volume *vol, const iso_box *box, double level, dou
     if (add_centre(out, centre, &centre_ref))
         return ISO_E_NOMEM;
     for (size_t i = 0; i < n; i++)
-        if (emit_triangle(out, centre_ref, s->segments[s->loop[(i + 1) % n]].from, s->segments[s->loop[i]].from))
+        if (emit_triangle(out, centre_ref, s->segments[loop[(i + 1) % n]].from, s->segments[loop[i]].from))
             return ISO_E_NOMEM;
-    result->triangles += n;
+    result->triangles += loop_triangles(n);
     return 1;
 }
 
@@ -474,29 +532,20 @@ int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
             if (march_face(s, vol, box, level, axis, side))
                 return ISO_E_NOMEM;
     /* Refusals the crossings decide already, before linking and fanning: no loop at all
-     * (a closed piece inside), loops too short, or more triangles than allowed. */
+     * (the node holds the level, its range says, but no face crosses it: the surface is a
+     * closed piece inside, which a fan cannot show), loops too short, or more triangles
+     * than allowed. */
     if (fewest_triangles(s->segment_count) > max_triangles || s->segment_count < 3)
         return 0;
-    if (index_segments(s))
-        return ISO_E_NOMEM;
+    int rc = link_loops(s, max_triangles);
+    if (rc != 1)
+        return rc;
     size_t centres_before = out->centre_count, triangles_before = out->triangle_count;
-    int rc = 1;
-    for (size_t i = 0; i < s->segment_count && rc == 1; i++) {
-        if (s->segments[i].used)
-            continue;
-        size_t n;
-        rc = collect_loop(s, i, &n);
-        if (rc)
-            break;
-        rc = fan_loop(vol, box, level, vertex_limit, s, n, out, result);
+    const uint32_t *loop = s->loop;
+    for (size_t i = 0; i < s->loop_count && rc == 1; loop += s->lengths[i++]) {
+        rc = fan_loop(vol, box, level, vertex_limit, s, loop, s->lengths[i], out, result);
         result->loops++;
-        if (rc == 1 && result->triangles > max_triangles)
-            rc = 0;
     }
-    /* The node holds the level (the caller checked its range) but no face crosses it: the
-     * surface is a closed piece inside, which a fan cannot show. */
-    if (rc == 1 && result->loops == 0)
-        rc = 0;
     if (rc != 1) {
         out->centre_count = centres_before;
         out->triangle_count = triangles_before;

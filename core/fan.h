@@ -40,8 +40,10 @@ typedef struct iso_fan_scratch {
     size_t segment_count, segment_capacity;
     uint32_t *slots;              /* open addressing: segment by its start vertex's edge */
     size_t slot_capacity, slot_mask; /* allocated; in use for the node at hand */
-    uint32_t *loop;               /* the segments of the loop at hand, in order */
+    uint32_t *loop;               /* the segments of every loop, in order, one loop after another */
     size_t loop_capacity;
+    uint32_t *lengths;            /* the loops' lengths */
+    size_t loop_count, length_capacity;
 } iso_fan_scratch;
 
 void iso_fan_scratch_free(iso_fan_scratch *scratch);
