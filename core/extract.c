@@ -58,6 +58,9 @@ typedef struct sub_walk {
     fan_tally tally;
     iso_march_brick *brick;         /* the brick at hand */
     double samples[BRICK_SAMPLES];  /* its samples, x fastest, brick->n per axis */
+    /* Its inside bits along y and z (iso_fan_inside), transposed from the kernel's. */
+    uint16_t along_y[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES], along_z[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES];
+    int transposed;                 /* along_y and along_z are the brick's (made on first use) */
 } sub_walk;
 
 typedef struct coarse {
@@ -78,14 +81,16 @@ typedef struct coarse {
  * triangles than its cells would give (max_triangles): it is refused then, so no
  * tolerance ever costs triangles. */
 static int try_fan(const coarse *c, const iso_box *box, double fit_error, size_t max_triangles,
-                   iso_fan_scratch *scratch, iso_fan_output *fans, fan_tally *tally)
+                   const iso_fan_inside *inside, iso_fan_scratch *scratch, iso_fan_output *fans,
+                   fan_tally *tally)
 {
     if (iso_box_cells(box) < MIN_FAN_CELLS || !(fit_error <= c->fit_limit))
         return 0;
     iso_fan_result result;
     /* Centres must land on the surface, not merely within the tolerance of its level: a
      * centre left in a flat background would meet that loosely and still be far off. */
-    int rc = iso_fan_polygonize(c->vol, box, c->level, c->centre_limit, max_triangles, scratch, fans, &result);
+    int rc = iso_fan_polygonize(c->vol, box, c->level, c->centre_limit, max_triangles, inside, scratch,
+                                fans, &result);
     if (rc == 1) {
         tally->nodes_polygonized++;
         if (result.vertex_error > tally->vertex_error)
@@ -124,7 +129,7 @@ static int descend(coarse *c, uint32_t index, const iso_box *box)
     c->tally.nodes_visited++;
     if (c->prune && !(node->min <= c->level && c->level < node->max))
         return 0;
-    int rc = try_fan(c, box, node->err, SIZE_MAX, &c->scratch, &c->fans, &c->tally);
+    int rc = try_fan(c, box, node->err, SIZE_MAX, NULL, &c->scratch, &c->fans, &c->tally);
     if (rc == 1)
         skip_bricks_of(c, box);
     if (rc || !node->first_child)
@@ -200,6 +205,25 @@ static void cover_cells(iso_march_brick *brick, const uint32_t lo[3], const uint
             brick->covered[z][y] |= (uint8_t)span;
 }
 
+/* The kernel's inside bits (rows along x at [z][y]) as rows along y at [x][z] and along
+ * z at [y][x], for iso_fan_inside. */
+static void transpose_inside(sub_walk *w)
+{
+    const iso_march_brick *b = w->brick;
+    if (w->transposed)
+        return;
+    w->transposed = 1;
+    memset(w->along_y, 0, sizeof w->along_y);
+    memset(w->along_z, 0, sizeof w->along_z);
+    for (unsigned z = 0; z < b->n[2]; z++)
+        for (unsigned y = 0; y < b->n[1]; y++)
+            for (unsigned r = b->inside[z * ISO_BRICK_SAMPLES + y]; r; r &= r - 1) {
+                unsigned x = (unsigned)__builtin_ctz(r);
+                w->along_y[x * ISO_BRICK_SAMPLES + z] |= (uint16_t)(1u << y);
+                w->along_z[y * ISO_BRICK_SAMPLES + x] |= (uint16_t)(1u << z);
+            }
+}
+
 static int visit_sub(const coarse *c, sub_walk *w, const iso_box *box)
 {
     uint32_t lo[3], hi[3];
@@ -210,7 +234,11 @@ static int visit_sub(const coarse *c, sub_walk *w, const iso_box *box)
     if (err <= c->fit_limit) {
         size_t triangles = w->fans.triangle_count, centres = w->fans.centre_count;
         size_t most = iso_march_box_triangles(w->brick, lo, hi);
-        int rc = try_fan(c, box, err, most, &w->scratch, &w->fans, &w->tally);
+        /* The kernel classified the brick's samples: the fan's faces take its bits. */
+        transpose_inside(w);
+        iso_fan_inside inside = {.rows = {w->brick->inside, w->along_y, w->along_z}, .stride = ISO_BRICK_SAMPLES};
+        memcpy(inside.origin, w->brick->lo, sizeof inside.origin);
+        int rc = try_fan(c, box, err, most, &inside, &w->scratch, &w->fans, &w->tally);
         if (rc < 0)
             return rc;
         if (rc == 1) {
@@ -243,6 +271,7 @@ static int cover(void *context, int thread, iso_march_brick *brick)
         return 0;
     w->brick = brick;
     iso_vol_read_box(c->vol, lo, hi, w->samples);
+    w->transposed = 0;
     int rc = visit_sub(c, w, &left);
     return rc ? rc : visit_sub(c, w, &right);
 }

@@ -183,6 +183,20 @@ static void inside_bits(const iso_volume *vol, double level, size_t at, size_t s
     }
 }
 
+/* inside_bits from bits the caller holds: face line j is a row along b at (axis, c),
+ * shifted down to the face's corner. */
+static void known_bits(const iso_fan_inside *known, const uint32_t corner[3], int axis, int b, int c,
+                       size_t nb, size_t nc, uint64_t *bits)
+{
+    uint32_t at[3];
+    for (int d = 0; d < 3; d++)
+        at[d] = corner[d] - known->origin[d];
+    assert(at[b] + nb <= 16);
+    const uint16_t *row = known->rows[b] + (size_t)at[axis] * known->stride + at[c];
+    for (size_t j = 0; j < nc; j++)
+        bits[j] = (uint64_t)(row[j] >> at[b]) & ((UINT64_C(1) << nb) - 1);
+}
+
 /* Word w of a bit row shifted down by one: bit b says sample b + 1. */
 static uint64_t next_bits(const uint64_t *row, size_t w, size_t words)
 {
@@ -193,7 +207,7 @@ static uint64_t next_bits(const uint64_t *row, size_t w, size_t words)
  * whose corners straddle the level (few: the surface is a curve on the face) come out of
  * word operations, in the order b fastest; only those build corners and segments. */
 static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *box,
-                      double level, int axis, int high_side)
+                      double level, const iso_fan_inside *known, int axis, int high_side)
 {
     face f = {.vol = vol, .level = level, .axis = axis, .b = (axis + 1) % 3, .c = (axis + 2) % 3};
     f.fixed = high_side ? box->hi[axis] : box->lo[axis];
@@ -207,8 +221,11 @@ static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *
     corner[axis] = f.fixed;
     corner[f.b] = box->lo[f.b];
     corner[f.c] = box->lo[f.c];
-    inside_bits(vol, level, iso_vol_index(vol, corner[0], corner[1], corner[2]), stride[f.b], stride[f.c],
-                nb, nc, words, s->inside);
+    if (known)
+        known_bits(known, corner, axis, f.b, f.c, nb, nc, s->inside);
+    else
+        inside_bits(vol, level, iso_vol_index(vol, corner[0], corner[1], corner[2]), stride[f.b],
+                    stride[f.c], nb, nc, words, s->inside);
     for (size_t c = 0; c + 1 < nc; c++) {
         const uint64_t *row = s->inside + c * words, *next = row + words;
         for (size_t w = 0; w < words; w++) {
@@ -521,15 +538,15 @@ static size_t fewest_triangles(size_t s)
 }
 
 int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
-                       double vertex_limit, size_t max_triangles, iso_fan_scratch *s,
-                       iso_fan_output *out, iso_fan_result *result)
+                       double vertex_limit, size_t max_triangles, const iso_fan_inside *known,
+                       iso_fan_scratch *s, iso_fan_output *out, iso_fan_result *result)
 {
     assert(iso_box_cells(box) >= 2);
     memset(result, 0, sizeof *result);
     s->segment_count = 0;
     for (int axis = 0; axis < 3; axis++)
         for (int side = 0; side < 2; side++)
-            if (march_face(s, vol, box, level, axis, side))
+            if (march_face(s, vol, box, level, known, axis, side))
                 return ISO_E_NOMEM;
     /* Refusals the crossings decide already, before linking and fanning: no loop at all
      * (the node holds the level, its range says, but no face crosses it: the surface is a

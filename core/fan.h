@@ -71,11 +71,23 @@ typedef struct iso_fan_result {
     double vertex_error; /* largest |f(v) - level| over the vertices emitted */
 } iso_fan_result;
 
+/* Inside bits a caller already holds for a block of samples around the box (the brick
+ * kernel's, march.h, and their transposes), as value > level decides them (NaN is not),
+ * in rows along each axis a: with (a, a1, a2) = (a, a + 1, a + 2) mod 3 and p local to
+ * origin, bit p[a] of rows[a][p[a2] * stride + p[a1]] says whether sample origin + p is
+ * above the level (rows[0] is the kernel's own layout). Each face line is then one shift.
+ * Rows hold 16 samples at most. */
+typedef struct iso_fan_inside {
+    const uint16_t *rows[3];
+    uint32_t origin[3];
+    uint32_t stride;
+} iso_fan_inside;
+
 /* Appends box's surface to out. Returns 1 when emitted, 0 when refused (nothing
  * appended; also when it would take more than max_triangles), ISO_E_NOMEM. The box must
- * hold at least two cells. */
+ * hold at least two cells. inside: the box's samples classified already, or NULL. */
 int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
-                       double vertex_limit, size_t max_triangles, iso_fan_scratch *scratch,
-                       iso_fan_output *out, iso_fan_result *result);
+                       double vertex_limit, size_t max_triangles, const iso_fan_inside *inside,
+                       iso_fan_scratch *scratch, iso_fan_output *out, iso_fan_result *result);
 
 #endif
