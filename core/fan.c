@@ -376,13 +376,12 @@ static double field_at(const iso_volume *vol, const double p[3], double gradient
     size_t cell[3];
     double u[3], c[8];
     for (int d = 0; d < 3; d++) {
-        /* floor, as a conversion: below 0 (and NaN) the cell is clamped to 0 anyway. */
-        double x = p[d] > 0 ? (double)(size_t)p[d] : 0;
+        /* floor, as a signed conversion (x86 has no unsigned one): below 0 (and NaN) the
+         * cell is clamped to 0 anyway; p is an index-space point, far below 2^63. */
+        double x = p[d] > 0 ? (double)(int64_t)p[d] : 0;
         if (x > (double)vol->dims[d] - 2)
             x = (double)vol->dims[d] - 2;
-        if (x < 0)
-            x = 0;
-        cell[d] = (size_t)x;
+        cell[d] = (size_t)(int64_t)x;
         u[d] = p[d] - x;
     }
     cell_corners(vol, cell, c);
