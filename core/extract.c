@@ -142,10 +142,15 @@ static int descend(coarse *c, uint32_t index, const iso_box *box)
 
 /* ---- PASS 2: below the bricks ---- */
 
-static double sample_at(const sub_walk *w, uint32_t x, uint32_t y, uint32_t z)
+static const double *sample_ptr(const sub_walk *w, uint32_t x, uint32_t y, uint32_t z)
 {
     const iso_march_brick *b = w->brick;
-    return w->samples[((size_t)(z - b->lo[2]) * b->n[1] + (y - b->lo[1])) * b->n[0] + (x - b->lo[0])];
+    return w->samples + ((size_t)(z - b->lo[2]) * b->n[1] + (y - b->lo[1])) * b->n[0] + (x - b->lo[0]);
+}
+
+static double sample_at(const sub_walk *w, uint32_t x, uint32_t y, uint32_t z)
+{
+    return *sample_ptr(w, x, y, z);
 }
 
 /* Lemma 1's fit error of box, or any value above limit as soon as a row shows it. */
@@ -167,12 +172,18 @@ static double fit_error_past(const sub_walk *w, const iso_box *box, double limit
                                           (m[2] - box->lo[2]) * inv[2]));
     if (middle > limit)
         return middle;
+    /* Rows walked by pointer, their x fractions computed once (the same products). */
+    uint32_t nx = box->hi[0] - box->lo[0] + 1;
+    double ux[ISO_BRICK_SAMPLES];
+    for (uint32_t i = 0; i < nx; i++)
+        ux[i] = i * inv[0];
     for (uint32_t z = box->lo[2]; z <= box->hi[2]; z++)
         for (uint32_t y = box->lo[1]; y <= box->hi[1]; y++) {
             double v = (y - box->lo[1]) * inv[1], t = (z - box->lo[2]) * inv[2];
             double a = iso_tri_eval(c, 0, v, t), e = iso_tri_eval(c, 1, v, t) - a;
-            for (uint32_t x = box->lo[0]; x <= box->hi[0]; x++) {
-                double s = sample_at(w, x, y, z), d = fabs(s - (a + e * ((x - box->lo[0]) * inv[0])));
+            const double *row = sample_ptr(w, box->lo[0], y, z);
+            for (uint32_t i = 0; i < nx; i++) {
+                double s = row[i], d = fabs(s - (a + e * ux[i]));
                 if (!(d <= worst))
                     worst = s != s ? INFINITY : d;
             }
