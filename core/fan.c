@@ -51,50 +51,47 @@ typedef struct face {
     double level;
     int axis, b, c;          /* the face is normal to axis; b, c span it, (b, c, axis) right-handed */
     uint32_t fixed;          /* the face's coordinate along axis */
+    size_t step[2];          /* linear index steps along b and c */
 } face;
 
-static double sample_at(const face *f, const uint32_t p[3])
-{
-    return iso_vol_sample(f->vol, iso_vol_index(f->vol, p[0], p[1], p[2]));
-}
+/* The four grid edges of a face square, by their low corner's (b, c) offset and the axis
+ * they run along (0: b, 1: c). */
+typedef struct square_edge {
+    uint32_t db, dc;
+    int along;
+} square_edge;
 
-/* The key of the grid edge from low along axis d (fan.h). */
-static uint64_t edge_key(const face *f, const uint32_t low[3], int d)
-{
-    const size_t *dims = f->vol->dims;
-    return (((uint64_t)low[2] * dims[1] + low[1]) * dims[0] + low[0]) * 3 + (uint64_t)d;
-}
+/* Side i of the walk (from corner i to i + 1, counter-clockwise seen from outside the
+ * node: the corners (b, c) = (0,0) (1,0) (1,1) (0,1) on the high side, reversed on the low
+ * side) as a grid edge. */
+static const square_edge side_edge[2][4] = {
+    {{0, 1, 0}, {1, 0, 1}, {0, 0, 0}, {0, 0, 1}},
+    {{0, 0, 0}, {1, 0, 1}, {0, 1, 0}, {0, 0, 1}}};
 
-/* The grid edge between neighbouring samples p and q: its low end and axis. */
-static const uint32_t *edge_between(const face *f, const uint32_t p[3], const uint32_t q[3], int *d)
+/* The crossing on the grid edge e of the square with low corner (ib, ic), linear index
+ * at: its key (fan.h: the low end's linear index * 3 + axis) and, if position is not
+ * NULL, its position and |f - level| there, from the same doubles and iso_mc_edge_t as
+ * every other module. */
+static uint64_t crossing(const face *f, uint32_t ib, uint32_t ic, size_t at, const square_edge *e,
+                         float position[3], double *error)
 {
-    *d = p[f->b] != q[f->b] ? f->b : f->c;
-    return p[*d] < q[*d] ? p : q;
-}
-
-/* The crossing on the grid edge between neighbouring samples p and q. */
-static void crossing(const face *f, const uint32_t p[3], const uint32_t q[3], uint64_t *key,
-                     float position[3], double *error)
-{
-    int d;
-    const uint32_t *low = edge_between(f, p, q, &d), *high = low == p ? q : p;
-    double a = sample_at(f, low), b = sample_at(f, high);
+    size_t low = at + e->db * f->step[0] + e->dc * f->step[1];
+    int d = e->along ? f->c : f->b;
+    uint64_t key = (uint64_t)low * 3 + (uint64_t)d;
+    if (!position)
+        return key;
+    double a = iso_vol_sample(f->vol, low), b = iso_vol_sample(f->vol, low + f->step[e->along]);
     double t = iso_mc_edge_t(a, b, f->level);
+    uint32_t p[3];
+    p[f->axis] = f->fixed;
+    p[f->b] = ib + e->db;
+    p[f->c] = ic + e->dc;
     for (int k = 0; k < 3; k++)
-        position[k] = (float)((double)low[k] + (k == d ? t : 0.0));
+        position[k] = (float)((double)p[k] + (k == d ? t : 0.0));
     *error = iso_mc_edge_error(a, b, t, f->level);
     if (!(*error >= 0))
         *error = 0; /* a NaN end: no level to be off from */
-    *key = edge_key(f, low, d);
-}
-
-/* A segment ends where the next one starts, which computes the crossing's position: here
- * only its key is needed. */
-static uint64_t crossing_key(const face *f, const uint32_t p[3], const uint32_t q[3])
-{
-    int d;
-    const uint32_t *low = edge_between(f, p, q, &d);
-    return edge_key(f, low, d);
+    return key;
 }
 
 /* iso_mc_face_segments for the 16 corner cases, indexed by sum of inside[i] << i: the
@@ -121,34 +118,21 @@ static const face_case *face_cases(void)
     return face_table;
 }
 
-/* One crossed data cell of the face with corner (ib, ic), its corners walked
- * counter-clockwise seen from outside the node: marching cubes' own face rule, so the
- * cell on the other side of the face, of any size, produces the same segments reversed.
- * inside[i]: whether corner i (in that walk) is above the level; table: face_cases(). */
+/* One crossed data cell of the face with low corner (ib, ic) at linear index at, walked
+ * as side_edge says: marching cubes' own face rule, so the cell on the other side of the
+ * face, of any size, produces the same segments reversed. walk_case: the face_case
+ * index of its corners in walk order. */
 static int march_square(iso_fan_scratch *s, const face *f, const face_case *table, int high_side,
-                        uint32_t ib, uint32_t ic, const int inside[4])
+                        uint32_t ib, uint32_t ic, size_t at, unsigned walk_case)
 {
-    /* (b, c) offsets of the walk's corners: counter-clockwise from the high side,
-     * reversed on the low side. */
-    static const uint32_t walk[2][4][2] = {{{0, 1}, {1, 1}, {1, 0}, {0, 0}},
-                                           {{0, 0}, {1, 0}, {1, 1}, {0, 1}}};
-    uint32_t q[4][3];
-    for (int i = 0; i < 4; i++) {
-        q[i][f->axis] = f->fixed;
-        q[i][f->b] = ib + walk[high_side][i][0];
-        q[i][f->c] = ic + walk[high_side][i][1];
-    }
-    const face_case *fc = table + (inside[0] | inside[1] << 1 | inside[2] << 2 | inside[3] << 3);
-    const int *from_side = fc->from, *to_side = fc->to;
-    int segments = fc->segments;
-    if (grow((void **)&s->segments, &s->segment_capacity, s->segment_count + (size_t)segments,
+    const face_case *fc = table + walk_case;
+    if (grow((void **)&s->segments, &s->segment_capacity, s->segment_count + (size_t)fc->segments,
              sizeof *s->segments))
         return ISO_E_NOMEM;
-    for (int r = 0; r < segments; r++) {
-        int from = from_side[r], to = to_side[r];
+    for (int r = 0; r < fc->segments; r++) {
         iso_fan_segment *g = s->segments + s->segment_count++;
-        crossing(f, q[from], q[(from + 1) % 4], &g->from, g->from_position, &g->from_error);
-        g->to = crossing_key(f, q[to], q[(to + 1) % 4]);
+        g->from = crossing(f, ib, ic, at, &side_edge[high_side][fc->from[r]], g->from_position, &g->from_error);
+        g->to = crossing(f, ib, ic, at, &side_edge[high_side][fc->to[r]], NULL, NULL);
         g->used = 0;
     }
     return 0;
@@ -217,15 +201,17 @@ static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *
     if (grow((void **)&s->inside, &s->inside_capacity, nc * words, sizeof *s->inside))
         return ISO_E_NOMEM;
     const face_case *table = face_cases();
+    f.step[0] = stride[f.b];
+    f.step[1] = stride[f.c];
     uint32_t corner[3];
     corner[axis] = f.fixed;
     corner[f.b] = box->lo[f.b];
     corner[f.c] = box->lo[f.c];
+    size_t origin = iso_vol_index(vol, corner[0], corner[1], corner[2]);
     if (known)
         known_bits(known, corner, axis, f.b, f.c, nb, nc, s->inside);
     else
-        inside_bits(vol, level, iso_vol_index(vol, corner[0], corner[1], corner[2]), stride[f.b],
-                    stride[f.c], nb, nc, words, s->inside);
+        inside_bits(vol, level, origin, f.step[0], f.step[1], nb, nc, words, s->inside);
     for (size_t c = 0; c + 1 < nc; c++) {
         const uint64_t *row = s->inside + c * words, *next = row + words;
         for (size_t w = 0; w < words; w++) {
@@ -239,18 +225,14 @@ static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *
             while (crossed) {
                 int k = __builtin_ctzll(crossed);
                 crossed &= crossed - 1;
-                int l0 = (int)(low0 >> k & 1), l1 = (int)(low1 >> k & 1);
-                int h0 = (int)(high0 >> k & 1), h1 = (int)(high1 >> k & 1);
-                /* The walk's corners, as march_square lists them. */
-                int inside[4] = {l1, h1, h0, l0};
-                if (high_side) {
-                    inside[0] = l0;
-                    inside[1] = h0;
-                    inside[2] = h1;
-                    inside[3] = l1;
-                }
-                uint32_t ib = box->lo[f.b] + (uint32_t)(64 * w + (size_t)k), ic = box->lo[f.c] + (uint32_t)c;
-                if (march_square(s, &f, table, high_side, ib, ic, inside))
+                unsigned l0 = (unsigned)(low0 >> k & 1), l1 = (unsigned)(low1 >> k & 1);
+                unsigned h0 = (unsigned)(high0 >> k & 1), h1 = (unsigned)(high1 >> k & 1);
+                /* The corners in walk order (side_edge), as face_case bits. */
+                unsigned walk_case = high_side ? l0 | h0 << 1 | h1 << 2 | l1 << 3
+                                               : l1 | h1 << 1 | h0 << 2 | l0 << 3;
+                size_t b = 64 * w + (size_t)k;
+                if (march_square(s, &f, table, high_side, box->lo[f.b] + (uint32_t)b, box->lo[f.c] + (uint32_t)c,
+                                 origin + b * f.step[0] + c * f.step[1], walk_case))
                     return ISO_E_NOMEM;
             }
         }
