@@ -332,13 +332,12 @@ static int link_loops(iso_fan_scratch *s, size_t max_triangles)
         c[4] = p[nz], c[5] = p[nz + 1], c[6] = p[nz + ny], c[7] = p[nz + ny + 1];        \
     } while (0)
 
-/* The 8 samples of the cell with low corner `cell` (inside the volume), corner k at
- * offset (k & 1, (k >> 1) & 1, (k >> 2) & 1): one index and one type switch, not eight. */
-static void cell_corners(const iso_volume *vol, const size_t cell[3], double c[8])
+/* The 8 samples of the cell whose low corner has linear index at (inside the volume),
+ * corner k at offset (k & 1, (k >> 1) & 1, (k >> 2) & 1): one type switch, not eight. */
+static void cell_corners(const iso_volume *vol, size_t at, double c[8])
 {
-    size_t at = iso_vol_index(vol, cell[0], cell[1], cell[2]);
     size_t ny = vol->dims[0], nz = vol->dims[0] * vol->dims[1]; /* the y and z strides */
-    assert(cell[0] + 1 < vol->dims[0] && cell[1] + 1 < vol->dims[1] && cell[2] + 1 < vol->dims[2]);
+    assert(at + nz + ny + 1 < iso_vol_count(vol));
     switch (vol->type) {
     case ISO_U8: READ_CORNERS(uint8_t); break;
     case ISO_I8: READ_CORNERS(int8_t); break;
@@ -352,11 +351,20 @@ static void cell_corners(const iso_volume *vol, const size_t cell[3], double c[8
     }
 }
 
+/* The volume as the fans sample it, with the last cell read: the fold checks of a fan and
+ * the Newton steps of a centre mostly stay in one cell. */
+typedef struct field {
+    const iso_volume *vol;
+    size_t at;   /* the cell's low corner, linear index; SIZE_MAX before the first */
+    double c[8]; /* its samples (cell_corners) */
+} field;
+
 /* f and its gradient at index-space point p (the trilinear of the cell holding p). */
-static double field_at(const iso_volume *vol, const double p[3], double gradient[3])
+static double field_at(field *fd, const double p[3], double gradient[3])
 {
+    const iso_volume *vol = fd->vol;
     size_t cell[3];
-    double u[3], c[8];
+    double u[3];
     for (int d = 0; d < 3; d++) {
         /* floor, as a signed conversion (x86 has no unsigned one): below 0 (and NaN) the
          * cell is clamped to 0 anyway; p is an index-space point, far below 2^63. */
@@ -366,7 +374,12 @@ static double field_at(const iso_volume *vol, const double p[3], double gradient
         cell[d] = (size_t)(int64_t)x;
         u[d] = p[d] - x;
     }
-    cell_corners(vol, cell, c);
+    size_t at = iso_vol_index(vol, cell[0], cell[1], cell[2]);
+    if (at != fd->at) {
+        cell_corners(vol, at, fd->c);
+        fd->at = at;
+    }
+    const double *c = fd->c;
     double x00 = c[0] + (c[1] - c[0]) * u[0], x10 = c[2] + (c[3] - c[2]) * u[0];
     double x01 = c[4] + (c[5] - c[4]) * u[0], x11 = c[6] + (c[7] - c[6]) * u[0];
     double y0 = x00 + (x10 - x00) * u[1], y1 = x01 + (x11 - x01) * u[1];
@@ -382,7 +395,7 @@ static double field_at(const iso_volume *vol, const double p[3], double gradient
 
 /* The loop's centroid, moved by Newton steps on f toward the level, kept inside box.
  * Returns |f(centre) - level| (NaN when f is NaN there). */
-static double place_centre(const iso_volume *vol, const iso_box *box, double level,
+static double place_centre(field *fd, const iso_box *box, double level,
                            const iso_fan_scratch *s, const uint32_t *loop, size_t n, double centre[3])
 {
     for (int d = 0; d < 3; d++)
@@ -392,7 +405,7 @@ static double place_centre(const iso_volume *vol, const iso_box *box, double lev
             centre[d] += s->segments[loop[i]].from_position[d];
     for (int d = 0; d < 3; d++)
         centre[d] /= (double)n;
-    double g[3], r = field_at(vol, centre, g) - level;
+    double g[3], r = field_at(fd, centre, g) - level;
     for (int step = 0; step < 12 && fabs(r) > 1e-12 * (1 + fabs(level)); step++) {
         double gg = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
         if (!(gg > 0))
@@ -404,14 +417,14 @@ static double place_centre(const iso_volume *vol, const iso_box *box, double lev
             if (centre[d] > box->hi[d])
                 centre[d] = box->hi[d];
         }
-        r = field_at(vol, centre, g) - level;
+        r = field_at(fd, centre, g) - level;
     }
     return fabs(r);
 }
 
 /* 1 if the triangle has area and faces down the gradient of f (normals point toward lower
  * values, as marching cubes' do); a fan over a loop that folds fails this somewhere. */
-static int sound_triangle(const iso_volume *vol, const float *a, const float *b, const float *c)
+static int sound_triangle(field *fd, const float *a, const float *b, const float *c)
 {
     double u[3], v[3], m[3], g[3];
     for (int d = 0; d < 3; d++) {
@@ -422,7 +435,7 @@ static int sound_triangle(const iso_volume *vol, const float *a, const float *b,
     double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
     if (n[0] == 0 && n[1] == 0 && n[2] == 0)
         return 0;
-    field_at(vol, m, g);
+    field_at(fd, m, g);
     return n[0] * g[0] + n[1] * g[1] + n[2] * g[2] < 0;
 }
 
@@ -467,7 +480,7 @@ static int add_centre(iso_fan_output *out, const double centre[3], uint64_t *ref
 /* Emits the loop (n >= 3 vertices, segment indices): 1 done, 0 refused, ISO_E_NOMEM. Triangles are
  * (centre, next, this): each face segment this -> next is then used as next -> this, the
  * direction marching cubes' own triangles give it. */
-static int fan_loop(const iso_volume *vol, const iso_box *box, double level, double vertex_limit,
+static int fan_loop(field *fd, const iso_box *box, double level, double vertex_limit,
                     const iso_fan_scratch *s, const uint32_t *loop, size_t n, iso_fan_output *out, iso_fan_result *result)
 {
     for (size_t i = 0; i < n; i++)
@@ -476,14 +489,14 @@ static int fan_loop(const iso_volume *vol, const iso_box *box, double level, dou
     if (n == 3) {
         const float *a = s->segments[loop[0]].from_position, *b = s->segments[loop[1]].from_position,
                     *c = s->segments[loop[2]].from_position;
-        if (!sound_triangle(vol, c, b, a))
+        if (!sound_triangle(fd, c, b, a))
             return 0;
         result->triangles++;
         return emit_triangle(out, s->segments[loop[2]].from, s->segments[loop[1]].from,
                              s->segments[loop[0]].from) ? ISO_E_NOMEM : 1;
     }
     double centre[3];
-    double error = place_centre(vol, box, level, s, loop, n, centre);
+    double error = place_centre(fd, box, level, s, loop, n, centre);
     if (!(error <= vertex_limit))
         return 0;
     if (error > result->vertex_error)
@@ -492,7 +505,7 @@ static int fan_loop(const iso_volume *vol, const iso_box *box, double level, dou
     for (size_t i = 0; i < n; i++) {
         const float *here = s->segments[loop[i]].from_position;
         const float *next = s->segments[loop[(i + 1) % n]].from_position;
-        if (!sound_triangle(vol, c, next, here))
+        if (!sound_triangle(fd, c, next, here))
             return 0;
     }
     uint64_t centre_ref;
@@ -540,8 +553,9 @@ int iso_fan_polygonize(const iso_volume *vol, const iso_box *box, double level,
         return rc;
     size_t centres_before = out->centre_count, triangles_before = out->triangle_count;
     const uint32_t *loop = s->loop;
+    field fd = {.vol = vol, .at = SIZE_MAX};
     for (size_t i = 0; i < s->loop_count && rc == 1; loop += s->lengths[i++]) {
-        rc = fan_loop(vol, box, level, vertex_limit, s, loop, s->lengths[i], out, result);
+        rc = fan_loop(&fd, box, level, vertex_limit, s, loop, s->lengths[i], out, result);
         result->loops++;
     }
     if (rc != 1) {
