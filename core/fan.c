@@ -212,8 +212,11 @@ static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *
         known_bits(known, corner, axis, f.b, f.c, nb, nc, s->inside);
     else
         inside_bits(vol, level, origin, f.step[0], f.step[1], nb, nc, words, s->inside);
+    uint64_t squares_1 = (UINT64_C(1) << ((nb - 1) & 63)) - 1; /* the squares of a one-word line */
     for (size_t c = 0; c + 1 < nc; c++) {
         const uint64_t *row = s->inside + c * words, *next = row + words;
+        if (words == 1 && !(((row[0] ^ next[0]) | (row[0] ^ row[0] >> 1) | (next[0] ^ next[0] >> 1)) & squares_1))
+            continue; /* no crossed square between the two lines, the common case */
         for (size_t w = 0; w < words; w++) {
             uint64_t low0 = row[w], low1 = next[w];
             uint64_t high0 = next_bits(row, w, words), high1 = next_bits(next, w, words);
