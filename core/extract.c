@@ -156,12 +156,20 @@ static double sample_at(const sub_walk *w, uint32_t x, uint32_t y, uint32_t z)
 /* Lemma 1's fit error of box, or any value above limit as soon as a row shows it. */
 static double fit_error_past(const sub_walk *w, const iso_box *box, double limit)
 {
+    /* 1 / the box's extent, by table: it is at most a brick's (the same quotients). */
+    static const double reciprocal[ISO_BRICK_SAMPLES] = {0.0, 1.0, 1.0 / 2, 1.0 / 3, 1.0 / 4,
+                                                         1.0 / 5, 1.0 / 6, 1.0 / 7, 1.0 / 8};
     double c[8], inv[3], worst = 0;
+    const double *low = sample_ptr(w, box->lo[0], box->lo[1], box->lo[2]);
+    size_t step[3] = {1, w->brick->n[0], (size_t)w->brick->n[0] * w->brick->n[1]};
+    _Static_assert(ISO_BRICK_CELLS == 8, "reciprocal[] lists 1/0..1/8");
+    for (int d = 0; d < 3; d++) {
+        assert(box->hi[d] - box->lo[d] <= ISO_BRICK_CELLS);
+        inv[d] = reciprocal[box->hi[d] - box->lo[d]];
+        step[d] *= box->hi[d] - box->lo[d]; /* from the low corner to the high one */
+    }
     for (int k = 0; k < 8; k++)
-        c[k] = sample_at(w, k & 1 ? box->hi[0] : box->lo[0], k & 2 ? box->hi[1] : box->lo[1],
-                         k & 4 ? box->hi[2] : box->lo[2]);
-    for (int d = 0; d < 3; d++)
-        inv[d] = box->hi[d] > box->lo[d] ? 1.0 / (box->hi[d] - box->lo[d]) : 0.0;
+        c[k] = low[(k & 1 ? step[0] : 0) + (k & 2 ? step[1] : 0) + (k & 4 ? step[2] : 0)];
     /* The middle sample first: where the data strays from its corners' trilinear most
      * often, so most boxes that will not fan are refused after one sample. */
     uint32_t m[3];
