@@ -14,8 +14,9 @@
  * PASS 2 (march): the kernel classifies the active bricks; for each unmarked one, the
  *   same rule runs on the fly below it (cover), on its samples read once: a sub-box is
  *   active when it holds a mixed cell (the kernel's bits), its fit error is scanned with
- *   an early exit past the limit, and a fanned sub-box's cells are covered. The kernel
- *   then marches the cells left.
+ *   an early exit past the limit, its fan classifies its faces by the kernel's inside bits
+ *   (transposed once per brick for faces across the rows), and a fanned sub-box's cells
+ *   are covered. The kernel then marches the cells left.
  * PASS 3 (number the fans): fan centres become new vertices, loop vertices the kernel's
  *   ids; the vertices only fanned-over cells used are dropped.
  * PASS 4 (cap, if asked): the cells between the volume's border samples and a virtual

@@ -8,15 +8,20 @@
  *   fine or coarse, computes the very same segments on the shared face, with
  *   bit-identical vertices, whatever its own size: that is what closes every crack and
  *   leaves no T-junction, at any difference of depth (Cubical Marching Squares, Ho et al.
- *   2005, taken to the data's own resolution on every face).
+ *   2005, taken to the data's own resolution on every face). Each face is classified
+ *   as bit lines (or taken from the caller's bits, iso_fan_inside) and only the squares
+ *   the level crosses build segments.
  * PASS 2 (link): every crossing starts one segment and ends one, so the segments chain
- *   into closed loops, oriented like marching cubes' (normals toward lower values).
+ *   into closed loops, oriented like marching cubes' (normals toward lower values). All
+ *   loops are linked before any is fanned, so the triangle count is known first.
  * PASS 3 (fan): a loop of three is one triangle; a longer loop is fanned around a centre
  *   vertex, the loop's centroid moved by Newton steps onto f = level inside the node (f
  *   the data's trilinear interpolant). The node is refused, and the caller descends, when
  *   no face crosses the level (the surface is a closed piece inside), a loop has fewer
- *   than three vertices, the centre cannot get within vertex_limit of the level, or a fan
- *   triangle would be degenerate or face up the gradient (a fold).
+ *   than three vertices, the loops would give more than max_triangles (decided from the
+ *   crossing count alone when even loops of three would, else after PASS 2: no centre is
+ *   placed for such a node), the centre cannot get within vertex_limit of the level, or a
+ *   fan triangle would be degenerate or face up the gradient (a fold).
  *
  * The loop vertices are marching cubes' own, so the vertex guarantee of extract.h holds
  * with the centres' measured |f(c) - level|. A closed part of the surface that touches no
