@@ -189,7 +189,7 @@ static uint64_t next_bits(const uint64_t *row, size_t w, size_t words)
 
 /* Marches one face. Its samples become bit rows (above the level or not), and the squares
  * whose corners straddle the level (few: the surface is a curve on the face) come out of
- * word operations, in the order b fastest; only those build corners and segments. */
+ * word operations, in the order b fastest; only those build segments. */
 static int march_face(iso_fan_scratch *s, const iso_volume *vol, const iso_box *box,
                       double level, const iso_fan_inside *known, int axis, int high_side)
 {
