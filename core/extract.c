@@ -14,8 +14,9 @@
  * PASS 2 (march): the kernel classifies the active bricks; for each unmarked one, the
  *   same rule runs on the fly below it (cover), on its samples read once: a sub-box is
  *   active when it holds a mixed cell (the kernel's bits), its fit error is scanned with
- *   an early exit past the limit, and a fanned sub-box's cells are covered. The kernel
- *   then marches the cells left.
+ *   an early exit past the limit, its fan classifies its faces by the kernel's inside bits
+ *   (transposed once per brick for faces across the rows), and a fanned sub-box's cells
+ *   are covered. The kernel then marches the cells left.
  * PASS 3 (number the fans): fan centres become new vertices, loop vertices the kernel's
  *   ids; the vertices only fanned-over cells used are dropped.
  * PASS 4 (cap, if asked): the cells between the volume's border samples and a virtual
@@ -58,6 +59,10 @@ typedef struct sub_walk {
     fan_tally tally;
     iso_march_brick *brick;         /* the brick at hand */
     double samples[BRICK_SAMPLES];  /* its samples, x fastest, brick->n per axis */
+    /* Its inside bits along y and z (iso_fan_inside), transposed from the kernel's. */
+    uint16_t along_y[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES], along_z[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES];
+    int transposed;                 /* along_y and along_z are the brick's (made on first use) */
+    int integer_samples;            /* the volume's type is an integer one */
 } sub_walk;
 
 typedef struct coarse {
@@ -78,14 +83,16 @@ typedef struct coarse {
  * triangles than its cells would give (max_triangles): it is refused then, so no
  * tolerance ever costs triangles. */
 static int try_fan(const coarse *c, const iso_box *box, double fit_error, size_t max_triangles,
-                   iso_fan_scratch *scratch, iso_fan_output *fans, fan_tally *tally)
+                   const iso_fan_inside *inside, iso_fan_scratch *scratch, iso_fan_output *fans,
+                   fan_tally *tally)
 {
     if (iso_box_cells(box) < MIN_FAN_CELLS || !(fit_error <= c->fit_limit))
         return 0;
     iso_fan_result result;
     /* Centres must land on the surface, not merely within the tolerance of its level: a
      * centre left in a flat background would meet that loosely and still be far off. */
-    int rc = iso_fan_polygonize(c->vol, box, c->level, c->centre_limit, max_triangles, scratch, fans, &result);
+    int rc = iso_fan_polygonize(c->vol, box, c->level, c->centre_limit, max_triangles, inside, scratch,
+                                fans, &result);
     if (rc == 1) {
         tally->nodes_polygonized++;
         if (result.vertex_error > tally->vertex_error)
@@ -124,7 +131,7 @@ static int descend(coarse *c, uint32_t index, const iso_box *box)
     c->tally.nodes_visited++;
     if (c->prune && !(node->min <= c->level && c->level < node->max))
         return 0;
-    int rc = try_fan(c, box, node->err, SIZE_MAX, &c->scratch, &c->fans, &c->tally);
+    int rc = try_fan(c, box, node->err, SIZE_MAX, NULL, &c->scratch, &c->fans, &c->tally);
     if (rc == 1)
         skip_bricks_of(c, box);
     if (rc || !node->first_child)
@@ -137,21 +144,34 @@ static int descend(coarse *c, uint32_t index, const iso_box *box)
 
 /* ---- PASS 2: below the bricks ---- */
 
-static double sample_at(const sub_walk *w, uint32_t x, uint32_t y, uint32_t z)
+static const double *sample_ptr(const sub_walk *w, uint32_t x, uint32_t y, uint32_t z)
 {
     const iso_march_brick *b = w->brick;
-    return w->samples[((size_t)(z - b->lo[2]) * b->n[1] + (y - b->lo[1])) * b->n[0] + (x - b->lo[0])];
+    return w->samples + ((size_t)(z - b->lo[2]) * b->n[1] + (y - b->lo[1])) * b->n[0] + (x - b->lo[0]);
+}
+
+static double sample_at(const sub_walk *w, uint32_t x, uint32_t y, uint32_t z)
+{
+    return *sample_ptr(w, x, y, z);
 }
 
 /* Lemma 1's fit error of box, or any value above limit as soon as a row shows it. */
 static double fit_error_past(const sub_walk *w, const iso_box *box, double limit)
 {
+    /* 1 / the box's extent, by table: it is at most a brick's (the same quotients). */
+    static const double reciprocal[ISO_BRICK_SAMPLES] = {0.0, 1.0, 1.0 / 2, 1.0 / 3, 1.0 / 4,
+                                                         1.0 / 5, 1.0 / 6, 1.0 / 7, 1.0 / 8};
     double c[8], inv[3], worst = 0;
+    const double *low = sample_ptr(w, box->lo[0], box->lo[1], box->lo[2]);
+    size_t step[3] = {1, w->brick->n[0], (size_t)w->brick->n[0] * w->brick->n[1]};
+    _Static_assert(ISO_BRICK_CELLS == 8, "reciprocal[] lists 1/0..1/8");
+    for (int d = 0; d < 3; d++) {
+        assert(box->hi[d] - box->lo[d] <= ISO_BRICK_CELLS);
+        inv[d] = reciprocal[box->hi[d] - box->lo[d]];
+        step[d] *= box->hi[d] - box->lo[d]; /* from the low corner to the high one */
+    }
     for (int k = 0; k < 8; k++)
-        c[k] = sample_at(w, k & 1 ? box->hi[0] : box->lo[0], k & 2 ? box->hi[1] : box->lo[1],
-                         k & 4 ? box->hi[2] : box->lo[2]);
-    for (int d = 0; d < 3; d++)
-        inv[d] = box->hi[d] > box->lo[d] ? 1.0 / (box->hi[d] - box->lo[d]) : 0.0;
+        c[k] = low[(k & 1 ? step[0] : 0) + (k & 2 ? step[1] : 0) + (k & 4 ? step[2] : 0)];
     /* The middle sample first: where the data strays from its corners' trilinear most
      * often, so most boxes that will not fan are refused after one sample. */
     uint32_t m[3];
@@ -162,15 +182,27 @@ static double fit_error_past(const sub_walk *w, const iso_box *box, double limit
                                           (m[2] - box->lo[2]) * inv[2]));
     if (middle > limit)
         return middle;
+    /* Rows walked by pointer, their x fractions computed once (the same products). */
+    uint32_t nx = box->hi[0] - box->lo[0] + 1;
+    double ux[ISO_BRICK_SAMPLES];
+    for (uint32_t i = 0; i < nx; i++)
+        ux[i] = i * inv[0];
     for (uint32_t z = box->lo[2]; z <= box->hi[2]; z++)
         for (uint32_t y = box->lo[1]; y <= box->hi[1]; y++) {
             double v = (y - box->lo[1]) * inv[1], t = (z - box->lo[2]) * inv[2];
             double a = iso_tri_eval(c, 0, v, t), e = iso_tri_eval(c, 1, v, t) - a;
-            for (uint32_t x = box->lo[0]; x <= box->hi[0]; x++) {
-                double s = sample_at(w, x, y, z), d = fabs(s - (a + e * ((x - box->lo[0]) * inv[0])));
-                if (!(d <= worst))
-                    worst = s != s ? INFINITY : d;
-            }
+            const double *row = sample_ptr(w, box->lo[0], y, z);
+            if (w->integer_samples) /* no NaN or infinity anywhere: a plain, branch-free max */
+                for (uint32_t i = 0; i < nx; i++) {
+                    double d = fabs(row[i] - (a + e * ux[i]));
+                    worst = d > worst ? d : worst;
+                }
+            else
+                for (uint32_t i = 0; i < nx; i++) {
+                    double s = row[i], d = fabs(s - (a + e * ux[i]));
+                    if (!(d <= worst))
+                        worst = s != s ? INFINITY : d;
+                }
             if (worst > limit)
                 return worst;
         }
@@ -200,6 +232,25 @@ static void cover_cells(iso_march_brick *brick, const uint32_t lo[3], const uint
             brick->covered[z][y] |= (uint8_t)span;
 }
 
+/* The kernel's inside bits (rows along x at [z][y]) as rows along y at [x][z] and along
+ * z at [y][x], for iso_fan_inside. */
+static void transpose_inside(sub_walk *w)
+{
+    const iso_march_brick *b = w->brick;
+    if (w->transposed)
+        return;
+    w->transposed = 1;
+    memset(w->along_y, 0, sizeof w->along_y);
+    memset(w->along_z, 0, sizeof w->along_z);
+    for (unsigned z = 0; z < b->n[2]; z++)
+        for (unsigned y = 0; y < b->n[1]; y++)
+            for (unsigned r = b->inside[z * ISO_BRICK_SAMPLES + y]; r; r &= r - 1) {
+                unsigned x = (unsigned)__builtin_ctz(r);
+                w->along_y[x * ISO_BRICK_SAMPLES + z] |= (uint16_t)(1u << y);
+                w->along_z[y * ISO_BRICK_SAMPLES + x] |= (uint16_t)(1u << z);
+            }
+}
+
 static int visit_sub(const coarse *c, sub_walk *w, const iso_box *box)
 {
     uint32_t lo[3], hi[3];
@@ -210,7 +261,11 @@ static int visit_sub(const coarse *c, sub_walk *w, const iso_box *box)
     if (err <= c->fit_limit) {
         size_t triangles = w->fans.triangle_count, centres = w->fans.centre_count;
         size_t most = iso_march_box_triangles(w->brick, lo, hi);
-        int rc = try_fan(c, box, err, most, &w->scratch, &w->fans, &w->tally);
+        /* The kernel classified the brick's samples: the fan's faces take its bits. */
+        transpose_inside(w);
+        iso_fan_inside inside = {.rows = {w->brick->inside, w->along_y, w->along_z}, .stride = ISO_BRICK_SAMPLES};
+        memcpy(inside.origin, w->brick->lo, sizeof inside.origin);
+        int rc = try_fan(c, box, err, most, &inside, &w->scratch, &w->fans, &w->tally);
         if (rc < 0)
             return rc;
         if (rc == 1) {
@@ -242,7 +297,9 @@ static int cover(void *context, int thread, iso_march_brick *brick)
     if (iso_box_split(&box, &left, &right) < 0)
         return 0;
     w->brick = brick;
+    w->integer_samples = !iso_vol_type_is_float(c->vol->type);
     iso_vol_read_box(c->vol, lo, hi, w->samples);
+    w->transposed = 0;
     int rc = visit_sub(c, w, &left);
     return rc ? rc : visit_sub(c, w, &right);
 }
