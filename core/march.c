@@ -27,6 +27,7 @@
 #include <assert.h>
 #include <math.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -71,6 +72,7 @@ typedef struct iso_march {
     double error[MAX_THREADS];
     size_t extra_vertices[MAX_THREADS], extra_triangles[MAX_THREADS];
     int cover_status[MAX_THREADS];
+    atomic_size_t next_brick;  /* the next active brick a thread may take (PASS 2, 4) */
 } march_job;
 
 static uint8_t bit_count[1 << S]; /* popcount of 9-bit words, without needing popcnt */
@@ -342,36 +344,39 @@ static range share_of(size_t count, int t, int threads)
     return r;
 }
 
-/* The first active brick at or past a share of PASS 4's work, counted as vertices plus
- * triangles from PASS 3's prefix sums: threads then get equal work, not equal bricks. */
-static size_t first_at_work(const march_job *job, size_t work)
+/* Active bricks are handed out CHUNK at a time from a shared counter: on a machine where
+ * another process holds one core, a fixed split waits for the thread stuck there, while
+ * chunks let the free core take more. Chunks of 8 were slower on CThead (neighbouring
+ * bricks, which read each other's crossing rows, ended up on different cores); 64 were
+ * as fast as the fixed split on an idle machine. */
+#define CHUNK 64
+
+static int next_chunk(march_job *job, range *r)
 {
-    size_t lo = 0, hi = job->active_count;
-    while (lo < hi) {
-        size_t mid = lo + (hi - lo) / 2;
-        const active_brick *ab = &job->active[mid];
-        if (ab->first_vertex + ab->first_triangle < work)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    return lo;
+    size_t begin = atomic_fetch_add_explicit(&job->next_brick, CHUNK, memory_order_relaxed);
+    if (begin >= job->active_count)
+        return 0;
+    r->begin = begin;
+    r->end = job->active_count - begin < CHUNK ? job->active_count : begin + CHUNK;
+    return 1;
 }
 
-static range work_share_of(const march_job *job, int t, int threads)
-{
-    size_t total = job->mesh->vertex_count + job->mesh->triangle_count;
-    range r = {first_at_work(job, total * (size_t)t / (size_t)threads),
-               t + 1 == threads ? job->active_count : first_at_work(job, total * (size_t)(t + 1) / (size_t)threads)};
-    return r;
-}
-
+/* With a cover function, each thread's fans are numbered in thread order afterwards
+ * (extract.c), so the bricks a thread classifies must not depend on timing: a fixed split
+ * keeps the mesh the same bytes on every run. Without one, chunks. */
 static void classify_share(void *context, int t, int threads)
 {
     march_job *job = context;
-    range r = share_of(job->active_count, t, threads);
-    for (size_t i = r.begin; i < r.end; i++)
-        classify(job, t, &job->active[i]);
+    range r;
+    if (job->cover) {
+        r = share_of(job->active_count, t, threads);
+        for (size_t i = r.begin; i < r.end; i++)
+            classify(job, t, &job->active[i]);
+        return;
+    }
+    while (next_chunk(job, &r))
+        for (size_t i = r.begin; i < r.end; i++)
+            classify(job, t, &job->active[i]);
 }
 
 /* ---- PASS 4: generate ---- */
@@ -545,21 +550,25 @@ static void generate_share(void *context, int t, int threads)
     march_job *job = context;
     double worst = 0;
     id_table table;
-    range r = work_share_of(job, t, threads);
-    for (size_t i = r.begin; i < r.end; i++) {
-        const active_brick *ab = &job->active[i];
-        if (i + 1 < r.end && job->active[i + 1].vertices)
-            prefetch_samples(job, &job->active[i + 1]);
-        if (ab->vertices) {
-            double e = place_vertices(job, ab, &table);
-            if (e > worst)
-                worst = e;
+    range r;
+    (void)threads;
+    /* Every brick writes its own, already counted range of the mesh, so chunks may go to
+     * any thread in any order and the mesh is the same. */
+    while (next_chunk(job, &r))
+        for (size_t i = r.begin; i < r.end; i++) {
+            const active_brick *ab = &job->active[i];
+            if (i + 1 < r.end && job->active[i + 1].vertices)
+                prefetch_samples(job, &job->active[i + 1]);
+            if (ab->vertices) {
+                double e = place_vertices(job, ab, &table);
+                if (e > worst)
+                    worst = e;
+            }
+            if (ab->triangles) {
+                fill_shared_ids(job, ab, &table);
+                emit_triangles(job, ab, &table);
+            }
         }
-        if (ab->triangles) {
-            fill_shared_ids(job, ab, &table);
-            emit_triangles(job, ab, &table);
-        }
-    }
     job->error[t] = worst;
 }
 
@@ -649,6 +658,7 @@ static int run_passes(march_job *job, const iso_march_options *o, iso_march_stat
     if (rc)
         return rc;
     int used = job->active_count < (size_t)threads ? (job->active_count ? (int)job->active_count : 1) : threads;
+    atomic_store_explicit(&job->next_brick, 0, memory_order_relaxed);
     iso_parallel_run(used, classify_share, job);
     for (int t = 0; t < used; t++)
         if (job->cover_status[t])
@@ -658,6 +668,7 @@ static int run_passes(march_job *job, const iso_march_options *o, iso_march_stat
     rc = lay_out_mesh(job, job->mesh, extra_vertices, extra_triangles);
     if (rc)
         return rc;
+    atomic_store_explicit(&job->next_brick, 0, memory_order_relaxed);
     iso_parallel_run(used, generate_share, job);
     for (int t = 0; t < used; t++)
         if (job->error[t] > stats->error_bound)
