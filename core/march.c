@@ -475,32 +475,30 @@ static double place_vertices(const march_job *job, const active_brick *ab, id_ta
     return worst;
 }
 
-/* Id of the crossing on the edge from brick-local corner (x, y, z) along axis: this
- * brick's own, or, on its upper faces, the neighbour's that owns it. */
-static uint32_t vertex_id(const march_job *job, const active_brick *ab, int x, int y, int z, int axis)
+/* The brick and its upper neighbours, by k = up_x | up_y << 1 | up_z << 2 (NULL where
+ * there is none, or none active). */
+static void neighbours_of(const march_job *job, const active_brick *ab, const active_brick *out[8])
 {
-    int up[3] = {x >= ab->owned[0], y >= ab->owned[1], z >= ab->owned[2]};
-    if (up[0] | up[1] | up[2]) {
-        const iso_bricks *g = job->bricks;
-        size_t index = ((size_t)(ab->brick[2] + (uint32_t)up[2]) * g->count[1] + ab->brick[1] + (uint32_t)up[1]) *
-                           g->count[0] + ab->brick[0] + (uint32_t)up[0];
-        int32_t slot = job->slot[index];
-        /* The edge's samples belong to that brick too, so its min/max hold the level. */
-        assert(slot >= 0);
-        ab = &job->active[slot];
-        x -= up[0] * ISO_BRICK_CELLS;
-        y -= up[1] * ISO_BRICK_CELLS;
-        z -= up[2] * ISO_BRICK_CELLS;
+    const iso_bricks *g = job->bricks;
+    out[0] = ab;
+    for (int k = 1; k < 8; k++) {
+        uint32_t b[3] = {ab->brick[0] + (uint32_t)(k & 1), ab->brick[1] + (uint32_t)(k >> 1 & 1),
+                         ab->brick[2] + (uint32_t)(k >> 2 & 1)};
+        out[k] = NULL;
+        if (b[0] < g->count[0] && b[1] < g->count[1] && b[2] < g->count[2]) {
+            int32_t slot = job->slot[((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0]];
+            out[k] = slot >= 0 ? &job->active[slot] : NULL;
+        }
     }
-    int r = z * S + y;
-    return (uint32_t)(ab->first_vertex + ab->before[r][axis] +
-                      bit_count[ab->cross[r][axis] & ((1u << x) - 1)]);
 }
 
 /* The ids of the crossings on the brick's upper faces, which its neighbours own (none
- * on a face that is the volume's last sample plane: the brick owns those). */
+ * on a face that is the volume's last sample plane: the brick owns those). An edge's
+ * samples belong to its owner too, so the owner's min/max hold the level: it is active. */
 static void fill_shared_ids(const march_job *job, const active_brick *ab, id_table *table)
 {
+    const active_brick *near[8];
+    neighbours_of(job, ab, near);
     unsigned all = (1u << ab->n[0]) - 1, x_edges = all >> 1, upper_x = all & ~((1u << ab->owned[0]) - 1);
     for (int z = 0; z < ab->n[2]; z++)
         for (int y = 0; y < ab->n[1]; y++) {
@@ -512,9 +510,18 @@ static void fill_shared_ids(const march_job *job, const active_brick *ab, id_tab
                 m[1] = (row ^ ab->inside[r + 1]) & (upper_z ? all : upper_x);
             if (z + 1 < ab->n[2])
                 m[2] = (row ^ ab->inside[r + S]) & (upper_y ? all : upper_x);
+            /* The row in the owner's numbering: y and z shifted down a brick if upper. */
+            int owner_row = r - (upper_y + upper_z * S) * ISO_BRICK_CELLS, k_row = upper_y << 1 | upper_z << 2;
             for (int a = 0; a < 3; a++)
-                for (; m[a]; m[a] &= m[a] - 1)
-                    table->at[a][r][__builtin_ctz(m[a])] = vertex_id(job, ab, __builtin_ctz(m[a]), y, z, a);
+                for (; m[a]; m[a] &= m[a] - 1) {
+                    int x = __builtin_ctz(m[a]), upper = x >= ab->owned[0];
+                    const active_brick *owner = near[k_row | upper];
+                    assert(owner);
+                    x -= upper * ISO_BRICK_CELLS;
+                    table->at[a][r][x + upper * ISO_BRICK_CELLS] =
+                        (uint32_t)(owner->first_vertex + owner->before[owner_row][a] +
+                                   bit_count[owner->cross[owner_row][a] & ((1u << x) - 1)]);
+                }
         }
 }
 
