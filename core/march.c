@@ -559,8 +559,11 @@ static void emit_triangles(const march_job *job, const active_brick *ab, const i
             unsigned c = case_of(row, x);
             const uint32_t *cell = ids + (z * S + y) * S + x;
             const uint16_t *corner = case_corner[c];
-            for (int k = 0; k < 3 * cases[c].triangle_count; k++)
-                *out++ = cell[corner[k]];
+            for (int k = cases[c].triangle_count; k > 0; k--, corner += 3, out += 3) {
+                out[0] = cell[corner[0]];
+                out[1] = cell[corner[1]];
+                out[2] = cell[corner[2]];
+            }
         }
     }
     assert(out == job->mesh->indices + 3 * (ab->first_triangle + ab->triangles));
