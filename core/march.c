@@ -61,10 +61,28 @@ typedef struct active_brick {
 
 #define MAX_THREADS 64
 
+/* The level as each type compares against it. An integer sample is above the level
+ * exactly when it is above the level's floor, so integer data is compared as integers,
+ * and 8- and 16-bit rows 8 samples at a time where SSE2 is there (x86-64 always has it):
+ * the inside bits were 12% of the exact path's instructions one double compare at a time. */
+typedef struct threshold {
+    double level;      /* floating types: above when sample > level; NaN never is */
+    int64_t floor;     /* integer types: above when sample > floor */
+#ifdef __SSE2__
+    __m128i bias;      /* 8- and 16-bit: added to samples (and floor) to compare as signed */
+    __m128i lanes;     /* floor + bias in every lane */
+#endif
+} threshold;
+
+/* Below the type's smallest value every sample is above; at or past its largest none is. */
+typedef enum { SOME_ABOVE, ALL_ABOVE, NONE_ABOVE } threshold_reach;
+
 typedef struct iso_march {
     const iso_volume *vol;
     const iso_bricks *bricks;
     double level;
+    threshold threshold;     /* the level as the voxel type compares it, made once */
+    threshold_reach reach;
     active_brick *active;
     size_t active_count;
     int32_t *slot;     /* per brick of the grid: its index in active, or -1 */
@@ -98,21 +116,6 @@ static void make_tables(void)
 
 /* ---- one brick's inside bits, per voxel type ---- */
 
-/* The level as each type compares against it. An integer sample is above the level
- * exactly when it is above the level's floor, so integer data is compared as integers,
- * and 8- and 16-bit rows 8 samples at a time where SSE2 is there (x86-64 always has it):
- * the inside bits were 12% of the exact path's instructions one double compare at a time. */
-typedef struct threshold {
-    double level;      /* floating types: above when sample > level; NaN never is */
-    int64_t floor;     /* integer types: above when sample > floor */
-#ifdef __SSE2__
-    __m128i bias;      /* 8- and 16-bit: added to samples (and floor) to compare as signed */
-    __m128i lanes;     /* floor + bias in every lane */
-#endif
-} threshold;
-
-/* Below the type's smallest value every sample is above; at or past its largest none is. */
-typedef enum { SOME_ABOVE, ALL_ABOVE, NONE_ABOVE } threshold_reach;
 
 static threshold_reach make_threshold(iso_voxel_type type, double level, threshold *th)
 {
@@ -211,27 +214,26 @@ DEFINE_INSIDE_ROWS(inside_i32, int32_t, row_i32)
 DEFINE_INSIDE_ROWS(inside_f32, float, row_f32)
 DEFINE_INSIDE_ROWS(inside_f64, double, row_f64)
 
-static void inside_rows(const iso_volume *vol, const size_t lo[3], const uint8_t n[3], double level,
-                        uint16_t *rows)
+static void inside_rows(const march_job *job, const size_t lo[3], const uint8_t n[3], uint16_t *rows)
 {
-    threshold th;
-    threshold_reach reach = make_threshold(vol->type, level, &th);
-    if (reach != SOME_ABOVE) {
-        uint16_t all = reach == ALL_ABOVE ? (uint16_t)((1u << n[0]) - 1) : 0;
+    const iso_volume *vol = job->vol;
+    const threshold *th = &job->threshold;
+    if (job->reach != SOME_ABOVE) {
+        uint16_t all = job->reach == ALL_ABOVE ? (uint16_t)((1u << n[0]) - 1) : 0;
         for (int z = 0; z < n[2]; z++)
             for (int y = 0; y < n[1]; y++)
                 rows[z * S + y] = all;
         return;
     }
     switch (vol->type) {
-    case ISO_U8: inside_u8(vol, lo, n, &th, rows); break;
-    case ISO_I8: inside_i8(vol, lo, n, &th, rows); break;
-    case ISO_U16: inside_u16(vol, lo, n, &th, rows); break;
-    case ISO_I16: inside_i16(vol, lo, n, &th, rows); break;
-    case ISO_U32: inside_u32(vol, lo, n, &th, rows); break;
-    case ISO_I32: inside_i32(vol, lo, n, &th, rows); break;
-    case ISO_F32: inside_f32(vol, lo, n, &th, rows); break;
-    case ISO_F64: inside_f64(vol, lo, n, &th, rows); break;
+    case ISO_U8: inside_u8(vol, lo, n, th, rows); break;
+    case ISO_I8: inside_i8(vol, lo, n, th, rows); break;
+    case ISO_U16: inside_u16(vol, lo, n, th, rows); break;
+    case ISO_I16: inside_i16(vol, lo, n, th, rows); break;
+    case ISO_U32: inside_u32(vol, lo, n, th, rows); break;
+    case ISO_I32: inside_i32(vol, lo, n, th, rows); break;
+    case ISO_F32: inside_f32(vol, lo, n, th, rows); break;
+    case ISO_F64: inside_f64(vol, lo, n, th, rows); break;
     }
 }
 
@@ -314,7 +316,7 @@ static void classify(march_job *job, int t, active_brick *ab)
         ab->n[d] = (uint8_t)(hi[d] - lo[d] + 1);
         ab->owned[d] = (uint8_t)(ab->brick[d] + 1 == job->bricks->count[d] ? ab->n[d] : ab->n[d] - 1);
     }
-    inside_rows(job->vol, lo, ab->n, job->level, ab->inside);
+    inside_rows(job, lo, ab->n, ab->inside);
     unsigned owned_x = (1u << ab->owned[0]) - 1, x_edges = (1u << (ab->n[0] - 1)) - 1;
     uint32_t count = 0;
     ab->crossing_rows[0] = ab->crossing_rows[1] = 0;
@@ -737,6 +739,7 @@ int iso_march_begin(const iso_volume *vol, const iso_bricks *bricks, double leve
     job->vol = vol;
     job->bricks = bricks;
     job->level = level;
+    job->reach = make_threshold(vol->type, level, &job->threshold);
     job->mesh = mesh;
     job->world = options->world;
     job->axis_aligned = 1;
