@@ -791,9 +791,11 @@ size_t iso_march_box_triangles(const iso_march_brick *brick, const uint32_t lo[3
     unsigned span = ((1u << hi[0]) - 1) & ~((1u << lo[0]) - 1);
     for (uint32_t z = lo[2]; z < hi[2]; z++)
         for (uint32_t y = lo[1]; y < hi[1]; y++) {
-            cell_row q = cell_row_at(brick->inside, (int)y, (int)z);
-            uint64_t row = row_cases(q);
-            for (unsigned m = brick->mixed[z][y] & span; m; m &= m - 1)
+            unsigned m = brick->mixed[z][y] & span;
+            if (!m)
+                continue; /* most rows of a sub-box: no table loads for them */
+            uint64_t row = row_cases(cell_row_at(brick->inside, (int)y, (int)z));
+            for (; m; m &= m - 1)
                 count += cases[case_of(row, __builtin_ctz(m))].triangle_count;
         }
     return count;
