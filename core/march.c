@@ -496,35 +496,84 @@ static void neighbours_of(const march_job *job, const active_brick *ab, const ac
 
 /* The ids of the crossings on the brick's upper faces, which its neighbours own (none
  * on a face that is the volume's last sample plane: the brick owns those). An edge's
- * samples belong to its owner too, so the owner's min/max hold the level: it is active. */
+ * samples belong to its owner too, so the owner's min/max hold the level: it is active.
+ *
+ * Face by face, since only the faces' rows have such edges: the z face (every edge of
+ * its rows but those along z), the y face below it (edges along x and z), and the x
+ * face's column (bit 8 of the edges along y and z of every other row). Where a row's
+ * edges belong to the neighbour at the same x, they are that neighbour's crossings of
+ * the same row in the same order, so their ids are consecutive from the row's first. */
+/* The crossing edges in m (bits x < owned x) of row r along axis, owned by the neighbour
+ * whose own row is owner_row: numbered there in increasing x, from the row's first id. */
+static inline void shared_run(uint32_t *ids, unsigned m, const active_brick *owner, int owner_row, int axis)
+{
+    if (!m)
+        return; /* the neighbour may be inactive then */
+    assert(owner);
+    uint32_t id = (uint32_t)(owner->first_vertex + owner->before[owner_row][axis]);
+    for (; m; m &= m - 1)
+        ids[__builtin_ctz(m)] = id++;
+}
+
+/* The crossing on the edge at x = 8 of row r along axis, if any: the first of the
+ * x neighbour's row. */
+static inline void shared_corner(uint32_t *ids, unsigned m, const active_brick *owner, int owner_row, int axis)
+{
+    if (!(m >> ISO_BRICK_CELLS & 1))
+        return;
+    assert(owner);
+    ids[ISO_BRICK_CELLS] = (uint32_t)(owner->first_vertex + owner->before[owner_row][axis]);
+}
+
 static void fill_shared_ids(const march_job *job, const active_brick *ab, id_table *table)
 {
     const active_brick *near[8];
     neighbours_of(job, ab, near);
-    unsigned all = (1u << ab->n[0]) - 1, x_edges = all >> 1, upper_x = all & ~((1u << ab->owned[0]) - 1);
-    for (int z = 0; z < ab->n[2]; z++)
+    const uint16_t *inside = ab->inside;
+    int upper[3];
+    for (int d = 0; d < 3; d++)
+        upper[d] = ab->owned[d] < ab->n[d]; /* the brick has an upper face along d */
+    unsigned low = (1u << ab->owned[0]) - 1; /* edges along y, z the same-x owner holds */
+    unsigned x_edges = (1u << (ab->n[0] - 1)) - 1;
+    const int C = ISO_BRICK_CELLS;
+    if (upper[2]) { /* z = 8: owners up in z (k = 4, 5, and 6, 7 past the y face) */
+        int z = C;
         for (int y = 0; y < ab->n[1]; y++) {
-            int r = z * S + y, upper_y = y >= ab->owned[1], upper_z = z >= ab->owned[2];
-            unsigned row = ab->inside[r], m[3] = {0, 0, 0};
-            if (upper_y | upper_z)
-                m[0] = (row ^ (row >> 1)) & x_edges;
-            if (y + 1 < ab->n[1])
-                m[1] = (row ^ ab->inside[r + 1]) & (upper_z ? all : upper_x);
-            if (z + 1 < ab->n[2])
-                m[2] = (row ^ ab->inside[r + S]) & (upper_y ? all : upper_x);
-            /* The row in the owner's numbering: y and z shifted down a brick if upper. */
-            int owner_row = r - (upper_y + upper_z * S) * ISO_BRICK_CELLS, k_row = upper_y << 1 | upper_z << 2;
-            for (int a = 0; a < 3; a++)
-                for (; m[a]; m[a] &= m[a] - 1) {
-                    int x = __builtin_ctz(m[a]), upper = x >= ab->owned[0];
-                    const active_brick *owner = near[k_row | upper];
-                    assert(owner);
-                    x -= upper * ISO_BRICK_CELLS;
-                    table->at[a][r][x + upper * ISO_BRICK_CELLS] =
-                        (uint32_t)(owner->first_vertex + owner->before[owner_row][a] +
-                                   bit_count[owner->cross[owner_row][a] & ((1u << x) - 1)]);
-                }
+            int r = z * S + y, up_y = y >= ab->owned[1], owner_row = r - (up_y + S) * C, k = 4 | up_y << 1;
+            unsigned row = inside[r];
+            shared_run(table->at[0][r], (row ^ (row >> 1)) & x_edges, near[k], owner_row, 0);
+            if (y + 1 < ab->n[1]) {
+                unsigned m = row ^ inside[r + 1];
+                shared_run(table->at[1][r], m & low, near[k], owner_row, 1);
+                if (upper[0])
+                    shared_corner(table->at[1][r], m, near[k | 1], owner_row, 1);
+            }
         }
+    }
+    if (upper[1]) { /* y = 8 below the z face: owners up in y (k = 2, 3) */
+        int y = C;
+        for (int z = 0; z < ab->owned[2]; z++) {
+            int r = z * S + y, owner_row = r - C;
+            unsigned row = inside[r];
+            shared_run(table->at[0][r], (row ^ (row >> 1)) & x_edges, near[2], owner_row, 0);
+            if (z + 1 < ab->n[2]) {
+                unsigned m = row ^ inside[r + S];
+                shared_run(table->at[2][r], m & low, near[2], owner_row, 2);
+                if (upper[0])
+                    shared_corner(table->at[2][r], m, near[3], owner_row, 2);
+            }
+        }
+    }
+    if (upper[0]) /* x = 8 of the rows inside both other faces: the x neighbour (k = 1) */
+        for (int z = 0; z < ab->owned[2]; z++)
+            for (int y = 0; y < ab->owned[1]; y++) {
+                int r = z * S + y;
+                unsigned row = inside[r];
+                if (y + 1 < ab->n[1])
+                    shared_corner(table->at[1][r], row ^ inside[r + 1], near[1], r, 1);
+                if (z + 1 < ab->n[2])
+                    shared_corner(table->at[2][r], row ^ inside[r + S], near[1], r, 2);
+            }
 }
 
 /* Per case, each triangle corner as an offset into an id_table from the entry of the
