@@ -83,12 +83,19 @@ typedef struct iso_march {
     double level;
     threshold threshold;     /* the level as the voxel type compares it, made once */
     threshold_reach reach;
+    int integer;             /* integer samples: no infinite ends */
     active_brick *active;
     size_t active_count;
     int32_t *slot;     /* per brick of the grid: its index in active, or -1 */
     iso_mesh *mesh;
     int world;         /* positions in world mm rather than index space */
     int axis_aligned;  /* the volume's direction is the identity */
+    /* Where a coordinate depends on its own axis only (index space, or an identity
+     * direction), per axis the position of every sample plane as store_position writes
+     * it, and the map of that axis (offset + index * scale): a vertex then computes only
+     * its edge's coordinate. NULL otherwise. */
+    float *plane[3];
+    double offset[3], scale[3];
     const uint8_t *skip;
     iso_march_cover_fn cover;
     void *cover_context;
@@ -436,6 +443,33 @@ static void store_position(const march_job *job, const size_t c[3], int axis, do
         p[d] = (float)world[d];
 }
 
+/* The one coordinate of a vertex on an edge along axis from sample c: as store_position
+ * writes it, where job->plane is there. */
+static inline float along_axis(const march_job *job, int axis, size_t c, double t)
+{
+    double index = (float)((double)c + t);
+    return (float)(job->offset[axis] + index * job->scale[axis]);
+}
+
+/* Fills job->plane, or leaves it NULL where positions need the direction. */
+static int make_planes(march_job *job)
+{
+    const iso_volume *vol = job->vol;
+    if (job->world && !job->axis_aligned)
+        return 0;
+    float *all = malloc((vol->dims[0] + vol->dims[1] + vol->dims[2]) * sizeof *all);
+    if (!all)
+        return ISO_E_NOMEM;
+    for (int d = 0; d < 3; d++) {
+        job->plane[d] = d ? job->plane[d - 1] + vol->dims[d - 1] : all;
+        job->offset[d] = job->world ? vol->origin[d] : 0.0;
+        job->scale[d] = job->world ? vol->spacing[d] : 1.0;
+        for (size_t i = 0; i < vol->dims[d]; i++)
+            job->plane[d][i] = along_axis(job, d, i, 0.0);
+    }
+    return 0;
+}
+
 /* The vertex id of every crossing edge of one brick's sample box, [axis][z * 9 + y][x],
  * brick-local: its own crossings' as PASS 4 places them, its upper faces' looked up in
  * the neighbours once per edge. A triangle corner is then one load. Entries of edges that
@@ -465,11 +499,19 @@ static double place_vertices(const march_job *job, const active_brick *ab, id_ta
                     size_t c[3] = {lo[0] + (size_t)__builtin_ctz(m), lo[1] + (size_t)y, lo[2] + (size_t)z};
                     size_t at = c[0] + c[1] * step[1] + c[2] * step[2];
                     double from = iso_vol_sample(vol, at), to = iso_vol_sample(vol, at + step[a]);
-                    double t = iso_mc_edge_t(from, to, job->level);
+                    double t = job->integer ? iso_mc_edge_t_finite(from, to, job->level)
+                                            : iso_mc_edge_t(from, to, job->level);
                     double e = iso_mc_edge_error(from, to, t, job->level);
                     if (e > worst)
                         worst = e;
-                    store_position(job, c, a, t, p);
+                    if (job->plane[0]) {
+                        p[0] = job->plane[0][c[0]];
+                        p[1] = job->plane[1][c[1]];
+                        p[2] = job->plane[2][c[2]];
+                        p[a] = along_axis(job, a, c[a], t);
+                    } else {
+                        store_position(job, c, a, t, p);
+                    }
                     p += 3;
                 }
         }
@@ -621,19 +663,25 @@ static void emit_triangles(const march_job *job, const active_brick *ab, const i
 }
 
 /* Asks for the sample rows of the brick's owned crossings ahead of time: PASS 2 read
- * them long before, and along y and z consecutive rows are far apart in memory. */
+ * them long before, and along y and z consecutive rows are far apart in memory. The rows
+ * are those with crossings and those their edges along y and z end in. */
 static void prefetch_samples(const march_job *job, const active_brick *ab)
 {
     const iso_volume *vol = job->vol;
     size_t size = iso_vol_type_size(vol->type), lo[3];
     brick_origin(ab, lo);
-    const char *base = (const char *)vol->data;
-    for (int z = 0; z < ab->n[2]; z++)
-        for (int y = 0; y < ab->n[1]; y++)
-            if (ab->cross[z * S + y][0] | ab->cross[z * S + y][1] | ab->cross[z * S + y][2] |
-                (z && ab->cross[(z - 1) * S + y][2]) | (y && ab->cross[z * S + y - 1][1]))
-                __builtin_prefetch(base + (((lo[2] + (size_t)z) * vol->dims[1] + lo[1] + (size_t)y) * vol->dims[0] +
-                                           lo[0]) * size);
+    const char *base = (const char *)vol->data + ((lo[2] * vol->dims[1] + lo[1]) * vol->dims[0] + lo[0]) * size;
+    size_t row_bytes = vol->dims[0] * size, plane_bytes = vol->dims[1] * row_bytes;
+    for (int word = 0; word < 2; word++)
+        for (uint64_t rows = ab->crossing_rows[word]; rows; rows &= rows - 1) {
+            int r = 64 * word + __builtin_ctzll(rows);
+            const char *row = base + (size_t)(r / S) * plane_bytes + (size_t)(r % S) * row_bytes;
+            __builtin_prefetch(row);
+            if (ab->cross[r][1])
+                __builtin_prefetch(row + row_bytes);
+            if (ab->cross[r][2])
+                __builtin_prefetch(row + plane_bytes);
+        }
 }
 
 static void generate_share(void *context, int t, int threads)
@@ -745,7 +793,10 @@ static void total_extras(const march_job *job, int used, const iso_march_options
 static int run_passes(march_job *job, const iso_march_options *o, iso_march_stats *stats)
 {
     int threads = iso_parallel_threads(o->threads);
-    int rc = select_bricks(job, o->prune);
+    int rc = make_planes(job);
+    if (rc)
+        return rc;
+    rc = select_bricks(job, o->prune);
     if (rc)
         return rc;
     int used = job->active_count < (size_t)threads ? (job->active_count ? (int)job->active_count : 1) : threads;
@@ -789,6 +840,7 @@ int iso_march_begin(const iso_volume *vol, const iso_bricks *bricks, double leve
     job->bricks = bricks;
     job->level = level;
     job->reach = make_threshold(vol->type, level, &job->threshold);
+    job->integer = vol->type != ISO_F32 && vol->type != ISO_F64;
     job->mesh = mesh;
     job->world = options->world;
     job->axis_aligned = 1;
@@ -856,6 +908,7 @@ void iso_march_end(iso_march *job)
         return;
     free(job->slot);
     free(job->active);
+    free(job->plane[0]);
     free(job);
 }
 

@@ -51,6 +51,7 @@ static inline unsigned iso_mc_case_index(const double v[8], double level)
  * edge from the low end; exactly one end must be above the level. A NaN end puts it
  * midway, an infinite end against the other. Every module that places vertices on grid edges uses this, so that a vertex is
  * bit-identical whichever piece of the surface computes it. */
+static inline double iso_mc_edge_t_finite(double a, double b, double level);
 static inline double iso_mc_edge_t(double a, double b, double level)
 {
     /* An infinite end (a float volume's, or the virtual layer of a cap) is infinitely far
@@ -59,6 +60,12 @@ static inline double iso_mc_edge_t(double a, double b, double level)
         return 1.0 - ISO_MC_END_GAP;
     if (b - b != 0 && b == b)
         return ISO_MC_END_GAP;
+    return iso_mc_edge_t_finite(a, b, level);
+}
+
+/* iso_mc_edge_t for ends known not to be infinite (integer samples): the same value. */
+static inline double iso_mc_edge_t_finite(double a, double b, double level)
+{
     double t = (level - a) / (b - a);
     if (!(t >= 0.0 && t <= 1.0))
         return 0.5;
