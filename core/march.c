@@ -101,6 +101,7 @@ typedef struct iso_march {
     void *cover_context;
     double error[MAX_THREADS];
     size_t extra_vertices[MAX_THREADS], extra_triangles[MAX_THREADS];
+    size_t cells[MAX_THREADS]; /* cells marched, per thread: counted where classified */
     int cover_status[MAX_THREADS];
     atomic_size_t next_brick;  /* the next active brick a thread may take (PASS 2, 4) */
 } march_job;
@@ -352,8 +353,14 @@ static void classify(march_job *job, int t, active_brick *ab)
     ab->triangles = 0;
     if (ab->skip)
         return;
-    if (job->cover && !job->cover_status[t])
+    size_t cells = (size_t)(ab->n[0] - 1) * (size_t)(ab->n[1] - 1) * (size_t)(ab->n[2] - 1);
+    if (job->cover && !job->cover_status[t]) {
         job->cover_status[t] = cover_brick(job, t, ab);
+        for (int z = 0; z < ISO_BRICK_CELLS; z++)
+            for (int y = 0; y < ISO_BRICK_CELLS; y++)
+                cells -= bit_count[ab->covered[z][y]];
+    }
+    job->cells[t] += cells;
     const iso_mc_case *cases = iso_mc_cases();
     uint32_t triangles = 0;
     for (int z = 0; z + 1 < ab->n[2]; z++)
@@ -769,16 +776,6 @@ static int lay_out_mesh(march_job *job, iso_mesh *mesh, size_t extra_vertices, s
     return 0;
 }
 
-static size_t cells_of(const iso_volume *vol, const active_brick *ab)
-{
-    size_t lo[3], hi[3], covered = 0;
-    iso_bricks_box(vol, ab->brick, lo, hi);
-    for (int z = 0; z < ISO_BRICK_CELLS; z++)
-        for (int y = 0; y < ISO_BRICK_CELLS; y++)
-            covered += bit_count[ab->covered[z][y]];
-    return (hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]) - covered;
-}
-
 static void total_extras(const march_job *job, int used, const iso_march_options *o, size_t *vertices,
                          size_t *triangles)
 {
@@ -816,9 +813,8 @@ static int run_passes(march_job *job, const iso_march_options *o, iso_march_stat
         if (job->error[t] > stats->error_bound)
             stats->error_bound = job->error[t];
     stats->bricks_active = job->active_count;
-    for (size_t i = 0; i < job->active_count; i++)
-        if (!job->active[i].skip)
-            stats->cells_visited += cells_of(job->vol, &job->active[i]);
+    for (int t = 0; t < used; t++)
+        stats->cells_visited += job->cells[t];
     return 0;
 }
 
