@@ -40,6 +40,9 @@
 
 #define S ISO_BRICK_SAMPLES
 #define ROWS (S * S)
+#define ROW_VECTORS 11                   /* the 81 rows, 8 at a time */
+#define PADDED_ROWS (8 * ROW_VECTORS)
+#define INSIDE_ROWS (PADDED_ROWS + S + 7) /* a vector reads rows r + 1, r + 9 and r + 10 too */
 
 typedef struct active_brick {
     uint32_t brick[3];
@@ -49,14 +52,16 @@ typedef struct active_brick {
     size_t first_vertex, first_triangle; /* PASS 3 */
     int skip;                            /* number the crossings, march no cell */
     uint8_t covered[ISO_BRICK_CELLS][ISO_BRICK_CELLS]; /* [z][y] bit x: a cover's cell */
-    uint16_t inside[ROWS];               /* bit x: sample (x, y, z) above the level */
-    uint16_t cross[ROWS][3];             /* bit x: owned edge from (x, y, z) along axis crosses */
-    uint16_t before[ROWS][3];            /* owned crossings numbered before that row */
+    /* Per row r = z * 9 + y; rows past the 81 are padding that SSE2 reads 8 at a time. */
+    uint16_t inside[INSIDE_ROWS];        /* bit x: sample (x, y, z) above the level */
+    uint16_t cross[3][PADDED_ROWS];      /* bit x: owned edge from (x, y, z) along axis crosses */
+    uint16_t before[3][PADDED_ROWS];     /* owned crossings numbered before; rows with some only */
+    uint8_t marching[PADDED_ROWS];       /* bit x: cell (x, y, z) to march: mixed, not covered */
     /* Which rows PASS 4 has work in, so that it visits only those (a brick the surface
-     * crosses as a sheet has work in a third of its rows or so): bit r = z * 9 + y of the
-     * sample rows with an owned crossing, bit z * 8 + y of the rows of cells to march. */
+     * crosses as a sheet has work in a third of its rows or so), bit r: the sample rows
+     * with an owned crossing, the rows of cells to march. */
     uint64_t crossing_rows[2];
-    uint64_t marching_rows;
+    uint64_t marching_rows[2];
 } active_brick;
 
 #define MAX_THREADS 64
@@ -111,9 +116,16 @@ static uint64_t pair_spread[1 << S]; /* bits x, x + 1 of a 9-bit row at bits 8x,
 
 static void learn_edges(void);
 
+#ifdef __SSE2__
+static void make_full_rows(void);
+#endif
+
 static void make_tables(void)
 {
     learn_edges();
+#ifdef __SSE2__
+    make_full_rows();
+#endif
     for (unsigned w = 0; w < (1u << S); w++) {
         bit_count[w] = (uint8_t)((w & 1) + bit_count[w >> 1]);
         pair_spread[w] = 0;
@@ -290,12 +302,6 @@ static inline unsigned case_of(uint64_t cases, int x)
     return (unsigned)(cases >> (8 * x)) & 0xFF;
 }
 
-/* The cells of the row this brick marches: mixed and not covered by a caller's fan. */
-static inline unsigned mixed_cells(const active_brick *ab, cell_row q, int y, int z)
-{
-    return row_mixed(q, ab->n[0]) & ~(unsigned)ab->covered[z][y];
-}
-
 /* ---- PASS 2: classify ---- */
 
 /* Shows the classified brick to the caller's cover function and keeps what it covers. */
@@ -308,7 +314,7 @@ static int cover_brick(march_job *job, int t, active_brick *ab)
     view.inside = ab->inside;
     for (int z = 0; z + 1 < ab->n[2]; z++)
         for (int y = 0; y + 1 < ab->n[1]; y++)
-            view.mixed[z][y] = (uint8_t)row_mixed(cell_row_at(ab->inside, y, z), ab->n[0]);
+            view.mixed[z][y] = ab->marching[z * S + y];
     int rc = job->cover(job->cover_context, t, &view);
     memcpy(ab->covered, view.covered, sizeof ab->covered);
     job->extra_vertices[t] += view.extra_vertices;
@@ -316,7 +322,129 @@ static int cover_brick(march_job *job, int t, active_brick *ab)
     return rc;
 }
 
-static void classify(march_job *job, int t, active_brick *ab)
+/* Any brick: per row its owned crossing edges and its mixed cells, one row at a time. */
+static void scalar_rows(active_brick *ab)
+{
+    unsigned owned_x = (1u << ab->owned[0]) - 1, x_edges = (1u << (ab->n[0] - 1)) - 1;
+    memset(ab->cross, 0, sizeof ab->cross);
+    memset(ab->marching, 0, sizeof ab->marching);
+    for (int z = 0; z < ab->owned[2]; z++)
+        for (int y = 0; y < ab->owned[1]; y++) {
+            int r = z * S + y;
+            unsigned row = ab->inside[r];
+            ab->cross[0][r] = (uint16_t)((row ^ (row >> 1)) & x_edges & owned_x);
+            if (y + 1 < ab->n[1])
+                ab->cross[1][r] = (uint16_t)((row ^ ab->inside[r + 1]) & owned_x);
+            if (z + 1 < ab->n[2])
+                ab->cross[2][r] = (uint16_t)((row ^ ab->inside[r + S]) & owned_x);
+        }
+    for (int z = 0; z + 1 < ab->n[2]; z++)
+        for (int y = 0; y + 1 < ab->n[1]; y++)
+            ab->marching[z * S + y] = (uint8_t)row_mixed(cell_row_at(ab->inside, y, z), ab->n[0]);
+    for (int r = 0; r < ROWS; r++) {
+        unsigned any = ab->cross[0][r] | ab->cross[1][r] | ab->cross[2][r];
+        ab->crossing_rows[r / 64] |= (uint64_t)(any != 0) << (r % 64);
+        ab->marching_rows[r / 64] |= (uint64_t)(ab->marching[r] != 0) << (r % 64);
+    }
+}
+
+#ifdef __SSE2__
+/* Per row of a full interior brick (9 samples per axis, 8 owned): 0xFF where y < 8 and
+ * z < 8 (the rows whose edges it owns and whose cells it marches), 0 elsewhere. */
+static uint16_t full_rows[PADDED_ROWS];
+
+static void make_full_rows(void)
+{
+    for (int r = 0; r < PADDED_ROWS; r++)
+        full_rows[r] = r < ROWS && r % S < ISO_BRICK_CELLS && r / S < ISO_BRICK_CELLS ? 0xFF : 0;
+}
+
+/* The 8 bits of rows 8k .. 8k + 7 that are not zero. */
+static inline uint64_t nonzero_rows(__m128i v)
+{
+    __m128i zero = _mm_cmpeq_epi16(v, _mm_setzero_si128());
+    return ~(uint64_t)_mm_movemask_epi8(_mm_packs_epi16(zero, zero)) & 0xFF;
+}
+
+/* 9 samples per axis, 8 of them owned: not the volume's last brick along any axis. */
+static int full_brick(const active_brick *ab)
+{
+    return ab->n[0] == S && ab->n[1] == S && ab->n[2] == S && ab->owned[0] == ISO_BRICK_CELLS &&
+           ab->owned[1] == ISO_BRICK_CELLS && ab->owned[2] == ISO_BRICK_CELLS;
+}
+
+/* scalar_rows for a full interior brick, 8 rows at a time: the same shifts and xors,
+ * with rows y + 1, z + 1 and both read at offsets 1, 9 and 10. */
+static void vector_rows(active_brick *ab)
+{
+    memset(ab->inside + ROWS, 0, (INSIDE_ROWS - ROWS) * sizeof *ab->inside);
+    for (int k = 0; k < ROW_VECTORS; k++) {
+        int r = 8 * k;
+        const uint16_t *in = ab->inside + r;
+        __m128i own = _mm_loadu_si128((const __m128i *)(full_rows + r));
+        __m128i a = _mm_loadu_si128((const __m128i *)in), b = _mm_loadu_si128((const __m128i *)(in + 1));
+        __m128i c = _mm_loadu_si128((const __m128i *)(in + S)), d = _mm_loadu_si128((const __m128i *)(in + S + 1));
+        __m128i x = _mm_and_si128(_mm_xor_si128(a, _mm_srli_epi16(a, 1)), own);
+        __m128i y = _mm_and_si128(_mm_xor_si128(a, b), own);
+        __m128i z = _mm_and_si128(_mm_xor_si128(a, c), own);
+        _mm_storeu_si128((__m128i *)(ab->cross[0] + r), x);
+        _mm_storeu_si128((__m128i *)(ab->cross[1] + r), y);
+        _mm_storeu_si128((__m128i *)(ab->cross[2] + r), z);
+        __m128i any = _mm_or_si128(_mm_or_si128(a, b), _mm_or_si128(c, d));
+        __m128i all = _mm_and_si128(_mm_and_si128(a, b), _mm_and_si128(c, d));
+        __m128i full = _mm_and_si128(all, _mm_srli_epi16(all, 1));
+        __m128i empty = _mm_andnot_si128(_mm_or_si128(any, _mm_srli_epi16(any, 1)), own);
+        __m128i mixed = _mm_andnot_si128(_mm_or_si128(full, empty), own);
+        _mm_storel_epi64((__m128i *)(ab->marching + r), _mm_packus_epi16(mixed, mixed));
+        ab->crossing_rows[r / 64] |= nonzero_rows(_mm_or_si128(_mm_or_si128(x, y), z)) << (r % 64);
+        ab->marching_rows[r / 64] |= nonzero_rows(mixed) << (r % 64);
+    }
+}
+#endif
+
+/* Numbers the owned crossings row by row (z, y, then axis, then x); returns how many. */
+static uint32_t number_crossings(active_brick *ab)
+{
+    uint32_t count = 0;
+    for (int word = 0; word < 2; word++)
+        for (uint64_t rows = ab->crossing_rows[word]; rows; rows &= rows - 1) {
+            int r = 64 * word + __builtin_ctzll(rows);
+            for (int a = 0; a < 3; a++) {
+                ab->before[a][r] = (uint16_t)count;
+                count += bit_count[ab->cross[a][r]];
+            }
+        }
+    return count;
+}
+
+/* Takes the cells a cover function fans out of the rows to march. */
+static void drop_covered(active_brick *ab)
+{
+    for (int word = 0; word < 2; word++)
+        for (uint64_t rows = ab->marching_rows[word]; rows; rows &= rows - 1) {
+            int r = 64 * word + __builtin_ctzll(rows);
+            ab->marching[r] &= (uint8_t)~ab->covered[r / S][r % S];
+            if (!ab->marching[r])
+                ab->marching_rows[word] &= ~(UINT64_C(1) << (r % 64));
+        }
+}
+
+static uint32_t count_triangles(const active_brick *ab)
+{
+    const iso_mc_case *cases = iso_mc_cases();
+    uint32_t triangles = 0;
+    for (int word = 0; word < 2; word++)
+        for (uint64_t rows = ab->marching_rows[word]; rows; rows &= rows - 1) {
+            int r = 64 * word + __builtin_ctzll(rows);
+            uint64_t row = row_cases(cell_row_at(ab->inside, r % S, r / S));
+            for (unsigned m = ab->marching[r]; m; m &= m - 1)
+                triangles += cases[case_of(row, __builtin_ctz(m))].triangle_count;
+        }
+    return triangles;
+}
+
+/* Returns the cells of the brick marching cubes visits: not skipped, not covered. */
+static size_t classify(march_job *job, int t, active_brick *ab)
 {
     size_t lo[3], hi[3];
     iso_bricks_box(job->vol, ab->brick, lo, hi);
@@ -325,55 +453,31 @@ static void classify(march_job *job, int t, active_brick *ab)
         ab->owned[d] = (uint8_t)(ab->brick[d] + 1 == job->bricks->count[d] ? ab->n[d] : ab->n[d] - 1);
     }
     inside_rows(job, lo, ab->n, ab->inside);
-    unsigned owned_x = (1u << ab->owned[0]) - 1, x_edges = (1u << (ab->n[0] - 1)) - 1;
-    uint32_t count = 0;
     ab->crossing_rows[0] = ab->crossing_rows[1] = 0;
-    ab->marching_rows = 0;
-    for (int z = 0; z < ab->n[2]; z++)
-        for (int y = 0; y < ab->n[1]; y++) {
-            int r = z * S + y;
-            unsigned row = ab->inside[r], cross[3] = {0, 0, 0};
-            if (z < ab->owned[2] && y < ab->owned[1]) {
-                cross[0] = (row ^ (row >> 1)) & x_edges & owned_x;
-                if (y + 1 < ab->n[1])
-                    cross[1] = (row ^ ab->inside[r + 1]) & owned_x;
-                if (z + 1 < ab->n[2])
-                    cross[2] = (row ^ ab->inside[r + S]) & owned_x;
-            }
-            for (int a = 0; a < 3; a++) {
-                ab->cross[r][a] = (uint16_t)cross[a];
-                ab->before[r][a] = (uint16_t)count;
-                count += bit_count[cross[a]];
-            }
-            if (cross[0] | cross[1] | cross[2])
-                ab->crossing_rows[r / 64] |= UINT64_C(1) << (r % 64);
-        }
-    ab->vertices = count;
+    ab->marching_rows[0] = ab->marching_rows[1] = 0;
+#ifdef __SSE2__
+    if (full_brick(ab))
+        vector_rows(ab);
+    else
+#endif
+        scalar_rows(ab);
+    ab->vertices = number_crossings(ab);
     memset(ab->covered, 0, sizeof ab->covered);
     ab->triangles = 0;
-    if (ab->skip)
-        return;
+    if (ab->skip) {
+        ab->marching_rows[0] = ab->marching_rows[1] = 0;
+        return 0;
+    }
     size_t cells = (size_t)(ab->n[0] - 1) * (size_t)(ab->n[1] - 1) * (size_t)(ab->n[2] - 1);
     if (job->cover && !job->cover_status[t]) {
         job->cover_status[t] = cover_brick(job, t, ab);
         for (int z = 0; z < ISO_BRICK_CELLS; z++)
             for (int y = 0; y < ISO_BRICK_CELLS; y++)
                 cells -= bit_count[ab->covered[z][y]];
+        drop_covered(ab);
     }
-    job->cells[t] += cells;
-    const iso_mc_case *cases = iso_mc_cases();
-    uint32_t triangles = 0;
-    for (int z = 0; z + 1 < ab->n[2]; z++)
-        for (int y = 0; y + 1 < ab->n[1]; y++) {
-            cell_row q = cell_row_at(ab->inside, y, z);
-            unsigned m = mixed_cells(ab, q, y, z);
-            if (m)
-                ab->marching_rows |= UINT64_C(1) << (z * ISO_BRICK_CELLS + y);
-            uint64_t row = m ? row_cases(q) : 0;
-            for (; m; m &= m - 1)
-                triangles += cases[case_of(row, __builtin_ctz(m))].triangle_count;
-        }
-    ab->triangles = triangles;
+    ab->triangles = count_triangles(ab);
+    return cells;
 }
 
 typedef struct range {
@@ -409,16 +513,18 @@ static int next_chunk(march_job *job, range *r)
 static void classify_share(void *context, int t, int threads)
 {
     march_job *job = context;
+    size_t cells = 0; /* summed here, stored once: the job's lines stay unshared */
     range r;
     if (job->cover) {
         r = share_of(job->active_count, t, threads);
         for (size_t i = r.begin; i < r.end; i++)
-            classify(job, t, &job->active[i]);
-        return;
+            cells += classify(job, t, &job->active[i]);
+    } else {
+        while (next_chunk(job, &r))
+            for (size_t i = r.begin; i < r.end; i++)
+                cells += classify(job, t, &job->active[i]);
     }
-    while (next_chunk(job, &r))
-        for (size_t i = r.begin; i < r.end; i++)
-            classify(job, t, &job->active[i]);
+    job->cells[t] = cells;
 }
 
 /* ---- PASS 4: generate ---- */
@@ -501,7 +607,7 @@ static double place_vertices(const march_job *job, const active_brick *ab, id_ta
         for (uint64_t rows = ab->crossing_rows[word]; rows; rows &= rows - 1) {
             int r = 64 * word + __builtin_ctzll(rows), y = r % S, z = r / S;
             for (int a = 0; a < 3; a++)
-                for (unsigned m = ab->cross[r][a]; m; m &= m - 1) {
+                for (unsigned m = ab->cross[a][r]; m; m &= m - 1) {
                     table->at[a][r][__builtin_ctz(m)] = id++;
                     size_t c[3] = {lo[0] + (size_t)__builtin_ctz(m), lo[1] + (size_t)y, lo[2] + (size_t)z};
                     size_t at = c[0] + c[1] * step[1] + c[2] * step[2];
@@ -559,7 +665,7 @@ static inline void shared_run(uint32_t *ids, unsigned m, const active_brick *own
     if (!m)
         return; /* the neighbour may be inactive then */
     assert(owner);
-    uint32_t id = (uint32_t)(owner->first_vertex + owner->before[owner_row][axis]);
+    uint32_t id = (uint32_t)(owner->first_vertex + owner->before[axis][owner_row]);
     for (; m; m &= m - 1)
         ids[__builtin_ctz(m)] = id++;
 }
@@ -571,7 +677,7 @@ static inline void shared_corner(uint32_t *ids, unsigned m, const active_brick *
     if (!(m >> ISO_BRICK_CELLS & 1))
         return;
     assert(owner);
-    ids[ISO_BRICK_CELLS] = (uint32_t)(owner->first_vertex + owner->before[owner_row][axis]);
+    ids[ISO_BRICK_CELLS] = (uint32_t)(owner->first_vertex + owner->before[axis][owner_row]);
 }
 
 static void fill_shared_ids(const march_job *job, const active_brick *ab, id_table *table)
@@ -650,14 +756,14 @@ static void emit_triangles(const march_job *job, const active_brick *ab, const i
     const iso_mc_case *cases = iso_mc_cases();
     const uint32_t *ids = &table->at[0][0][0];
     uint32_t *out = job->mesh->indices + 3 * ab->first_triangle;
-    for (uint64_t rows = ab->marching_rows; rows; rows &= rows - 1) {
-        int r = __builtin_ctzll(rows), y = r % ISO_BRICK_CELLS, z = r / ISO_BRICK_CELLS;
-        cell_row q = cell_row_at(ab->inside, y, z);
-        uint64_t row = row_cases(q);
-        for (unsigned m = mixed_cells(ab, q, y, z); m; m &= m - 1) {
+    for (int word = 0; word < 2; word++)
+    for (uint64_t rows = ab->marching_rows[word]; rows; rows &= rows - 1) {
+        int r = 64 * word + __builtin_ctzll(rows);
+        uint64_t row = row_cases(cell_row_at(ab->inside, r % S, r / S));
+        for (unsigned m = ab->marching[r]; m; m &= m - 1) {
             int x = __builtin_ctz(m);
             unsigned c = case_of(row, x);
-            const uint32_t *cell = ids + (z * S + y) * S + x;
+            const uint32_t *cell = ids + r * S + x;
             const uint16_t *corner = case_corner[c];
             for (int k = cases[c].triangle_count; k > 0; k--, corner += 3, out += 3) {
                 out[0] = cell[corner[0]];
@@ -684,9 +790,9 @@ static void prefetch_samples(const march_job *job, const active_brick *ab)
             int r = 64 * word + __builtin_ctzll(rows);
             const char *row = base + (size_t)(r / S) * plane_bytes + (size_t)(r % S) * row_bytes;
             __builtin_prefetch(row);
-            if (ab->cross[r][1])
+            if (ab->cross[1][r])
                 __builtin_prefetch(row + row_bytes);
-            if (ab->cross[r][2])
+            if (ab->cross[2][r])
                 __builtin_prefetch(row + plane_bytes);
         }
 }
@@ -874,11 +980,11 @@ uint32_t iso_march_vertex(const iso_march *job, const uint32_t corner[3], int ax
     const active_brick *ab = &job->active[slot];
     int x = (int)(corner[0] - b[0] * ISO_BRICK_CELLS), r = (int)(corner[2] - b[2] * ISO_BRICK_CELLS) * S +
                                                        (int)(corner[1] - b[1] * ISO_BRICK_CELLS);
-    unsigned row = ab->cross[r][axis];
+    unsigned row = ab->cross[axis][r];
     assert(row >> x & 1);
     if (!(row >> x & 1))
         return UINT32_MAX;
-    return (uint32_t)(ab->first_vertex + ab->before[r][axis] + bit_count[row & ((1u << x) - 1)]);
+    return (uint32_t)(ab->first_vertex + ab->before[axis][r] + bit_count[row & ((1u << x) - 1)]);
 }
 
 size_t iso_march_box_triangles(const iso_march_brick *brick, const uint32_t lo[3], const uint32_t hi[3])
