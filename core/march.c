@@ -597,30 +597,39 @@ static double place_vertices(const march_job *job, const active_brick *ab, id_ta
 {
     const iso_volume *vol = job->vol;
     const size_t step[3] = {1, vol->dims[0], vol->dims[0] * vol->dims[1]};
+    const double level = job->level;
+    const int integer = job->integer;
     size_t lo[3];
     brick_origin(ab, lo);
     float *p = job->mesh->positions + 3 * ab->first_vertex;
     uint32_t id = (uint32_t)ab->first_vertex;
     double worst = 0;
-    /* Rows in ascending r = z * 9 + y: the numbering order. */
+    /* Rows in ascending r = z * 9 + y: the numbering order. What is the same along a row
+     * is read once per row (the compiler cannot hoist it: p may alias the planes). */
     for (int word = 0; word < 2; word++)
         for (uint64_t rows = ab->crossing_rows[word]; rows; rows &= rows - 1) {
-            int r = 64 * word + __builtin_ctzll(rows), y = r % S, z = r / S;
+            int r = 64 * word + __builtin_ctzll(rows);
+            size_t c[3] = {lo[0], lo[1] + (size_t)(r % S), lo[2] + (size_t)(r / S)};
+            size_t row_at = c[0] + c[1] * step[1] + c[2] * step[2];
+            float row_p[3] = {0, 0, 0};
+            if (job->plane[0])
+                for (int d = 1; d < 3; d++)
+                    row_p[d] = job->plane[d][c[d]];
             for (int a = 0; a < 3; a++)
                 for (unsigned m = ab->cross[a][r]; m; m &= m - 1) {
-                    table->at[a][r][__builtin_ctz(m)] = id++;
-                    size_t c[3] = {lo[0] + (size_t)__builtin_ctz(m), lo[1] + (size_t)y, lo[2] + (size_t)z};
-                    size_t at = c[0] + c[1] * step[1] + c[2] * step[2];
+                    int x = __builtin_ctz(m);
+                    table->at[a][r][x] = id++;
+                    size_t at = row_at + (size_t)x;
                     double from = iso_vol_sample(vol, at), to = iso_vol_sample(vol, at + step[a]);
-                    double t = job->integer ? iso_mc_edge_t_finite(from, to, job->level)
-                                            : iso_mc_edge_t(from, to, job->level);
-                    double e = iso_mc_edge_error(from, to, t, job->level);
+                    double t = integer ? iso_mc_edge_t_finite(from, to, level) : iso_mc_edge_t(from, to, level);
+                    double e = iso_mc_edge_error(from, to, t, level);
                     if (e > worst)
                         worst = e;
+                    c[0] = lo[0] + (size_t)x;
                     if (job->plane[0]) {
                         p[0] = job->plane[0][c[0]];
-                        p[1] = job->plane[1][c[1]];
-                        p[2] = job->plane[2][c[2]];
+                        p[1] = row_p[1];
+                        p[2] = row_p[2];
                         p[a] = along_axis(job, a, c[a], t);
                     } else {
                         store_position(job, c, a, t, p);
