@@ -689,6 +689,33 @@ static inline void shared_corner(uint32_t *ids, unsigned m, const active_brick *
     ids[ISO_BRICK_CELLS] = (uint32_t)(owner->first_vertex + owner->before[axis][owner_row]);
 }
 
+#ifdef __SSE2__
+/* The x face's column of a full brick, 8 rows at a time: the rows whose edge at x = 8
+ * along y or z crosses (bit 8 of the same xors as vector_rows), then only those. */
+static void column_ids(const active_brick *ab, const active_brick *owner, id_table *table)
+{
+    uint64_t rows[2][2] = {{0, 0}, {0, 0}}; /* [y, z][word] */
+    for (int k = 0; k < ROW_VECTORS; k++) {
+        int r = 8 * k;
+        const uint16_t *in = ab->inside + r;
+        __m128i own = _mm_loadu_si128((const __m128i *)(full_rows + r)); /* 0xFF where owned */
+        __m128i column = _mm_and_si128(_mm_slli_epi16(own, 1), _mm_set1_epi16(0x100));
+        __m128i a = _mm_loadu_si128((const __m128i *)in);
+        __m128i y = _mm_and_si128(_mm_xor_si128(a, _mm_loadu_si128((const __m128i *)(in + 1))), column);
+        __m128i z = _mm_and_si128(_mm_xor_si128(a, _mm_loadu_si128((const __m128i *)(in + S))), column);
+        rows[0][r / 64] |= nonzero_rows(y) << (r % 64);
+        rows[1][r / 64] |= nonzero_rows(z) << (r % 64);
+    }
+    for (int axis = 1; axis < 3; axis++)
+        for (int word = 0; word < 2; word++)
+            for (uint64_t m = rows[axis - 1][word]; m; m &= m - 1) {
+                int r = 64 * word + __builtin_ctzll(m);
+                assert(owner);
+                table->at[axis][r][ISO_BRICK_CELLS] = (uint32_t)(owner->first_vertex + owner->before[axis][r]);
+            }
+}
+#endif
+
 static void fill_shared_ids(const march_job *job, const active_brick *ab, id_table *table)
 {
     const active_brick *near[8];
@@ -728,16 +755,24 @@ static void fill_shared_ids(const march_job *job, const active_brick *ab, id_tab
             }
         }
     }
-    if (upper[0]) /* x = 8 of the rows inside both other faces: the x neighbour (k = 1) */
-        for (int z = 0; z < ab->owned[2]; z++)
-            for (int y = 0; y < ab->owned[1]; y++) {
-                int r = z * S + y;
-                unsigned row = inside[r];
-                if (y + 1 < ab->n[1])
-                    shared_corner(table->at[1][r], row ^ inside[r + 1], near[1], r, 1);
-                if (z + 1 < ab->n[2])
-                    shared_corner(table->at[2][r], row ^ inside[r + S], near[1], r, 2);
-            }
+    if (!upper[0])
+        return;
+#ifdef __SSE2__
+    if (full_brick(ab)) {
+        column_ids(ab, near[1], table);
+        return;
+    }
+#endif
+    /* x = 8 of the rows inside both other faces: the x neighbour (k = 1) */
+    for (int z = 0; z < ab->owned[2]; z++)
+        for (int y = 0; y < ab->owned[1]; y++) {
+            int r = z * S + y;
+            unsigned row = inside[r];
+            if (y + 1 < ab->n[1])
+                shared_corner(table->at[1][r], row ^ inside[r + 1], near[1], r, 1);
+            if (z + 1 < ab->n[2])
+                shared_corner(table->at[2][r], row ^ inside[r + S], near[1], r, 2);
+        }
 }
 
 /* Per case, each triangle corner as an offset into an id_table from the entry of the
