@@ -52,6 +52,12 @@ typedef struct fan_tally {
     double vertex_error, fit_error;
 } fan_tally;
 
+/* The first centre and triangle of one brick's fans in its thread's output. */
+typedef struct fan_mark {
+    size_t brick;  /* its index in the grid, z, y, then x */
+    size_t centre, triangle;
+} fan_mark;
+
 /* The fans one thread made below the bricks (PASS 2), and its scratch. */
 typedef struct sub_walk {
     iso_fan_scratch scratch;
@@ -63,6 +69,11 @@ typedef struct sub_walk {
     uint16_t along_y[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES], along_z[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES];
     int transposed;                 /* along_y and along_z are the brick's (made on first use) */
     int integer_samples;            /* the volume's type is an integer one */
+    /* Where each brick's fans begin in fans, for the bricks that made some, in the order
+     * this thread covered them: PASS 3 numbers them in grid order whichever thread took
+     * which brick, so the mesh does not depend on the scheduling. */
+    fan_mark *marks;
+    size_t mark_count, mark_capacity;
 } sub_walk;
 
 typedef struct coarse {
@@ -281,6 +292,28 @@ static int visit_sub(const coarse *c, sub_walk *w, const iso_box *box)
     return rc ? rc : visit_sub(c, w, &right);
 }
 
+static size_t brick_index(const iso_bricks *g, const iso_march_brick *brick)
+{
+    size_t b[3];
+    for (int d = 0; d < 3; d++)
+        b[d] = brick->lo[d] / ISO_BRICK_CELLS;
+    return (b[2] * g->count[1] + b[1]) * g->count[0] + b[0];
+}
+
+static int add_mark(sub_walk *w, fan_mark mark)
+{
+    if (w->mark_count == w->mark_capacity) {
+        size_t capacity = w->mark_capacity ? 2 * w->mark_capacity : 256;
+        fan_mark *grown = realloc(w->marks, capacity * sizeof *grown);
+        if (!grown)
+            return ISO_E_NOMEM;
+        w->marks = grown;
+        w->mark_capacity = capacity;
+    }
+    w->marks[w->mark_count++] = mark;
+    return 0;
+}
+
 static int cover(void *context, int thread, iso_march_brick *brick)
 {
     const coarse *c = context;
@@ -300,8 +333,13 @@ static int cover(void *context, int thread, iso_march_brick *brick)
     w->integer_samples = !iso_vol_type_is_float(c->vol->type);
     iso_vol_read_box(c->vol, lo, hi, w->samples);
     w->transposed = 0;
+    fan_mark mark = {brick_index(&c->tree->bricks, brick), w->fans.centre_count, w->fans.triangle_count};
     int rc = visit_sub(c, w, &left);
-    return rc ? rc : visit_sub(c, w, &right);
+    if (!rc)
+        rc = visit_sub(c, w, &right);
+    if (rc || w->fans.triangle_count == mark.triangle)
+        return rc;
+    return add_mark(w, mark);
 }
 
 /* ---- PASS 3: the fans' vertices ---- */
@@ -315,19 +353,24 @@ static void place_centre(const iso_volume *vol, const float *index, int world, f
         out[d] = (float)(world ? q[d] : p[d]);
 }
 
-static int number_fans(const iso_volume *vol, const iso_fan_output *fans, const iso_march *march,
-                       int world, iso_mesh *mesh)
+/* Appends centres [centre, centre_end) and triangles [triangle, triangle_end) of fans to
+ * the mesh: centres become new vertices, loop vertices the kernel's ids. A slice's
+ * triangles name only its own centres (a fan's centre is made with it). */
+static int number_slice(const iso_volume *vol, const iso_fan_output *fans, size_t centre, size_t centre_end,
+                        size_t triangle, size_t triangle_end, const iso_march *march, int world, iso_mesh *mesh)
 {
-    assert(mesh->vertex_count + fans->centre_count <= mesh->vertex_capacity);
-    assert(mesh->triangle_count + fans->triangle_count <= mesh->triangle_capacity);
+    assert(mesh->vertex_count + centre_end - centre <= mesh->vertex_capacity);
+    assert(mesh->triangle_count + triangle_end - triangle <= mesh->triangle_capacity);
     size_t first_centre = mesh->vertex_count;
-    for (size_t i = 0; i < fans->centre_count; i++)
+    for (size_t i = centre; i < centre_end; i++)
         place_centre(vol, fans->centres + 3 * i, world, mesh->positions + 3 * mesh->vertex_count++);
     uint32_t *out = mesh->indices + 3 * mesh->triangle_count;
-    for (size_t i = 0; i < 3 * fans->triangle_count; i++) {
-        uint64_t ref = fans->corners[i];
+    for (size_t i = 0; i < 3 * (triangle_end - triangle); i++) {
+        uint64_t ref = fans->corners[3 * triangle + i];
         if (ref & ISO_FAN_CENTRE) {
-            out[i] = (uint32_t)(first_centre + (ref & ~ISO_FAN_CENTRE));
+            size_t index = (size_t)(ref & ~ISO_FAN_CENTRE);
+            assert(index >= centre && index < centre_end);
+            out[i] = (uint32_t)(first_centre + index - centre);
             continue;
         }
         uint32_t corner[3];
@@ -337,8 +380,33 @@ static int number_fans(const iso_volume *vol, const iso_fan_output *fans, const 
         if (out[i] == UINT32_MAX)
             return ISO_E_ARGUMENT; /* a loop vertex the kernel did not number: a bug */
     }
-    mesh->triangle_count += fans->triangle_count;
+    mesh->triangle_count += triangle_end - triangle;
     return 0;
+}
+
+/* PASS 3: PASS 1's fans, then the bricks' in grid order, merged from the threads' marks
+ * (each thread's are in grid order already). */
+static int number_fans(const coarse *c, const iso_march *march, int world, iso_mesh *mesh)
+{
+    const iso_fan_output *first = &c->fans;
+    int rc = number_slice(c->vol, first, 0, first->centre_count, 0, first->triangle_count, march, world, mesh);
+    size_t next[ISO_PARALLEL_MAX_THREADS] = {0};
+    assert(c->thread_count <= ISO_PARALLEL_MAX_THREADS);
+    while (!rc) {
+        int t = -1;
+        for (int u = 0; u < c->thread_count; u++)
+            if (next[u] < c->threads[u].mark_count &&
+                (t < 0 || c->threads[u].marks[next[u]].brick < c->threads[t].marks[next[t]].brick))
+                t = u;
+        if (t < 0)
+            break;
+        const sub_walk *w = &c->threads[t];
+        const fan_mark *m = &w->marks[next[t]++];
+        int last = next[t] == w->mark_count;
+        rc = number_slice(c->vol, &w->fans, m->centre, last ? w->fans.centre_count : m[1].centre, m->triangle,
+                          last ? w->fans.triangle_count : m[1].triangle, march, world, mesh);
+    }
+    return rc;
 }
 
 static void sum_tally(fan_tally *into, const fan_tally *from)
@@ -434,11 +502,9 @@ static int march_and_finish(const iso_tree *tree, const iso_extract_params *para
     fan_tally tally = {0};
     if (c) {
         sum_tally(&tally, &c->tally);
-        rc = number_fans(tree->vol, &c->fans, march, world, mesh);
-        for (int t = 0; t < c->thread_count && !rc; t++) {
+        for (int t = 0; t < c->thread_count; t++)
             sum_tally(&tally, &c->threads[t].tally);
-            rc = number_fans(tree->vol, &c->threads[t].fans, march, world, mesh);
-        }
+        rc = number_fans(c, march, world, mesh);
         if (!rc && tally.nodes_polygonized && iso_mesh_drop_unused(mesh))
             rc = ISO_E_NOMEM;
     }
@@ -468,6 +534,7 @@ static void coarse_free(coarse *c)
     for (int t = 0; c->threads && t < c->thread_count; t++) {
         iso_fan_scratch_free(&c->threads[t].scratch);
         iso_fan_output_free(&c->threads[t].fans);
+        free(c->threads[t].marks);
     }
     free(c->threads);
     free(c->skip);

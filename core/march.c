@@ -64,7 +64,7 @@ typedef struct active_brick {
     uint64_t marching_rows[2];
 } active_brick;
 
-#define MAX_THREADS 64
+#define MAX_THREADS ISO_PARALLEL_MAX_THREADS
 
 /* The level as each type compares against it. An integer sample is above the level
  * exactly when it is above the level's floor, so integer data is compared as integers,
@@ -484,12 +484,6 @@ typedef struct range {
     size_t begin, end;
 } range;
 
-static range share_of(size_t count, int t, int threads)
-{
-    range r = {count * (size_t)t / (size_t)threads, count * (size_t)(t + 1) / (size_t)threads};
-    return r;
-}
-
 /* Active bricks are handed out CHUNK at a time from a shared counter: on a machine where
  * another process holds one core, a fixed split waits for the thread stuck there, while
  * chunks let the free core take more. Chunks of 8 were slower on CThead (neighbouring
@@ -507,23 +501,17 @@ static int next_chunk(march_job *job, range *r)
     return 1;
 }
 
-/* With a cover function, each thread's fans are numbered in thread order afterwards
- * (extract.c), so the bricks a thread classifies must not depend on timing: a fixed split
- * keeps the mesh the same bytes on every run. Without one, chunks. */
+/* Chunks with a cover function too: its caller numbers the fans by brick afterwards
+ * (extract.c), so the mesh does not depend on which thread took which brick. */
 static void classify_share(void *context, int t, int threads)
 {
     march_job *job = context;
     size_t cells = 0; /* summed here, stored once: the job's lines stay unshared */
     range r;
-    if (job->cover) {
-        r = share_of(job->active_count, t, threads);
+    (void)threads;
+    while (next_chunk(job, &r))
         for (size_t i = r.begin; i < r.end; i++)
             cells += classify(job, t, &job->active[i]);
-    } else {
-        while (next_chunk(job, &r))
-            for (size_t i = r.begin; i < r.end; i++)
-                cells += classify(job, t, &job->active[i]);
-    }
     job->cells[t] = cells;
 }
 

@@ -6,7 +6,7 @@
 #include <pthread.h>
 #include <unistd.h>
 
-#define MAX_THREADS 64
+#define MAX_THREADS ISO_PARALLEL_MAX_THREADS
 
 int iso_parallel_cores(void)
 {

@@ -3,6 +3,9 @@
 #ifndef ISO_PARALLEL_H
 #define ISO_PARALLEL_H
 
+/* The most threads any pass uses. */
+#define ISO_PARALLEL_MAX_THREADS 64
+
 /* Cores online, 1..64: what "all cores" (threads = 0) means everywhere. */
 int iso_parallel_cores(void);
 
