@@ -2,6 +2,7 @@
 #include "cli.h"
 
 #include <errno.h>
+#include <malloc.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -117,4 +118,11 @@ void srv_close(srv_subject *s)
     iso_tree_destroy(s->tree);
     iso_vol_destroy(s->vol);
     memset(s, 0, sizeof *s);
+}
+
+/* Returns of mallopt are ignored: it is a tuning, and sanitizers stub it. */
+void srv_keep_freed_memory(void)
+{
+    mallopt(M_MMAP_THRESHOLD, 32 << 20);
+    mallopt(M_TRIM_THRESHOLD, 1 << 30);
 }

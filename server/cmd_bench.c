@@ -78,6 +78,7 @@ int srv_cmd_bench(int argc, char **argv)
     size_t count = 0;
     int have_level = 0, repeat = 3, baselines = 1;
     const char *json_path = NULL, *tol_text = "0,6,10,15,25,50,75,100,200,300,400,500";
+    srv_keep_freed_memory(); /* the server's allocator, as bench_peer tunes VTK's */
     for (int i = 0; i < argc; i++) {
         const char *a = argv[i], *value = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--level") && value) {

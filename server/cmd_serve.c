@@ -8,7 +8,6 @@
  * by --drain-seconds), stop, free, exit 0. */
 #include <errno.h>
 #include <limits.h>
-#include <malloc.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
@@ -366,19 +365,6 @@ done:
     return status;
 }
 
-/* A mesh request allocates and frees tens of MB (the mesh, the edge census, Draco's
- * corner tables). With glibc's defaults the large blocks are fresh mmaps and freed memory
- * above 128 KiB is handed back, so every request faults its pages in again: 7,600 faults
- * per CThead skin request. Keeping them took Draco speed 5 from 280 to 220 ms of CPU on
- * CThead skin (docs/performance.md). Blocks up to 32 MiB (glibc's limit) now come from the
- * heap, and freed memory stays for the next request: the process keeps its peak. Returns
- * of mallopt are ignored: it is a tuning, and sanitizers stub it. */
-static void keep_freed_memory(void)
-{
-    mallopt(M_MMAP_THRESHOLD, 32 << 20);
-    mallopt(M_TRIM_THRESHOLD, 1 << 30);
-}
-
 int srv_cmd_serve(int argc, char **argv)
 {
     serve_options o;
@@ -395,7 +381,7 @@ int srv_cmd_serve(int argc, char **argv)
     /* Past a file size limit (ulimit -f) write() then fails with EFBIG, like a full disk,
      * and the hierarchy is served from memory; the default action would kill the server. */
     signal(SIGXFSZ, SIG_IGN);
-    keep_freed_memory();
+    srv_keep_freed_memory();
     srv_catalog catalog;
     if (read_catalog(&o, &catalog))
         return 1;
