@@ -353,24 +353,30 @@ static void place_centre(const iso_volume *vol, const float *index, int world, f
         out[d] = (float)(world ? q[d] : p[d]);
 }
 
-/* Appends centres [centre, centre_end) and triangles [triangle, triangle_end) of fans to
- * the mesh: centres become new vertices, loop vertices the kernel's ids. A slice's
+/* Centres [centre, centre_end) and triangles [triangle, triangle_end) of fans, to be
+ * written from vertex first_vertex and triangle first_triangle of the mesh. A slice's
  * triangles name only its own centres (a fan's centre is made with it). */
-static int number_slice(const iso_volume *vol, const iso_fan_output *fans, size_t centre, size_t centre_end,
-                        size_t triangle, size_t triangle_end, const iso_march *march, int world, iso_mesh *mesh)
+typedef struct fan_slice {
+    const iso_fan_output *fans;
+    size_t centre, centre_end, triangle, triangle_end;
+    size_t first_vertex, first_triangle;
+} fan_slice;
+
+/* Centres become new vertices, loop vertices the kernel's ids. */
+static int number_slice(const iso_volume *vol, const fan_slice *s, const iso_march *march, int world,
+                        iso_mesh *mesh)
 {
-    assert(mesh->vertex_count + centre_end - centre <= mesh->vertex_capacity);
-    assert(mesh->triangle_count + triangle_end - triangle <= mesh->triangle_capacity);
-    size_t first_centre = mesh->vertex_count;
-    for (size_t i = centre; i < centre_end; i++)
-        place_centre(vol, fans->centres + 3 * i, world, mesh->positions + 3 * mesh->vertex_count++);
-    uint32_t *out = mesh->indices + 3 * mesh->triangle_count;
-    for (size_t i = 0; i < 3 * (triangle_end - triangle); i++) {
-        uint64_t ref = fans->corners[3 * triangle + i];
+    const iso_fan_output *fans = s->fans;
+    float *position = mesh->positions + 3 * s->first_vertex;
+    for (size_t i = s->centre; i < s->centre_end; i++, position += 3)
+        place_centre(vol, fans->centres + 3 * i, world, position);
+    uint32_t *out = mesh->indices + 3 * s->first_triangle;
+    for (size_t i = 0; i < 3 * (s->triangle_end - s->triangle); i++) {
+        uint64_t ref = fans->corners[3 * s->triangle + i];
         if (ref & ISO_FAN_CENTRE) {
             size_t index = (size_t)(ref & ~ISO_FAN_CENTRE);
-            assert(index >= centre && index < centre_end);
-            out[i] = (uint32_t)(first_centre + index - centre);
+            assert(index >= s->centre && index < s->centre_end);
+            out[i] = (uint32_t)(s->first_vertex + index - s->centre);
             continue;
         }
         uint32_t corner[3];
@@ -380,33 +386,85 @@ static int number_slice(const iso_volume *vol, const iso_fan_output *fans, size_
         if (out[i] == UINT32_MAX)
             return ISO_E_ARGUMENT; /* a loop vertex the kernel did not number: a bug */
     }
-    mesh->triangle_count += triangle_end - triangle;
     return 0;
 }
 
-/* PASS 3: PASS 1's fans, then the bricks' in grid order, merged from the threads' marks
- * (each thread's are in grid order already). */
-static int number_fans(const coarse *c, const iso_march *march, int world, iso_mesh *mesh)
+/* PASS 1's fans, then the bricks' in grid order, merged from the threads' marks (each
+ * thread's are in grid order already), placed one after another from the mesh's end.
+ * Returns how many, or 0 if the array cannot be had (*slices NULL). */
+static size_t order_slices(const coarse *c, const iso_mesh *mesh, fan_slice **slices)
 {
-    const iso_fan_output *first = &c->fans;
-    int rc = number_slice(c->vol, first, 0, first->centre_count, 0, first->triangle_count, march, world, mesh);
-    size_t next[ISO_PARALLEL_MAX_THREADS] = {0};
+    size_t count = 1, next[ISO_PARALLEL_MAX_THREADS] = {0};
     assert(c->thread_count <= ISO_PARALLEL_MAX_THREADS);
-    while (!rc) {
+    for (int t = 0; t < c->thread_count; t++)
+        count += c->threads[t].mark_count;
+    fan_slice *s = *slices = malloc(count * sizeof *s);
+    if (!s)
+        return 0;
+    s[0] = (fan_slice){&c->fans, 0, c->fans.centre_count, 0, c->fans.triangle_count, 0, 0};
+    for (size_t i = 1; i < count; i++) {
         int t = -1;
         for (int u = 0; u < c->thread_count; u++)
             if (next[u] < c->threads[u].mark_count &&
                 (t < 0 || c->threads[u].marks[next[u]].brick < c->threads[t].marks[next[t]].brick))
                 t = u;
-        if (t < 0)
-            break;
         const sub_walk *w = &c->threads[t];
         const fan_mark *m = &w->marks[next[t]++];
         int last = next[t] == w->mark_count;
-        rc = number_slice(c->vol, &w->fans, m->centre, last ? w->fans.centre_count : m[1].centre, m->triangle,
-                          last ? w->fans.triangle_count : m[1].triangle, march, world, mesh);
+        s[i] = (fan_slice){&w->fans, m->centre, last ? w->fans.centre_count : m[1].centre, m->triangle,
+                           last ? w->fans.triangle_count : m[1].triangle, 0, 0};
     }
-    return rc;
+    size_t vertex = mesh->vertex_count, triangle = mesh->triangle_count;
+    for (size_t i = 0; i < count; i++) {
+        s[i].first_vertex = vertex;
+        s[i].first_triangle = triangle;
+        vertex += s[i].centre_end - s[i].centre;
+        triangle += s[i].triangle_end - s[i].triangle;
+    }
+    return count;
+}
+
+typedef struct numbering {
+    const iso_volume *vol;
+    const iso_march *march;
+    int world;
+    iso_mesh *mesh;
+    const fan_slice *slices;
+    size_t count;
+    int status[ISO_PARALLEL_MAX_THREADS];
+} numbering;
+
+/* Every slice writes its own, already placed range: any split gives the same mesh. */
+static void number_share(void *context, int t, int threads)
+{
+    numbering *n = context;
+    size_t begin = n->count * (size_t)t / (size_t)threads, end = n->count * (size_t)(t + 1) / (size_t)threads;
+    n->status[t] = 0;
+    for (size_t i = begin; i < end && !n->status[t]; i++)
+        n->status[t] = number_slice(n->vol, &n->slices[i], n->march, n->world, n->mesh);
+}
+
+/* PASS 3, on the extraction's threads. */
+static int number_fans(const coarse *c, const iso_march *march, int world, iso_mesh *mesh)
+{
+    fan_slice *slices;
+    size_t count = order_slices(c, mesh, &slices);
+    if (!slices)
+        return ISO_E_NOMEM;
+    const fan_slice *last = &slices[count - 1];
+    size_t vertices = last->first_vertex + last->centre_end - last->centre;
+    size_t triangles = last->first_triangle + last->triangle_end - last->triangle;
+    assert(vertices <= mesh->vertex_capacity && triangles <= mesh->triangle_capacity);
+    numbering n = {c->vol, march, world, mesh, slices, count, {0}};
+    int threads = count < (size_t)c->thread_count ? (int)count : c->thread_count;
+    iso_parallel_run(threads, number_share, &n);
+    free(slices);
+    for (int t = 0; t < threads; t++)
+        if (n.status[t])
+            return n.status[t];
+    mesh->vertex_count = vertices;
+    mesh->triangle_count = triangles;
+    return 0;
 }
 
 static void sum_tally(fan_tally *into, const fan_tally *from)
