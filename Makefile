@@ -148,7 +148,7 @@ test-asan: setup
 bench: setup all
 	bash tests/bench/run.sh
 
-# Until the server exists, the run command extracts the default volume and reports it.
+# The README's run command: the server on the default collection (scripts/run.sh).
 run: setup all
 	bash scripts/run.sh
 
