@@ -9,15 +9,17 @@
  * PASS 1 (select): bricks with min <= level < max, in grid order.
  * PASS 2 (classify, threads): per active brick, one 9-bit word per x-row of samples
  *   saying which are above the level; from those by shifts and xors, the owned crossing
- *   edges of every row and axis and their running count; the triangles of the cells that
- *   are neither all inside nor all outside (found 8 cells at a time, per row of cells).
+ *   edges of every row and axis and the row's cells that are neither all inside nor all
+ *   outside (8 rows at a time with SSE2 in a full interior brick); then the crossings'
+ *   running count and the mixed cells' triangles, in the rows that have some.
  * PASS 3 (offsets): prefix sums give each brick its first vertex and first triangle; the
  *   mesh is allocated once at its final size (the caller's arrays reused if they fit).
  * PASS 4 (generate, threads): per active brick, the positions of its owned crossings in
  *   numbering order, then the triangles of its mixed cells into its own range.
  *
  * Layout: a brick has at most 9x9x9 samples; row r = z * 9 + y of the brick holds bit x
- * for sample (x, y, z), brick-local. Only bricks with triangles are touched in PASS 4.
+ * for sample (x, y, z), brick-local; a row of cells is named by the sample row of its
+ * low corners. Only bricks with triangles are touched in PASS 4.
  *
  * With a tolerance (iso_march_begin), PASS 2 also hands each brick to the caller's cover
  * function, which may take cells out of marching cubes (it fans them itself), and skipped
@@ -646,15 +648,6 @@ static void neighbours_of(const march_job *job, const active_brick *ab, const ac
     }
 }
 
-/* The ids of the crossings on the brick's upper faces, which its neighbours own (none
- * on a face that is the volume's last sample plane: the brick owns those). An edge's
- * samples belong to its owner too, so the owner's min/max hold the level: it is active.
- *
- * Face by face, since only the faces' rows have such edges: the z face (every edge of
- * its rows but those along z), the y face below it (edges along x and z), and the x
- * face's column (bit 8 of the edges along y and z of every other row). Where a row's
- * edges belong to the neighbour at the same x, they are that neighbour's crossings of
- * the same row in the same order, so their ids are consecutive from the row's first. */
 /* The crossing edges in m (bits x < owned x) of row r along axis, owned by the neighbour
  * whose own row is owner_row: numbered there in increasing x, from the row's first id. */
 static inline void shared_run(uint32_t *ids, unsigned m, const active_brick *owner, int owner_row, int axis)
@@ -704,6 +697,15 @@ static void column_ids(const active_brick *ab, const active_brick *owner, id_tab
 }
 #endif
 
+/* The ids of the crossings on the brick's upper faces, which its neighbours own (none
+ * on a face that is the volume's last sample plane: the brick owns those). An edge's
+ * samples belong to its owner too, so the owner's min/max hold the level: it is active.
+ *
+ * Face by face, since only the faces' rows have such edges: the z face (every edge of
+ * its rows but those along z), the y face below it (edges along x and z), and the x
+ * face's column (bit 8 of the edges along y and z of every other row). Where a row's
+ * edges belong to the neighbour at the same x, they are that neighbour's crossings of
+ * the same row in the same order, so their ids are consecutive from the row's first. */
 static void fill_shared_ids(const march_job *job, const active_brick *ab, id_table *table)
 {
     const active_brick *near[8];
@@ -789,21 +791,21 @@ static void emit_triangles(const march_job *job, const active_brick *ab, const i
     const uint32_t *ids = &table->at[0][0][0];
     uint32_t *out = job->mesh->indices + 3 * ab->first_triangle;
     for (int word = 0; word < 2; word++)
-    for (uint64_t rows = ab->marching_rows[word]; rows; rows &= rows - 1) {
-        int r = 64 * word + __builtin_ctzll(rows);
-        uint64_t row = row_cases(cell_row_at(ab->inside, r % S, r / S));
-        for (unsigned m = ab->marching[r]; m; m &= m - 1) {
-            int x = __builtin_ctz(m);
-            unsigned c = case_of(row, x);
-            const uint32_t *cell = ids + r * S + x;
-            const uint16_t *corner = case_corner[c];
-            for (int k = cases[c].triangle_count; k > 0; k--, corner += 3, out += 3) {
-                out[0] = cell[corner[0]];
-                out[1] = cell[corner[1]];
-                out[2] = cell[corner[2]];
+        for (uint64_t rows = ab->marching_rows[word]; rows; rows &= rows - 1) {
+            int r = 64 * word + __builtin_ctzll(rows);
+            uint64_t row = row_cases(cell_row_at(ab->inside, r % S, r / S));
+            for (unsigned m = ab->marching[r]; m; m &= m - 1) {
+                int x = __builtin_ctz(m);
+                unsigned c = case_of(row, x);
+                const uint32_t *cell = ids + r * S + x;
+                const uint16_t *corner = case_corner[c];
+                for (int k = cases[c].triangle_count; k > 0; k--, corner += 3, out += 3) {
+                    out[0] = cell[corner[0]];
+                    out[1] = cell[corner[1]];
+                    out[2] = cell[corner[2]];
+                }
             }
         }
-    }
     assert(out == job->mesh->indices + 3 * (ab->first_triangle + ab->triangles));
 }
 

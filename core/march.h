@@ -45,9 +45,9 @@ typedef struct iso_march_brick {
     size_t extra_vertices, extra_triangles; /* what it emits, so the mesh is sized once */
 } iso_march_brick;
 
-/* Called once per active, unskipped brick, on thread `thread` (0..threads-1; each thread
- * takes its bricks in increasing grid order, which bricks depending on timing). Returns 0
- * or ISO_E_NOMEM. */
+/* Called once per active, unskipped brick, on thread `thread` (0..threads-1). Which
+ * thread gets which brick depends on timing; each sees its own in increasing grid order.
+ * Returns 0 or ISO_E_NOMEM. */
 typedef int (*iso_march_cover_fn)(void *context, int thread, iso_march_brick *brick);
 
 /* What to do with a brick a caller's fan covers whole. */

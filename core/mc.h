@@ -47,23 +47,8 @@ static inline unsigned iso_mc_case_index(const double v[8], double level)
  * edge's value step, which extraction reports in its error bound. */
 #define ISO_MC_END_GAP (1.0 / 1024)
 
-/* The crossing on an edge whose low end has value a and high end b, as a fraction of the
- * edge from the low end; exactly one end must be above the level. A NaN end puts it
- * midway, an infinite end against the other. Every module that places vertices on grid edges uses this, so that a vertex is
- * bit-identical whichever piece of the surface computes it. */
-static inline double iso_mc_edge_t_finite(double a, double b, double level);
-static inline double iso_mc_edge_t(double a, double b, double level)
-{
-    /* An infinite end (a float volume's, or the virtual layer of a cap) is infinitely far
-     * in value: the crossing sits against the finite end. */
-    if (a - a != 0 && a == a)
-        return 1.0 - ISO_MC_END_GAP;
-    if (b - b != 0 && b == b)
-        return ISO_MC_END_GAP;
-    return iso_mc_edge_t_finite(a, b, level);
-}
-
-/* iso_mc_edge_t for ends known not to be infinite (integer samples): the same value. */
+/* The crossing iso_mc_edge_t gives for ends known not to be infinite (integer samples),
+ * without testing for them. */
 static inline double iso_mc_edge_t_finite(double a, double b, double level)
 {
     double t = (level - a) / (b - a);
@@ -74,6 +59,22 @@ static inline double iso_mc_edge_t_finite(double a, double b, double level)
     if (t > 1.0 - ISO_MC_END_GAP)
         return 1.0 - ISO_MC_END_GAP;
     return t;
+}
+
+/* The crossing on an edge whose low end has value a and high end b, as a fraction of the
+ * edge from the low end; exactly one end must be above the level. A NaN end puts it
+ * midway, an infinite end against the other. Every module that places vertices on grid
+ * edges uses this, so that a vertex is bit-identical whichever piece of the surface
+ * computes it. */
+static inline double iso_mc_edge_t(double a, double b, double level)
+{
+    /* An infinite end (a float volume's, or the virtual layer of a cap) is infinitely far
+     * in value: the crossing sits against the finite end. */
+    if (a - a != 0 && a == a)
+        return 1.0 - ISO_MC_END_GAP;
+    if (b - b != 0 && b == b)
+        return ISO_MC_END_GAP;
+    return iso_mc_edge_t_finite(a, b, level);
 }
 
 /* |value at the crossing - level| for the crossing t = iso_mc_edge_t(a, b, level): nonzero
