@@ -435,9 +435,12 @@ static void extract_threads(const iso_tree *tree, double level, double tolerance
  * interior edge has two triangles, and the bytes do not depend on the thread count. */
 static void test_fans_join_the_kernel_without_weld(void)
 {
-    static const char *fields[] = {"field:sphere:61x47x53", "field:torus:64x64x40", "field:ml:65x65x65"};
-    static const double levels[] = {0.5, 0.5, 0.5};
-    for (int f = 0; f < 3 && !check_failed(); f++) {
+    /* The last is large enough (2,744 bricks) that threads take many 64-brick chunks in
+     * turn, so fans come from both threads interleaved and are numbered by brick. */
+    static const char *fields[] = {"field:sphere:61x47x53", "field:torus:64x64x40", "field:ml:65x65x65",
+                                   "field:ml:113x113x113"};
+    static const double levels[] = {0.5, 0.5, 0.5, 0.5};
+    for (int f = 0; f < 4 && !check_failed(); f++) {
         iso_volume *vol;
         iso_error err;
         CHECK_OK(iso_load(fields[f], NULL, &vol, &err), &err);
