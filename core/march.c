@@ -90,7 +90,6 @@ typedef struct iso_march {
     double level;
     threshold threshold;     /* the level as the voxel type compares it, made once */
     threshold_reach reach;
-    int integer;             /* integer samples: no infinite ends */
     active_brick *active;
     size_t active_count;
     int32_t *slot;     /* per brick of the grid: its index in active, or -1 */
@@ -583,12 +582,13 @@ typedef struct id_table {
 
 /* Positions of the brick's owned crossings, in numbering order, and their ids into table;
  * returns the largest vertex error. */
-static double place_vertices(const march_job *job, const active_brick *ab, id_table *table)
+static inline __attribute__((always_inline)) double place_vertices_as(const march_job *job, const active_brick *ab,
+                                                                      id_table *table, const iso_voxel_type type)
 {
     const iso_volume *vol = job->vol;
     const size_t step[3] = {1, vol->dims[0], vol->dims[0] * vol->dims[1]};
     const double level = job->level;
-    const int integer = job->integer;
+    const int integer = type != ISO_F32 && type != ISO_F64;
     size_t lo[3];
     brick_origin(ab, lo);
     float *p = job->mesh->positions + 3 * ab->first_vertex;
@@ -610,7 +610,8 @@ static double place_vertices(const march_job *job, const active_brick *ab, id_ta
                     int x = __builtin_ctz(m);
                     table->at[a][r][x] = id++;
                     size_t at = row_at + (size_t)x;
-                    double from = iso_vol_sample(vol, at), to = iso_vol_sample(vol, at + step[a]);
+                    double from = iso_vol_sample_as(vol->data, type, at);
+                    double to = iso_vol_sample_as(vol->data, type, at + step[a]);
                     double t = integer ? iso_mc_edge_t_finite(from, to, level) : iso_mc_edge_t(from, to, level);
                     double e = iso_mc_edge_error(from, to, t, level);
                     if (e > worst)
@@ -629,6 +630,22 @@ static double place_vertices(const march_job *job, const active_brick *ab, id_ta
         }
     assert(p == job->mesh->positions + 3 * (ab->first_vertex + ab->vertices));
     return worst;
+}
+
+/* place_vertices_as, one copy per voxel type (the sample reads without a switch). */
+static double place_vertices(const march_job *job, const active_brick *ab, id_table *table)
+{
+    switch (job->vol->type) {
+    case ISO_U8: return place_vertices_as(job, ab, table, ISO_U8);
+    case ISO_I8: return place_vertices_as(job, ab, table, ISO_I8);
+    case ISO_U16: return place_vertices_as(job, ab, table, ISO_U16);
+    case ISO_I16: return place_vertices_as(job, ab, table, ISO_I16);
+    case ISO_U32: return place_vertices_as(job, ab, table, ISO_U32);
+    case ISO_I32: return place_vertices_as(job, ab, table, ISO_I32);
+    case ISO_F32: return place_vertices_as(job, ab, table, ISO_F32);
+    case ISO_F64: return place_vertices_as(job, ab, table, ISO_F64);
+    }
+    return 0;
 }
 
 /* The brick and its upper neighbours, by k = up_x | up_y << 1 | up_z << 2 (NULL where
@@ -976,7 +993,6 @@ int iso_march_begin(const iso_volume *vol, const iso_bricks *bricks, double leve
     job->bricks = bricks;
     job->level = level;
     job->reach = make_threshold(vol->type, level, &job->threshold);
-    job->integer = vol->type != ISO_F32 && vol->type != ISO_F64;
     job->mesh = mesh;
     job->world = options->world;
     job->axis_aligned = 1;

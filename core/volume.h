@@ -65,21 +65,28 @@ static inline size_t iso_vol_index(const iso_volume *vol, size_t i, size_t j, si
     return (k * vol->dims[1] + j) * vol->dims[0] + i;
 }
 
+/* Sample at linear index `at` of samples of the given type, unchecked. Called with a
+ * constant type inside a function specialized per type, the switch folds away. */
+static inline double iso_vol_sample_as(const void *data, iso_voxel_type type, size_t at)
+{
+    switch (type) {
+    case ISO_U8: return ((const uint8_t *)data)[at];
+    case ISO_I8: return ((const int8_t *)data)[at];
+    case ISO_U16: return ((const uint16_t *)data)[at];
+    case ISO_I16: return ((const int16_t *)data)[at];
+    case ISO_U32: return ((const uint32_t *)data)[at];
+    case ISO_I32: return ((const int32_t *)data)[at];
+    case ISO_F32: return ((const float *)data)[at];
+    case ISO_F64: return ((const double *)data)[at];
+    }
+    return 0;
+}
+
 /* Sample at linear index `at` (iso_vol_index), unchecked: for loops that know their
  * bounds. */
 static inline double iso_vol_sample(const iso_volume *vol, size_t at)
 {
-    switch (vol->type) {
-    case ISO_U8: return ((const uint8_t *)vol->data)[at];
-    case ISO_I8: return ((const int8_t *)vol->data)[at];
-    case ISO_U16: return ((const uint16_t *)vol->data)[at];
-    case ISO_I16: return ((const int16_t *)vol->data)[at];
-    case ISO_U32: return ((const uint32_t *)vol->data)[at];
-    case ISO_I32: return ((const int32_t *)vol->data)[at];
-    case ISO_F32: return ((const float *)vol->data)[at];
-    case ISO_F64: return ((const double *)vol->data)[at];
-    }
-    return 0;
+    return iso_vol_sample_as(vol->data, vol->type, at);
 }
 
 /* Sample (i,j,k) as a double. Asserts the indices are inside. O(1), a switch per call:
