@@ -518,10 +518,11 @@ static void classify_share(void *context, int t, int threads)
 
 /* ---- PASS 4: generate ---- */
 
-/* The vertex's float index position, then, if asked, world mm from that float position
- * exactly as the other extraction paths place theirs (iso_vol_index_to_world). With an
- * identity direction that map is origin + index * spacing to the bit (the other terms
- * add +0 to a sum that cannot be -0, indices being >= 0), without its six products. */
+/* World mm of a vertex of a volume with a rotated direction, from its float index
+ * position, exactly as the other extraction paths place theirs (iso_vol_index_to_world).
+ * Index space and identity directions go through job->plane instead (along_axis), to the
+ * same bits: there the map is origin + index * spacing (the other terms add +0 to a sum
+ * that cannot be -0, indices being >= 0). */
 static void store_position(const march_job *job, const size_t c[3], int axis, double t, float *p)
 {
     /* Rounded once, in one expression per coordinate: GCC 12.2's SLP vectorizer at -O2
@@ -529,18 +530,8 @@ static void store_position(const march_job *job, const size_t c[3], int axis, do
      * the array (test_march's world positions test catches that). */
     double index[3] = {(float)c[0], (float)c[1], (float)c[2]}, world[3];
     index[axis] = (float)((double)c[axis] + t);
-    if (!job->world) {
-        for (int d = 0; d < 3; d++)
-            p[d] = (float)index[d];
-        return;
-    }
-    const iso_volume *vol = job->vol;
-    if (job->axis_aligned) {
-        for (int d = 0; d < 3; d++)
-            p[d] = (float)(vol->origin[d] + index[d] * vol->spacing[d]);
-        return;
-    }
-    iso_vol_index_to_world(vol, index, world);
+    assert(job->world && !job->axis_aligned);
+    iso_vol_index_to_world(job->vol, index, world);
     for (int d = 0; d < 3; d++)
         p[d] = (float)world[d];
 }
