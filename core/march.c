@@ -868,39 +868,60 @@ static void generate_share(void *context, int t, int threads)
 
 /* ---- the passes in order ---- */
 
-static int brick_selected(const march_job *job, size_t at, int prune)
+/* The largest float not above level: a float x is <= level exactly when x <= it, and
+ * > level exactly when x > it, so the bricks' float bounds are compared without widening
+ * each one to double. */
+static float float_at_or_below(double level)
+{
+    float f = (float)level;
+    return (double)f > level ? nextafterf(f, -INFINITY) : f;
+}
+
+/* Numbers the selected bricks in grid order: slot[at] is the number or -1, order[n] the
+ * grid index of number n. One branch-free pass over the grid, as many bricks are
+ * inactive as there are in a sparse volume. */
+static size_t number_selected(const march_job *job, int prune, int32_t *slot, uint32_t *order)
 {
     const iso_bricks *g = job->bricks;
-    if (job->skip && job->skip[at] == ISO_MARCH_SKIP_UNREAD)
-        return 0;
-    return !prune || (g->min[at] <= job->level && job->level < g->max[at]);
+    size_t total = iso_bricks_total(g), n = 0;
+    float level = float_at_or_below(job->level);
+    const uint8_t *skip = job->skip;
+    for (size_t at = 0; at < total; at++) {
+        int on = !prune || ((g->min[at] <= level) & (g->max[at] > level));
+        if (skip)
+            on &= skip[at] != ISO_MARCH_SKIP_UNREAD;
+        slot[at] = on ? (int32_t)n : -1;
+        order[n] = (uint32_t)at;
+        n += (size_t)on;
+    }
+    return n;
 }
 
 static int select_bricks(march_job *job, int prune)
 {
     const iso_bricks *g = job->bricks;
-    size_t total = iso_bricks_total(g), count = 0;
-    for (size_t i = 0; i < total; i++)
-        count += brick_selected(job, i, prune);
+    size_t total = iso_bricks_total(g);
     job->slot = malloc(total * sizeof *job->slot);
-    job->active = malloc((count ? count : 1) * sizeof *job->active);
-    if (!job->slot || !job->active)
+    uint32_t *order = malloc(total * sizeof *order);
+    if (!job->slot || !order) {
+        free(order);
         return ISO_E_NOMEM;
-    size_t n = 0;
-    for (uint32_t k = 0; k < g->count[2]; k++)
-        for (uint32_t j = 0; j < g->count[1]; j++)
-            for (uint32_t i = 0; i < g->count[0]; i++) {
-                size_t at = ((size_t)k * g->count[1] + j) * g->count[0] + i;
-                int on = brick_selected(job, at, prune);
-                job->slot[at] = on ? (int32_t)n : -1;
-                if (on) {
-                    active_brick *ab = &job->active[n++];
-                    ab->skip = job->skip && job->skip[at];
-                    ab->brick[0] = i;
-                    ab->brick[1] = j;
-                    ab->brick[2] = k;
-                }
-            }
+    }
+    size_t n = number_selected(job, prune, job->slot, order);
+    job->active = malloc((n ? n : 1) * sizeof *job->active);
+    if (!job->active) {
+        free(order);
+        return ISO_E_NOMEM;
+    }
+    for (size_t i = 0; i < n; i++) {
+        active_brick *ab = &job->active[i];
+        uint32_t at = order[i];
+        ab->skip = job->skip && job->skip[at];
+        ab->brick[0] = at % g->count[0];
+        ab->brick[1] = at / g->count[0] % g->count[1];
+        ab->brick[2] = at / g->count[0] / g->count[1];
+    }
+    free(order);
     job->active_count = n;
     return 0;
 }

@@ -131,6 +131,28 @@ static void test_every_type_at_its_range_ends(void)
     }
 }
 
+/* Levels a hair either side of samples that no float holds: the kernel selects bricks by
+ * comparing their float bounds with the largest float not above the level, which must
+ * keep every brick the double compare of the full scan would. 26 x 10 x 10 doubles, four
+ * bricks along x. */
+static void test_levels_between_floats(void)
+{
+    const double values[] = {0.1, 1.0 / 3, 0.7, 1e-9};
+    iso_volume *vol = surface_make_volume(26, 10, 10, ISO_F64);
+    for (size_t k = 0; k < 10; k++)
+        for (size_t j = 0; j < 10; j++)
+            for (size_t i = 0; i < 26; i++)
+                iso_vol_set(vol, i, j, k, values[(i / 8 + (surface_uniform() < 0.3)) % 4]);
+    iso_vol_update_stats(vol);
+    for (size_t v = 0; v < sizeof values / sizeof *values && !check_failed(); v++) {
+        check_same_as_full_scan(vol, values[v]);
+        check_same_as_full_scan(vol, nextafter(values[v], INFINITY));
+        check_same_as_full_scan(vol, nextafter(values[v], -INFINITY));
+        check_same_as_full_scan(vol, (double)(float)values[v]);
+    }
+    iso_vol_destroy(vol);
+}
+
 /* World positions are the index positions, as floats, through iso_vol_index_to_world to
  * the bit, with an identity direction (the kernel's shortcut) and with a rotated one. */
 static void test_world_positions_are_the_index_map(void)
@@ -249,6 +271,7 @@ int main(void)
 {
     CHECK_RUN(test_random_fields_match_full_scan);
     CHECK_RUN(test_every_type_at_its_range_ends);
+    CHECK_RUN(test_levels_between_floats);
     CHECK_RUN(test_world_positions_are_the_index_map);
     CHECK_RUN(test_octahedron_across_eight_bricks);
     CHECK_RUN(test_threads_give_identical_meshes);
