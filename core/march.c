@@ -571,53 +571,71 @@ typedef struct id_table {
     uint32_t at[3][ROWS][S];
 } id_table;
 
-/* Positions of the brick's owned crossings, in numbering order, and their ids into table;
- * returns the largest vertex error. */
+/* The crossings of row r along axis a of a brick: ids into table from *id, positions from
+ * p on; returns p past them. Inlined with a constant a, so that the position's axis and
+ * the sample step fold. c is the row's first sample, row_at its linear index. */
+static inline __attribute__((always_inline)) float *place_row(const march_job *job, const active_brick *ab,
+                                                              id_table *table, const iso_voxel_type type,
+                                                              const int a, int r, const size_t c[3],
+                                                              size_t row_at, uint32_t *id, double *worst, float *p)
+{
+    const iso_volume *vol = job->vol;
+    const double level = job->level;
+    const int integer = type != ISO_F32 && type != ISO_F64;
+    const size_t step = a == 0 ? 1 : a == 1 ? vol->dims[0] : vol->dims[0] * vol->dims[1];
+    const float *plane_x = job->plane[0];
+    /* What is the same along the row is read once (the compiler cannot hoist it: p may
+     * alias the planes). */
+    const float row_y = plane_x ? job->plane[1][c[1]] : 0, row_z = plane_x ? job->plane[2][c[2]] : 0;
+    uint32_t next = *id;
+    double most = *worst;
+    for (unsigned m = ab->cross[a][r]; m; m &= m - 1) {
+        int x = __builtin_ctz(m);
+        table->at[a][r][x] = next++;
+        size_t at = row_at + (size_t)x;
+        double from = iso_vol_sample_as(vol->data, type, at);
+        double to = iso_vol_sample_as(vol->data, type, at + step);
+        double t = integer ? iso_mc_edge_t_finite(from, to, level) : iso_mc_edge_t(from, to, level);
+        double e = iso_mc_edge_error(from, to, t, level);
+        if (e > most)
+            most = e;
+        size_t cx = c[0] + (size_t)x;
+        if (plane_x) {
+            p[0] = a == 0 ? along_axis(job, 0, cx, t) : plane_x[cx];
+            p[1] = a == 1 ? along_axis(job, 1, c[1], t) : row_y;
+            p[2] = a == 2 ? along_axis(job, 2, c[2], t) : row_z;
+        } else {
+            const size_t corner[3] = {cx, c[1], c[2]};
+            store_position(job, corner, a, t, p);
+        }
+        p += 3;
+    }
+    *id = next;
+    *worst = most;
+    return p;
+}
+
+/* Positions of the brick's owned crossings, in numbering order (rows in ascending
+ * r = z * 9 + y, then axis, then x), and their ids into table; returns the largest
+ * vertex error. */
 static inline __attribute__((always_inline)) double place_vertices_as(const march_job *job, const active_brick *ab,
                                                                       id_table *table, const iso_voxel_type type)
 {
     const iso_volume *vol = job->vol;
-    const size_t step[3] = {1, vol->dims[0], vol->dims[0] * vol->dims[1]};
-    const double level = job->level;
-    const int integer = type != ISO_F32 && type != ISO_F64;
+    const size_t row_step = vol->dims[0], plane_step = vol->dims[0] * vol->dims[1];
     size_t lo[3];
     brick_origin(ab, lo);
     float *p = job->mesh->positions + 3 * ab->first_vertex;
     uint32_t id = (uint32_t)ab->first_vertex;
     double worst = 0;
-    /* Rows in ascending r = z * 9 + y: the numbering order. What is the same along a row
-     * is read once per row (the compiler cannot hoist it: p may alias the planes). */
     for (int word = 0; word < 2; word++)
         for (uint64_t rows = ab->crossing_rows[word]; rows; rows &= rows - 1) {
             int r = 64 * word + __builtin_ctzll(rows);
-            size_t c[3] = {lo[0], lo[1] + (size_t)(r % S), lo[2] + (size_t)(r / S)};
-            size_t row_at = c[0] + c[1] * step[1] + c[2] * step[2];
-            float row_p[3] = {0, 0, 0};
-            if (job->plane[0])
-                for (int d = 1; d < 3; d++)
-                    row_p[d] = job->plane[d][c[d]];
-            for (int a = 0; a < 3; a++)
-                for (unsigned m = ab->cross[a][r]; m; m &= m - 1) {
-                    int x = __builtin_ctz(m);
-                    table->at[a][r][x] = id++;
-                    size_t at = row_at + (size_t)x;
-                    double from = iso_vol_sample_as(vol->data, type, at);
-                    double to = iso_vol_sample_as(vol->data, type, at + step[a]);
-                    double t = integer ? iso_mc_edge_t_finite(from, to, level) : iso_mc_edge_t(from, to, level);
-                    double e = iso_mc_edge_error(from, to, t, level);
-                    if (e > worst)
-                        worst = e;
-                    c[0] = lo[0] + (size_t)x;
-                    if (job->plane[0]) {
-                        p[0] = job->plane[0][c[0]];
-                        p[1] = row_p[1];
-                        p[2] = row_p[2];
-                        p[a] = along_axis(job, a, c[a], t);
-                    } else {
-                        store_position(job, c, a, t, p);
-                    }
-                    p += 3;
-                }
+            const size_t c[3] = {lo[0], lo[1] + (size_t)(r % S), lo[2] + (size_t)(r / S)};
+            size_t row_at = c[0] + c[1] * row_step + c[2] * plane_step;
+            p = place_row(job, ab, table, type, 0, r, c, row_at, &id, &worst, p);
+            p = place_row(job, ab, table, type, 1, r, c, row_at, &id, &worst, p);
+            p = place_row(job, ab, table, type, 2, r, c, row_at, &id, &worst, p);
         }
     assert(p == job->mesh->positions + 3 * (ab->first_vertex + ab->vertices));
     return worst;
