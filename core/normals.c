@@ -72,28 +72,40 @@ static size_t clamp_index(long i, size_t n)
     return i < 0 ? 0 : (size_t)i >= n ? n - 1 : (size_t)i;
 }
 
-/* The order^3 samples of the spline's support from first[] on, x fastest, into block:
- * border samples repeated, NaN read as the volume's minimum. Row offsets are computed
- * once per axis, and the voxel type is switched on once per vertex, not per sample. */
+/* The n[0] x n[1] x n[2] samples of the spline's support from first[] on, x fastest, into
+ * block: border samples repeated, NaN read as the volume's minimum. Row offsets are
+ * computed once per axis, and the voxel type is switched on once per vertex, not per
+ * sample. */
 #define GATHER(T)                                                                   \
     do {                                                                            \
         const T *data = (const T *)vol->data;                                       \
-        for (int k = 0; k < order; k++)                                             \
-            for (int j = 0; j < order; j++) {                                       \
-                const T *row = data + (z[k] * vol->dims[1] + y[j]) * vol->dims[0];  \
-                for (int i = 0; i < order; i++)                                     \
+        _Pragma("GCC unroll 4") for (int k = 0; k < n2; k++)                        \
+            _Pragma("GCC unroll 4") for (int j = 0; j < n1; j++) {                  \
+                const T *row = data + z[k] * plane + y[j] * vol->dims[0];           \
+                _Pragma("GCC unroll 4") for (int i = 0; i < n0; i++)                \
                     *out++ = (double)row[x[i]];                                     \
             }                                                                       \
     } while (0)
 
-static inline __attribute__((always_inline)) void gather(const iso_volume *vol, const int order,
-                                                         const long first[3], double *block)
+static inline __attribute__((always_inline)) void gather(const iso_volume *vol, const int n0, const int n1,
+                                                         const int n2, const long first[3], double *block)
 {
-    size_t x[4], y[4], z[4];
-    for (int a = 0; a < order; a++) {
-        x[a] = clamp_index(first[0] + a, vol->dims[0]);
-        y[a] = clamp_index(first[1] + a, vol->dims[1]);
-        z[a] = clamp_index(first[2] + a, vol->dims[2]);
+    size_t x[4], y[4], z[4], plane = vol->dims[0] * vol->dims[1];
+    if (first[0] >= 0 && first[1] >= 0 && first[2] >= 0 && (size_t)first[0] + (size_t)n0 <= vol->dims[0] &&
+        (size_t)first[1] + (size_t)n1 <= vol->dims[1] && (size_t)first[2] + (size_t)n2 <= vol->dims[2]) {
+        /* Inside the volume, as nearly every vertex is: no clamping. */
+        for (int a = 0; a < 4; a++) {
+            x[a] = (size_t)first[0] + (size_t)a;
+            y[a] = (size_t)first[1] + (size_t)a;
+            z[a] = (size_t)first[2] + (size_t)a;
+        }
+    } else {
+        for (int a = 0; a < n0; a++)
+            x[a] = clamp_index(first[0] + a, vol->dims[0]);
+        for (int a = 0; a < n1; a++)
+            y[a] = clamp_index(first[1] + a, vol->dims[1]);
+        for (int a = 0; a < n2; a++)
+            z[a] = clamp_index(first[2] + a, vol->dims[2]);
     }
     double *out = block;
     switch (vol->type) {
@@ -105,32 +117,37 @@ static inline __attribute__((always_inline)) void gather(const iso_volume *vol, 
     case ISO_I32: GATHER(int32_t); break;
     case ISO_F32: GATHER(float); break;
     case ISO_F64: GATHER(double); break;
+    default: /* a loaded volume has one of the types above */
+        assert(0);
+        memset(block, 0, sizeof(double) * (size_t)(n0 * n1 * n2));
     }
     if (vol->has_nan)
-        for (int n = 0; n < order * order * order; n++)
+        for (int n = 0; n < n0 * n1 * n2; n++)
             if (block[n] != block[n])
                 block[n] = vol->value_min;
 }
 
-/* The B-spline's gradient in index space at p, separably: each x row of the block reduces
- * to its value and x derivative, each y column of those to three partial sums, then z.
- * About 2 order^3 + 3 order^2 + 6 multiply-adds instead of 3 order^3 products of four.
- * Inlined into one copy per order (gradient_2/3/4) so that its loops unroll. */
-static inline __attribute__((always_inline)) void gradient_of(const iso_volume *vol, const int order,
-                                                              const double p[3], double g[3])
+/* The spline's gradient in index space from its weights, separably: each x row of the
+ * block reduces to its value and x derivative, each y column of those to three partial
+ * sums, then z. About 2 n^3 + 3 n^2 + 6 multiply-adds instead of 3 n^3 products of four.
+ * Inlined with constant tap counts (gradient_2/3/4) so that its loops unroll. */
+static inline __attribute__((always_inline)) void spline_gradient(const iso_volume *vol, const int n0,
+                                                                  const int n1, const int n2,
+                                                                  const long first[3], const double (*w)[4],
+                                                                  const double (*d)[4], double g[3])
 {
-    double w[3][4], d[3][4], block[64];
-    long first[3];
-    for (int a = 0; a < 3; a++)
-        basis(order, p[a], vol->dims[a], &first[a], w[a], d[a]);
-    gather(vol, order, first, block);
+    double block[64];
+    gather(vol, n0, n1, n2, first, block);
     g[0] = g[1] = g[2] = 0;
-    for (int k = 0; k < order; k++) {
+#pragma GCC unroll 4
+    for (int k = 0; k < n2; k++) {
         double value_xy = 0, dx_y = 0, x_dy = 0; /* f, df/dx, df/dy on this z plane */
-        for (int j = 0; j < order; j++) {
-            const double *row = block + (k * order + j) * order;
+#pragma GCC unroll 4
+        for (int j = 0; j < n1; j++) {
+            const double *row = block + (k * n1 + j) * n0;
             double value_x = 0, dx = 0;
-            for (int i = 0; i < order; i++) {
+#pragma GCC unroll 4
+            for (int i = 0; i < n0; i++) {
                 value_x += w[0][i] * row[i];
                 dx += d[0][i] * row[i];
             }
@@ -144,9 +161,66 @@ static inline __attribute__((always_inline)) void gradient_of(const iso_volume *
     }
 }
 
+static inline __attribute__((always_inline)) void gradient_of(const iso_volume *vol, const int order,
+                                                              const double p[3], double g[3])
+{
+    double w[3][4], d[3][4];
+    long first[3];
+    for (int a = 0; a < 3; a++)
+        basis(order, p[a], vol->dims[a], &first[a], w[a], d[a]);
+    spline_gradient(vol, order, order, order, first, w, d, g);
+}
+
 static void gradient_2(const iso_volume *vol, const double p[3], double g[3]) { gradient_of(vol, 2, p, g); }
 static void gradient_3(const iso_volume *vol, const double p[3], double g[3]) { gradient_of(vol, 3, p, g); }
-static void gradient_4(const iso_volume *vol, const double p[3], double g[3]) { gradient_of(vol, 4, p, g); }
+
+/* ---- the tricubic gradient at a grid edge's crossing ----
+ *
+ * Every vertex marching cubes places lies on a grid edge: two of its three coordinates
+ * are sample planes. There the cubic's weights are {1, 4, 1, 0} / 6 and its derivative's
+ * {-1, 0, 1, 0} / 2: one tap of four vanishes on each of those axes, and the support is
+ * 4 x 3 x 3 samples, not 64. World positions come back to index space through floats, so
+ * a plane is recognised within EDGE_SLACK of a sample and its vanishing tap dropped
+ * there: that tap's weights are then below EDGE_SLACK^2 / 2 (5e-9), far under a float
+ * normal's rounding. */
+#define EDGE_SLACK 1e-4
+
+/* 1 if p is on a sample plane and its axis's vanishing tap was dropped: first, w and d
+ * then describe the three taps kept. */
+static inline __attribute__((always_inline)) int drop_vanishing_tap(double p, long *first, double w[4], double d[4])
+{
+    double t = p - floor(p);
+    if (t < EDGE_SLACK)
+        return 1; /* the last tap, t^3 / 6 */
+    if (t > 1 - EDGE_SLACK) { /* the first tap, (1 - t)^3 / 6 */
+        for (int i = 0; i < 3; i++)
+            w[i] = w[i + 1], d[i] = d[i + 1];
+        ++*first;
+        return 1;
+    }
+    return 0;
+}
+
+static void gradient_4(const iso_volume *vol, const double p[3], double g[3])
+{
+    double w[3][4], d[3][4];
+    long first[3];
+    for (int a = 0; a < 3; a++)
+        basis(4, p[a], vol->dims[a], &first[a], w[a], d[a]);
+    long trimmed_first[3] = {first[0], first[1], first[2]};
+    double tw[3][4], td[3][4];
+    memcpy(tw, w, sizeof tw);
+    memcpy(td, d, sizeof td);
+    unsigned planes = 0;
+    for (int a = 0; a < 3; a++)
+        planes |= (unsigned)drop_vanishing_tap(p[a], &trimmed_first[a], tw[a], td[a]) << a;
+    switch (planes) {
+    case 6: spline_gradient(vol, 4, 3, 3, trimmed_first, tw, td, g); return; /* on an x edge */
+    case 5: spline_gradient(vol, 3, 4, 3, trimmed_first, tw, td, g); return; /* a y edge */
+    case 3: spline_gradient(vol, 3, 3, 4, trimmed_first, tw, td, g); return; /* a z edge */
+    default: spline_gradient(vol, 4, 4, 4, first, w, d, g); return;       /* a fan centre, a sample */
+    }
+}
 
 static void gradient(const iso_volume *vol, int order, const double p[3], double g[3])
 {

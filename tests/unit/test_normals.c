@@ -75,6 +75,96 @@ static void test_ramp_exact_every_order(void)
     iso_vol_destroy(vol);
 }
 
+/* The cubic B-spline's weight, or its derivative's, of the sample at offset m in -1..2
+ * from floor(x), t = x - floor(x): the textbook table, term by term. */
+static double cubic_weight(int m, double t, int derivative)
+{
+    double s = 1 - t;
+    switch (m) {
+    case -1: return derivative ? -s * s / 2 : s * s * s / 6;
+    case 0: return derivative ? (3 * t * t - 4 * t) / 2 : (3 * t * t * t - 6 * t * t + 4) / 6;
+    case 1: return derivative ? (-3 * t * t + 2 * t + 1) / 2 : (-3 * t * t * t + 3 * t * t + 3 * t + 1) / 6;
+    default: return derivative ? t * t / 2 : t * t * t / 6;
+    }
+}
+
+/* The tricubic gradient at p from all 64 taps, border samples repeated. */
+static void tricubic_reference(const iso_volume *vol, const double p[3], double g[3])
+{
+    long floor_of[3];
+    double t[3];
+    for (int a = 0; a < 3; a++) {
+        floor_of[a] = (long)floor(p[a]);
+        t[a] = p[a] - (double)floor_of[a];
+    }
+    g[0] = g[1] = g[2] = 0;
+    for (int k = -1; k <= 2; k++)
+        for (int j = -1; j <= 2; j++)
+            for (int i = -1; i <= 2; i++) {
+                long at[3] = {floor_of[0] + i, floor_of[1] + j, floor_of[2] + k};
+                for (int a = 0; a < 3; a++)
+                    at[a] = at[a] < 0 ? 0 : at[a] >= (long)vol->dims[a] ? (long)vol->dims[a] - 1 : at[a];
+                double f = iso_vol_get(vol, (size_t)at[0], (size_t)at[1], (size_t)at[2]);
+                int m[3] = {i, j, k};
+                for (int c = 0; c < 3; c++)
+                    g[c] += f * cubic_weight(m[0], t[0], c == 0) * cubic_weight(m[1], t[1], c == 1) *
+                            cubic_weight(m[2], t[2], c == 2);
+            }
+}
+
+/* Marching cubes' vertices lie on grid edges, where the tricubic has 36 taps, not 64
+ * (normals.c): on x, y and z edges, exactly on the sample planes, a hair off them either
+ * way (as world positions come back), off them, and at samples and near the border, the
+ * normals agree with all 64 taps summed here. A tap dropped on the wrong side, or the
+ * weights of a kept tap shifted wrongly, is off by a whole weight (1/6). */
+static void test_tricubic_on_grid_edges(void)
+{
+    iso_error err;
+    iso_volume *vol = NULL;
+    CHECK_OK(iso_field_load("field:ml:20", NULL, &vol, &err), &err);
+    if (!vol)
+        return;
+    const double hair[] = {0, 3e-5, -3e-5, 0.25, 0.5};
+    const double along[] = {0.1, 0.5, 0.93};
+    const double anchors[][3] = {{7, 9, 11}, {1, 1, 18}, {0, 12, 5}, {18, 0, 0}, {19, 19, 19}};
+    enum { POINTS = 3 * 5 * 5 * 5 * 3 };
+    iso_mesh mesh;
+    iso_mesh_init(&mesh);
+    CHECK_OK(iso_mesh_reserve(&mesh, POINTS, 1), &err);
+    double want[POINTS][3];
+    size_t n = 0;
+    for (int axis = 0; axis < 3; axis++)
+        for (int h1 = 0; h1 < 5; h1++)
+            for (int h2 = 0; h2 < 5; h2++)
+                for (int an = 0; an < 5; an++)
+                    for (int f = 0; f < 3; f++, n++) {
+                        double p[3];
+                        for (int a = 0; a < 3; a++)
+                            p[a] = anchors[an][a];
+                        p[axis] = fmin(anchors[an][axis] + along[f], (double)vol->dims[axis] - 1);
+                        p[(axis + 1) % 3] = fmax(0, p[(axis + 1) % 3] + hair[h1]);
+                        p[(axis + 2) % 3] = fmax(0, p[(axis + 2) % 3] + hair[h2]);
+                        for (int a = 0; a < 3; a++) {
+                            mesh.positions[3 * n + a] = (float)p[a];
+                            p[a] = mesh.positions[3 * n + a]; /* the point the normal is asked at */
+                        }
+                        double g[3];
+                        tricubic_reference(vol, p, g);
+                        double len = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+                        for (int c = 0; c < 3; c++)
+                            want[n][c] = -g[c] / len;
+                    }
+    mesh.vertex_count = n;
+    CHECK_OK(iso_normals_compute(vol, &mesh, 4, ISO_SPACE_INDEX, 1, &err), &err);
+    for (size_t v = 0; v < n && mesh.normals; v++)
+        for (int c = 0; c < 3; c++)
+            CHECKF(fabs(mesh.normals[3 * v + c] - want[v][c]) <= 1e-6, "point %zu (%g, %g, %g): %g, want %g", v,
+                   mesh.positions[3 * v], mesh.positions[3 * v + 1], mesh.positions[3 * v + 2],
+                   mesh.normals[3 * v + c], want[v][c]);
+    iso_mesh_free(&mesh);
+    iso_vol_destroy(vol);
+}
+
 /* Extracts field `name` at `level` into mesh; returns its volume (NULL on failure, a
  * CHECK failure already recorded). The caller destroys the volume and frees the mesh. */
 static iso_volume *field_mesh(const char *name, double level, iso_mesh *mesh)
@@ -157,6 +247,7 @@ int main(void)
 {
     CHECK_RUN(test_names);
     CHECK_RUN(test_ramp_exact_every_order);
+    CHECK_RUN(test_tricubic_on_grid_edges);
     CHECK_RUN(test_sphere_outward_unit_and_ordered);
     CHECK_RUN(test_threads_give_identical_normals);
     return check_finish();
