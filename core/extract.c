@@ -33,20 +33,15 @@
 
 #include "clock.h"
 #include "fan.h"
+#include "fit.h"
 #include "march.h"
 #include "mc.h"
 #include "parallel.h"
-#include "trilinear.h"
 
 #define BRICK_SAMPLES (ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES)
 
-/* A fan emits about one triangle per loop vertex, marching cubes about two per crossed
- * cell, so a small box spares few triangles, while an attempt (faces marched, loops
- * linked, a centre placed; accepted or not) costs about 1-1.5 us. Counted on CThead at
- * tolerance 654 (docs/performance.md): 2x2x2 boxes spared 6,374 triangles on skin over
- * 12,911 attempts and 14,646 on bone over 21,615, under one per attempt, for a fifth of
- * the extraction time; from 2x2x4 up a fan spares 2 (2x2x4) to 27 (whole half bricks). */
-#define MIN_FAN_CELLS 16
+/* The smallest box a fan may replace (tree.h says why). */
+#define MIN_FAN_CELLS ISO_TREE_FAN_MIN_CELLS
 /* Share of the tolerance a fan's centre may be off the level (Newton lands far closer). */
 #define CENTRE_SHARE (1.0 / 64)
 
@@ -69,10 +64,10 @@ typedef struct sub_walk {
     fan_tally tally;
     iso_march_brick *brick;         /* the brick at hand */
     double samples[BRICK_SAMPLES];  /* its samples, x fastest, brick->n per axis */
+    iso_fit_block block;            /* the same, for fit errors */
     /* Its inside bits along y and z (iso_fan_inside), transposed from the kernel's. */
     uint16_t along_y[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES], along_z[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES];
     int transposed;                 /* along_y and along_z are the brick's (made on first use) */
-    int integer_samples;            /* the volume's type is an integer one */
     /* Where each brick's fans begin in fans, for the bricks that made some, in the order
      * this thread covered them: PASS 3 numbers them in grid order whichever thread took
      * which brick, so the mesh does not depend on the scheduling. */
@@ -159,71 +154,6 @@ static int descend(coarse *c, uint32_t index, const iso_box *box)
 
 /* ---- PASS 2: below the bricks ---- */
 
-static const double *sample_ptr(const sub_walk *w, uint32_t x, uint32_t y, uint32_t z)
-{
-    const iso_march_brick *b = w->brick;
-    return w->samples + ((size_t)(z - b->lo[2]) * b->n[1] + (y - b->lo[1])) * b->n[0] + (x - b->lo[0]);
-}
-
-static double sample_at(const sub_walk *w, uint32_t x, uint32_t y, uint32_t z)
-{
-    return *sample_ptr(w, x, y, z);
-}
-
-/* Lemma 1's fit error of box, or any value above limit as soon as a row shows it. */
-static double fit_error_past(const sub_walk *w, const iso_box *box, double limit)
-{
-    /* 1 / the box's extent, by table: it is at most a brick's (the same quotients). */
-    static const double reciprocal[ISO_BRICK_SAMPLES] = {0.0, 1.0, 1.0 / 2, 1.0 / 3, 1.0 / 4,
-                                                         1.0 / 5, 1.0 / 6, 1.0 / 7, 1.0 / 8};
-    double c[8], inv[3], worst = 0;
-    const double *low = sample_ptr(w, box->lo[0], box->lo[1], box->lo[2]);
-    size_t step[3] = {1, w->brick->n[0], (size_t)w->brick->n[0] * w->brick->n[1]};
-    _Static_assert(ISO_BRICK_CELLS == 8, "reciprocal[] lists 1/0..1/8");
-    for (int d = 0; d < 3; d++) {
-        assert(box->hi[d] - box->lo[d] <= ISO_BRICK_CELLS);
-        inv[d] = reciprocal[box->hi[d] - box->lo[d]];
-        step[d] *= box->hi[d] - box->lo[d]; /* from the low corner to the high one */
-    }
-    for (int k = 0; k < 8; k++)
-        c[k] = low[(k & 1 ? step[0] : 0) + (k & 2 ? step[1] : 0) + (k & 4 ? step[2] : 0)];
-    /* The middle sample first: where the data strays from its corners' trilinear most
-     * often, so most boxes that will not fan are refused after one sample. */
-    uint32_t m[3];
-    for (int d = 0; d < 3; d++)
-        m[d] = (box->lo[d] + box->hi[d]) / 2;
-    double at_middle = sample_at(w, m[0], m[1], m[2]);
-    double middle = fabs(at_middle - iso_tri_eval(c, (m[0] - box->lo[0]) * inv[0], (m[1] - box->lo[1]) * inv[1],
-                                          (m[2] - box->lo[2]) * inv[2]));
-    if (middle > limit)
-        return middle;
-    /* Rows walked by pointer, their x fractions computed once (the same products). */
-    uint32_t nx = box->hi[0] - box->lo[0] + 1;
-    double ux[ISO_BRICK_SAMPLES];
-    for (uint32_t i = 0; i < nx; i++)
-        ux[i] = i * inv[0];
-    for (uint32_t z = box->lo[2]; z <= box->hi[2]; z++)
-        for (uint32_t y = box->lo[1]; y <= box->hi[1]; y++) {
-            double v = (y - box->lo[1]) * inv[1], t = (z - box->lo[2]) * inv[2];
-            double a = iso_tri_eval(c, 0, v, t), e = iso_tri_eval(c, 1, v, t) - a;
-            const double *row = sample_ptr(w, box->lo[0], y, z);
-            if (w->integer_samples) /* no NaN or infinity anywhere: a plain, branch-free max */
-                for (uint32_t i = 0; i < nx; i++) {
-                    double d = fabs(row[i] - (a + e * ux[i]));
-                    worst = d > worst ? d : worst;
-                }
-            else
-                for (uint32_t i = 0; i < nx; i++) {
-                    double s = row[i], d = fabs(s - (a + e * ux[i]));
-                    if (!(d <= worst))
-                        worst = s != s ? INFINITY : d;
-                }
-            if (worst > limit)
-                return worst;
-        }
-    return worst;
-}
-
 /* The brick-local cell range of box, and whether any of its cells is mixed. */
 static int box_cells(const sub_walk *w, const iso_box *box, uint32_t lo[3], uint32_t hi[3])
 {
@@ -272,7 +202,7 @@ static int visit_sub(const coarse *c, sub_walk *w, const iso_box *box)
     if (iso_box_cells(box) < MIN_FAN_CELLS || !box_cells(w, box, lo, hi))
         return 0; /* marching cubes' cells, or nothing to draw */
     w->tally.nodes_visited++;
-    double err = fit_error_past(w, box, c->fit_limit);
+    double err = iso_fit_error_past(&w->block, box, c->fit_limit);
     if (err <= c->fit_limit) {
         size_t triangles = w->fans.triangle_count, centres = w->fans.centre_count;
         size_t most = iso_march_box_triangles(w->brick, lo, hi);
@@ -330,14 +260,20 @@ static int cover(void *context, int thread, iso_march_brick *brick)
         lo[d] = box.lo[d];
         hi[d] = box.hi[d];
     }
-    /* The brick itself was tried whole in PASS 1; a brick of one cell has no sub-box. */
-    if (iso_box_split(&box, &left, &right) < 0)
+    /* The brick itself was tried whole in PASS 1; a brick of one cell has no sub-box, and
+     * one whose floor (fan_floor.h) is past the fit limit has none that could fan. */
+    size_t index = brick_index(&c->tree->bricks, brick);
+    if (iso_box_split(&box, &left, &right) < 0 || !(c->tree->fan_floor[index] <= c->fit_limit))
         return 0;
     w->brick = brick;
-    w->integer_samples = !iso_vol_type_is_float(c->vol->type);
+    w->block = (iso_fit_block){.samples = w->samples, .integer_samples = !iso_vol_type_is_float(c->vol->type)};
+    for (int d = 0; d < 3; d++) {
+        w->block.lo[d] = brick->lo[d];
+        w->block.n[d] = brick->n[d];
+    }
     iso_vol_read_box(c->vol, lo, hi, w->samples);
     w->transposed = 0;
-    fan_mark mark = {brick_index(&c->tree->bricks, brick), w->fans.centre_count, w->fans.triangle_count};
+    fan_mark mark = {index, w->fans.centre_count, w->fans.triangle_count};
     int rc = visit_sub(c, w, &left);
     if (!rc)
         rc = visit_sub(c, w, &right);

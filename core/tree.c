@@ -24,6 +24,7 @@
 #include <zlib.h>
 
 #include "clock.h"
+#include "fan_floor.h"
 #include "parallel.h"
 #include "round.h"
 #include "trilinear.h"
@@ -269,6 +270,8 @@ int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress,
     tree->volume_crc = iso_tree_volume_crc(vol);
     l.nodes = NULL;
     int rc = iso_bricks_build(vol, threads, &tree->bricks, err);
+    if (!rc)
+        rc = iso_fan_floor_build(vol, &tree->bricks, threads, &tree->fan_floor, err);
     if (rc) {
         iso_tree_destroy(tree);
         free(l.boxes);
@@ -293,6 +296,7 @@ void iso_tree_destroy(iso_tree *tree)
     else
         free(tree->nodes);
     iso_bricks_free(&tree->bricks);
+    free(tree->fan_floor);
     free(tree);
 }
 
@@ -303,7 +307,7 @@ size_t iso_tree_bytes(const iso_tree *tree)
 
 size_t iso_tree_memory(const iso_tree *tree)
 {
-    return iso_tree_bytes(tree) + iso_bricks_total(&tree->bricks) * 2 * sizeof(float);
+    return iso_tree_bytes(tree) + iso_bricks_total(&tree->bricks) * 3 * sizeof(float);
 }
 
 uint32_t iso_tree_volume_crc(const iso_volume *vol)
@@ -495,7 +499,8 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
     tree->volume_crc = h.volume_crc;
     tree->mapping = map;
     tree->mapping_bytes = bytes;
-    if ((rc = iso_bricks_build(vol, 0, &tree->bricks, err))) {
+    if ((rc = iso_bricks_build(vol, 0, &tree->bricks, err)) ||
+        (rc = iso_fan_floor_build(vol, &tree->bricks, 0, &tree->fan_floor, err))) {
         iso_tree_destroy(tree);
         return rc;
     }

@@ -31,6 +31,15 @@
 
 #define ISO_TREE_BRICK ISO_BRICK_CELLS /* the stored leaves are the grid's bricks */
 
+/* The smallest box extraction keeps whole (fans, fan.h). A fan emits about one triangle
+ * per loop vertex, marching cubes about two per crossed cell, so a small box spares few
+ * triangles, while an attempt (faces marched, loops linked, a centre placed; accepted or
+ * not) costs about 1-1.5 us. Counted on CThead at tolerance 654 (docs/performance.md):
+ * 2x2x2 boxes spared 6,374 triangles on skin over 12,911 attempts and 14,646 on bone over
+ * 21,615, under one per attempt, for a fifth of the extraction time; from 2x2x4 up a fan
+ * spares 2 (2x2x4) to 27 (half bricks). */
+#define ISO_TREE_FAN_MIN_CELLS 16
+
 typedef struct iso_box {
     uint32_t lo[3], hi[3]; /* inclusive sample indices; hi[a] - lo[a] cells along a */
 } iso_box;
@@ -47,6 +56,7 @@ typedef struct iso_tree {
     uint32_t volume_crc;    /* CRC-32 of dims, type and samples: ties a file to its volume */
     double build_ms;        /* time to build (or to load and verify the file) */
     iso_bricks bricks;      /* regular min/max grid for exact extraction; computed, not saved */
+    float *fan_floor;       /* per brick, the least fit error below it (fan_floor.h); computed */
     void *mapping;          /* file mapping when loaded with iso_tree_load, else NULL */
     size_t mapping_bytes;
 } iso_tree;
@@ -62,7 +72,7 @@ int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress,
 void iso_tree_destroy(iso_tree *tree);
 /* Bytes the tree's nodes occupy (what its file holds after the header). */
 size_t iso_tree_bytes(const iso_tree *tree);
-/* Bytes the tree occupies in memory: its nodes and its brick grid. */
+/* Bytes the tree occupies in memory: its nodes, its brick grid and the bricks' fan floors. */
 size_t iso_tree_memory(const iso_tree *tree);
 
 /* CRC-32 identifying the volume's dims, type and samples (the hierarchy file's key). O(N). */

@@ -14,6 +14,7 @@
 #include "field.h"
 #include "loader.h"
 #include "mc.h"
+#include "round.h"
 #include "tree.h"
 #include "trilinear.h"
 
@@ -360,6 +361,8 @@ static void test_tree_file_round_trip_and_refusals(void)
     if (back) {
         CHECK_EQ(back->node_count, tree->node_count);
         CHECK(memcmp(back->nodes, tree->nodes, iso_tree_bytes(tree)) == 0);
+        /* The bricks' fan floors are computed again on load, to the same bits. */
+        CHECK(memcmp(back->fan_floor, tree->fan_floor, iso_bricks_total(&tree->bricks) * sizeof(float)) == 0);
         iso_tree_destroy(back);
     }
     FILE *f = fopen(path, "rb");
@@ -490,6 +493,116 @@ static void test_fans_join_the_kernel_without_weld(void)
     }
 }
 
+/* ---- the bricks' fan floors ---- */
+
+/* The least fit error of the non-constant boxes from box down to the fan size, by scanning
+ * each box in full (iso_tree_scan_box), INFINITY if there is none. */
+static double least_fit_brute(const iso_volume *vol, const iso_box *box)
+{
+    if (iso_box_cells(box) < ISO_TREE_FAN_MIN_CELLS)
+        return INFINITY;
+    double best = INFINITY, mn, mx, er;
+    iso_box left, right;
+    if (iso_box_split(box, &left, &right) >= 0)
+        best = fmin(least_fit_brute(vol, &left), least_fit_brute(vol, &right));
+    iso_tree_scan_box(vol, box, &mn, &mx, &er);
+    return mn < mx && er < best ? er : best;
+}
+
+/* Every brick's floor is the least fit error of the boxes extraction could fan below it:
+ * on fields with partial and one-cell bricks, a volume with constant regions (whose boxes
+ * no level crosses: left out), and a float volume with a NaN (its boxes: infinite error). */
+static void test_fan_floor_is_the_least_fit_below(void)
+{
+    static const char *fields[] = {"field:ml:41x37x29", "field:sphere:10x18x26", "field:torus:33x33x17"};
+    iso_error err;
+    for (int f = 0; f < 5 && !check_failed(); f++) {
+        iso_volume *vol = NULL;
+        if (f < 3) {
+            CHECK_OK(iso_load(fields[f], NULL, &vol, &err), &err);
+        } else {
+            size_t dims[3] = {26, 19, 17};
+            vol = iso_vol_create(dims, f == 3 ? ISO_U8 : ISO_F32, 0, &err);
+            CHECK(vol != NULL);
+            for (size_t k = 0; vol && k < dims[2]; k++)
+                for (size_t j = 0; j < dims[1]; j++)
+                    for (size_t i = 0; i < dims[0]; i++) /* a ball of noise in a constant block */
+                        iso_vol_set(vol, i, j, k, (i - 13.0) * (i - 13.0) + (j - 9.0) * (j - 9.0) < 40 ? (double)((i * 7 + j * 13 + k * 5) % 11) : 3.0);
+            if (vol && f == 4)
+                iso_vol_set(vol, 12, 9, 8, NAN);
+        }
+        if (!vol)
+            continue;
+        iso_vol_update_stats(vol);
+        iso_tree *tree = surface_build(vol);
+        const iso_bricks *g = &tree->bricks;
+        size_t finite = 0, total = iso_bricks_total(g);
+        for (uint32_t k = 0; k < g->count[2]; k++)
+            for (uint32_t j = 0; j < g->count[1]; j++)
+                for (uint32_t i = 0; i < g->count[0]; i++) {
+                    uint32_t brick[3] = {i, j, k};
+                    size_t lo[3], hi[3];
+                    iso_bricks_box(vol, brick, lo, hi);
+                    iso_box box, left, right;
+                    for (int d = 0; d < 3; d++)
+                        box.lo[d] = (uint32_t)lo[d], box.hi[d] = (uint32_t)hi[d];
+                    double want = iso_box_split(&box, &left, &right) < 0
+                                      ? INFINITY
+                                      : fmin(least_fit_brute(vol, &left), least_fit_brute(vol, &right));
+                    float floor = tree->fan_floor[((size_t)k * g->count[1] + j) * g->count[0] + i];
+                    float expected = isinf(want) ? INFINITY : iso_float_down(want);
+                    CHECKF(floor == expected, "%d: brick (%u, %u, %u): floor %.9g, least fit below %.9g", f, i, j,
+                           k, floor, want);
+                    finite += isfinite(floor);
+                }
+        CHECKF(finite > 0 && finite < total + (f < 3), "%d: %zu of %zu floors finite", f, finite, total);
+        iso_tree_destroy(tree);
+        iso_vol_destroy(vol);
+    }
+}
+
+/* A brick whose floor is past the fit limit is marched without its walk: the mesh is the
+ * same, to the byte, as with every floor at 0 (every walk made), and fewer boxes are
+ * visited at a small tolerance. */
+static void test_fan_floor_skips_only_what_cannot_fan(void)
+{
+    static const char *fields[] = {"field:ml:65x65x65", "field:sphere:61x47x53"};
+    for (int f = 0; f < 2 && !check_failed(); f++) {
+        iso_volume *vol;
+        iso_error err;
+        CHECK_OK(iso_load(fields[f], NULL, &vol, &err), &err);
+        iso_tree *tree = surface_build(vol);
+        size_t total = iso_bricks_total(&tree->bricks);
+        float *floors = tree->fan_floor, *zero = calloc(total, sizeof *zero);
+        double range = tree->nodes[0].max - tree->nodes[0].min;
+        size_t skipped = 0;
+        for (double share = 0.001; share < 0.1; share *= 3) {
+            iso_mesh gated, walked;
+            iso_mesh_init(&gated);
+            iso_mesh_init(&walked);
+            iso_extract_stats a, b;
+            extract_threads(tree, 0.5, share * range, 2, &gated, &a);
+            tree->fan_floor = zero;
+            extract_threads(tree, 0.5, share * range, 2, &walked, &b);
+            tree->fan_floor = floors;
+            CHECKF(gated.vertex_count == walked.vertex_count && gated.triangle_count == walked.triangle_count &&
+                       memcmp(gated.positions, walked.positions, 12 * gated.vertex_count) == 0 &&
+                       memcmp(gated.indices, walked.indices, 12 * gated.triangle_count) == 0,
+                   "%s tol %g: %zu/%zu triangles gated, %zu/%zu walked", fields[f], share * range,
+                   gated.triangle_count, gated.vertex_count, walked.triangle_count, walked.vertex_count);
+            CHECK_EQ(a.nodes_polygonized, b.nodes_polygonized);
+            CHECK(a.nodes_visited <= b.nodes_visited);
+            skipped += b.nodes_visited - a.nodes_visited;
+            iso_mesh_free(&gated);
+            iso_mesh_free(&walked);
+        }
+        CHECKF(skipped > 0, "%s: the floors skipped no walk", fields[f]);
+        free(zero);
+        iso_tree_destroy(tree);
+        iso_vol_destroy(vol);
+    }
+}
+
 /* Dimensions 10, 18, 26 leave bricks one cell thick at the far end of every axis (the
  * corner one is a single cell): the walk below bricks must take them as they are. */
 static void test_tolerance_on_one_cell_bricks(void)
@@ -581,6 +694,8 @@ int main(void)
     CHECK_RUN(test_tree_is_small);
     CHECK_RUN(test_fans_join_the_kernel_without_weld);
     CHECK_RUN(test_tolerance_on_one_cell_bricks);
+    CHECK_RUN(test_fan_floor_is_the_least_fit_below);
+    CHECK_RUN(test_fan_floor_skips_only_what_cannot_fan);
     CHECK_RUN(test_cthead_guarantee_and_trend);
     return check_finish();
 }
