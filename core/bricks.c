@@ -17,6 +17,13 @@ void iso_bricks_box(const iso_volume *vol, const uint32_t brick[3], size_t lo[3]
     }
 }
 
+void iso_bricks_count(const iso_volume *vol, uint32_t count[3])
+{
+    for (int d = 0; d < 3; d++)
+        count[d] = vol->dims[d] < 2 || vol->dims[d] > UINT32_MAX ? 0
+                                                                 : (uint32_t)((vol->dims[d] - 2) / ISO_BRICK_CELLS + 1);
+}
+
 typedef struct scan_job {
     const iso_volume *vol;
     iso_bricks *bricks;
@@ -54,11 +61,10 @@ int iso_bricks_build(const iso_volume *vol, int threads, iso_bricks *bricks, iso
 {
     *bricks = (iso_bricks){0};
     iso_bricks b = {0};
-    for (int d = 0; d < 3; d++) {
+    for (int d = 0; d < 3; d++)
         if (vol->dims[d] < 2 || vol->dims[d] > UINT32_MAX)
             return iso_error_set(err, ISO_E_ARGUMENT, "volume dimension %zu out of range", vol->dims[d]);
-        b.count[d] = (uint32_t)((vol->dims[d] - 2) / ISO_BRICK_CELLS + 1);
-    }
+    iso_bricks_count(vol, b.count);
     size_t total = iso_bricks_total(&b);
     b.min = malloc(total * sizeof *b.min);
     b.max = malloc(total * sizeof *b.max);

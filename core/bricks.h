@@ -34,6 +34,9 @@ static inline size_t iso_bricks_total(const iso_bricks *b)
     return (size_t)b->count[0] * b->count[1] * b->count[2];
 }
 
+/* Bricks per axis of vol's grid, ceil((dims - 1) / 8); 0 on an axis of fewer than 2 samples. */
+void iso_bricks_count(const iso_volume *vol, uint32_t count[3]);
+
 /* The inclusive sample box of brick (i, j, k): lo = 8 * index, hi clipped to dims - 1. */
 void iso_bricks_box(const iso_volume *vol, const uint32_t brick[3], size_t lo[3], size_t hi[3]);
 

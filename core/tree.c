@@ -328,7 +328,9 @@ uint32_t iso_tree_volume_crc(const iso_volume *vol)
 /* ---- the file ---- */
 
 #define TREE_MAGIC "ISOTREE"
-#define TREE_VERSION 2 /* 2: splits above brick size aligned to the brick grid */
+/* 2: splits above brick size aligned to the brick grid; 3: the bricks' fan floors after
+ * the nodes (fan_floor.h), so that loading need not compute them again. */
+#define TREE_VERSION 3
 
 typedef struct tree_header {
     char magic[8];          /* "ISOTREE\0" */
@@ -338,7 +340,7 @@ typedef struct tree_header {
     uint32_t type;
     uint32_t volume_crc;    /* iso_tree_volume_crc of the volume it was built from */
     uint64_t node_count;
-    uint32_t node_crc;      /* CRC-32 of the node bytes */
+    uint32_t node_crc;      /* CRC-32 of the bytes after the header: nodes, then floors */
     uint32_t header_crc;    /* CRC-32 of the header with this field zero */
 } tree_header;
 
@@ -378,7 +380,9 @@ int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err)
     h.type = (uint32_t)tree->vol->type;
     h.volume_crc = tree->volume_crc;
     h.node_count = tree->node_count;
-    h.node_crc = (uint32_t)crc32(0L, (const Bytef *)tree->nodes, (uInt)iso_tree_bytes(tree));
+    size_t floor_bytes = iso_bricks_total(&tree->bricks) * sizeof(float);
+    uLong crc = crc32(0L, (const Bytef *)tree->nodes, (uInt)iso_tree_bytes(tree));
+    h.node_crc = (uint32_t)crc32(crc, (const Bytef *)tree->fan_floor, (uInt)floor_bytes);
     h.header_crc = header_crc(h);
 
     size_t len = strlen(path);
@@ -393,7 +397,7 @@ int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err)
         return iso_error_set(err, ISO_E_IO, "%s: cannot create a temporary file: %s", path, strerror(e));
     }
     if (write_all(fd, &h, sizeof h) || write_all(fd, tree->nodes, iso_tree_bytes(tree)) ||
-        fsync(fd) != 0) {
+        write_all(fd, tree->fan_floor, floor_bytes) || fsync(fd) != 0) {
         int e = errno;
         close(fd);
         unlink(tmp);
@@ -460,6 +464,9 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
 
     tree_header h;
     memcpy(&h, map, sizeof h);
+    uint32_t count[3];
+    iso_bricks_count(vol, count);
+    size_t floors = (size_t)count[0] * count[1] * count[2]; /* one per brick (bricks.h) */
     int rc = 0;
     if (memcmp(h.magic, TREE_MAGIC, sizeof TREE_MAGIC) != 0)
         rc = iso_error_set(err, ISO_E_FORMAT, "%s: not a hierarchy file (bad magic)", path);
@@ -475,15 +482,23 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
                            path, (unsigned long long)h.dims[0], (unsigned long long)h.dims[1],
                            (unsigned long long)h.dims[2]);
     else if (h.node_count > (bytes - sizeof h) / sizeof(iso_tree_node) ||
-             sizeof h + h.node_count * sizeof(iso_tree_node) != bytes)
-        rc = iso_error_set(err, ISO_E_CORRUPT, "%s: %zu bytes do not hold the %llu nodes the header announces",
-                           path, bytes, (unsigned long long)h.node_count);
+             sizeof h + h.node_count * sizeof(iso_tree_node) + floors * sizeof(float) != bytes)
+        rc = iso_error_set(err, ISO_E_CORRUPT,
+                           "%s: %zu bytes do not hold the %llu nodes the header announces and %zu brick floors",
+                           path, bytes, (unsigned long long)h.node_count, floors);
     else if ((uint32_t)crc32(0L, (const Bytef *)map + sizeof h, (uInt)(bytes - sizeof h)) != h.node_crc)
         rc = iso_error_set(err, ISO_E_CORRUPT, "%s: node checksum mismatch", path);
     else if (h.volume_crc != iso_tree_volume_crc(vol))
         rc = iso_error_set(err, ISO_E_STALE, "%s: built from different samples than this volume", path);
     else
         rc = check_structure(vol, (const iso_tree_node *)((const char *)map + sizeof h), h.node_count, path, err);
+    const float *floor = NULL;
+    if (rc == 0) {
+        floor = (const float *)((const char *)map + sizeof h + h.node_count * sizeof(iso_tree_node));
+        for (size_t b = 0; rc == 0 && b < floors; b++)
+            if (!(floor[b] >= 0))
+                rc = iso_error_set(err, ISO_E_CORRUPT, "%s: brick %zu's fan floor is %g", path, b, (double)floor[b]);
+    }
     if (rc) {
         munmap(map, bytes);
         return rc;
@@ -499,8 +514,13 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
     tree->volume_crc = h.volume_crc;
     tree->mapping = map;
     tree->mapping_bytes = bytes;
-    if ((rc = iso_bricks_build(vol, 0, &tree->bricks, err)) ||
-        (rc = iso_fan_floor_build(vol, &tree->bricks, 0, &tree->fan_floor, err))) {
+    tree->fan_floor = malloc(floors * sizeof(float));
+    if (!tree->fan_floor) {
+        iso_tree_destroy(tree);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory loading %s", path);
+    }
+    memcpy(tree->fan_floor, floor, floors * sizeof(float));
+    if ((rc = iso_bricks_build(vol, 0, &tree->bricks, err))) {
         iso_tree_destroy(tree);
         return rc;
     }

@@ -56,7 +56,7 @@ typedef struct iso_tree {
     uint32_t volume_crc;    /* CRC-32 of dims, type and samples: ties a file to its volume */
     double build_ms;        /* time to build (or to load and verify the file) */
     iso_bricks bricks;      /* regular min/max grid for exact extraction; computed, not saved */
-    float *fan_floor;       /* per brick, the least fit error below it (fan_floor.h); computed */
+    float *fan_floor;       /* per brick, the least fit error below it (fan_floor.h); saved */
     void *mapping;          /* file mapping when loaded with iso_tree_load, else NULL */
     size_t mapping_bytes;
 } iso_tree;
@@ -70,7 +70,8 @@ int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress,
                    iso_tree **out, iso_error *err);
 /* Frees the tree (or unmaps its file). NULL is allowed. */
 void iso_tree_destroy(iso_tree *tree);
-/* Bytes the tree's nodes occupy (what its file holds after the header). */
+/* Bytes the tree's nodes occupy (what its file holds after the header, before the bricks'
+ * fan floors). */
 size_t iso_tree_bytes(const iso_tree *tree);
 /* Bytes the tree occupies in memory: its nodes, its brick grid and the bricks' fan floors. */
 size_t iso_tree_memory(const iso_tree *tree);

@@ -361,7 +361,7 @@ static void test_tree_file_round_trip_and_refusals(void)
     if (back) {
         CHECK_EQ(back->node_count, tree->node_count);
         CHECK(memcmp(back->nodes, tree->nodes, iso_tree_bytes(tree)) == 0);
-        /* The bricks' fan floors are computed again on load, to the same bits. */
+        /* The bricks' fan floors are saved after the nodes and read back to the same bits. */
         CHECK(memcmp(back->fan_floor, tree->fan_floor, iso_bricks_total(&tree->bricks) * sizeof(float)) == 0);
         iso_tree_destroy(back);
     }

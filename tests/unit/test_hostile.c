@@ -288,15 +288,47 @@ static void expect_tree(const iso_volume *vol, const char *path, int code, const
     iso_tree_destroy(tree);
 }
 
+/* The whole of path (its size in *n), or NULL after a CHECK failure; the caller frees it. */
+static unsigned char *read_all(const char *path, long *n)
+{
+    *n = file_size(path);
+    unsigned char *bytes = *n > 0 ? malloc((size_t)*n) : NULL;
+    FILE *f = fopen(path, "rb");
+    int ok = bytes && f && fread(bytes, 1, (size_t)*n, f) == (size_t)*n;
+    CHECK(ok);
+    if (f)
+        fclose(f);
+    if (!ok) {
+        free(bytes);
+        return NULL;
+    }
+    return bytes;
+}
+
+/* Copies src to dst with brick `b`'s fan floor set to `value` and both checksums made
+ * right again (the header's fields: node_crc at 56, header_crc at 60): a file only its
+ * values betray. */
+static void floor_forged_copy(const char *src, const char *dst, size_t nodes, size_t b, float value)
+{
+    long n;
+    unsigned char *bytes = read_all(src, &n);
+    if (!bytes)
+        return;
+    memcpy(bytes + 64 + 16 * nodes + 4 * b, &value, sizeof value);
+    uint32_t crc = (uint32_t)crc32(0L, bytes + 64, (uInt)(n - 64));
+    memcpy(bytes + 56, &crc, sizeof crc);
+    memset(bytes + 60, 0, 4);
+    crc = (uint32_t)crc32(0L, bytes, 64);
+    memcpy(bytes + 60, &crc, sizeof crc);
+    check_write_file(dst, bytes, (size_t)n, NULL, 0);
+    free(bytes);
+}
+
 /* Copies src to dst keeping `keep` bytes (all if < 0), with byte `flip` (if >= 0) inverted. */
 static void damaged_copy(const char *src, const char *dst, long keep, long flip)
 {
-    long n = file_size(src);
-    unsigned char *bytes = malloc((size_t)n);
-    FILE *f = fopen(src, "rb");
-    CHECK(bytes && f && fread(bytes, 1, (size_t)n, f) == (size_t)n);
-    if (f)
-        fclose(f);
+    long n;
+    unsigned char *bytes = read_all(src, &n);
     if (!bytes)
         return;
     if (flip >= 0)
@@ -320,24 +352,35 @@ static void test_tree_file_damage_exact(void)
     const char *good = temp_path("ml.isotree");
     CHECK_OK(iso_tree_save(tree, good, &err), &err);
     long size = file_size(good);
-    CHECK_EQ(size, 64 + 16 * (long)tree->node_count);
+    size_t bricks = iso_bricks_total(&tree->bricks);
+    CHECK_EQ(size, 64 + 16 * (long)tree->node_count + 4 * (long)bricks); /* nodes, then fan floors */
     char format[256];
     const char *bad = temp_path("bad.isotree");
 
-    damaged_copy(good, bad, size - 16, -1); /* the last node missing */
-    snprintf(format, sizeof format, "%%s: %ld bytes do not hold the %zu nodes the header announces",
-             size - 16, tree->node_count);
+    damaged_copy(good, bad, size - 16, -1); /* the last four floors missing */
+    snprintf(format, sizeof format,
+             "%%s: %ld bytes do not hold the %zu nodes the header announces and %zu brick floors", size - 16,
+             tree->node_count, bricks);
     expect_tree(vol, bad, ISO_E_CORRUPT, format);
-    damaged_copy(good, bad, size - 3, -1); /* cut mid-node */
-    snprintf(format, sizeof format, "%%s: %ld bytes do not hold the %zu nodes the header announces",
-             size - 3, tree->node_count);
+    damaged_copy(good, bad, size - 4 * (long)bricks - 3, -1); /* cut mid-node, no floors */
+    snprintf(format, sizeof format,
+             "%%s: %ld bytes do not hold the %zu nodes the header announces and %zu brick floors",
+             size - 4 * (long)bricks - 3, tree->node_count, bricks);
     expect_tree(vol, bad, ISO_E_CORRUPT, format);
     damaged_copy(good, bad, 40, -1);
     expect_tree(vol, bad, ISO_E_FORMAT, "%s: 40 bytes, shorter than the 64-byte header");
     damaged_copy(good, bad, 0, -1);
     expect_tree(vol, bad, ISO_E_FORMAT, "%s: 0 bytes, shorter than the 64-byte header");
-    damaged_copy(good, bad, -1, size - 5); /* a byte of the last node */
+    damaged_copy(good, bad, -1, size - 5); /* a byte of a floor: the checksum covers them */
     expect_tree(vol, bad, ISO_E_CORRUPT, "%s: node checksum mismatch");
+    damaged_copy(good, bad, -1, 64 + 5); /* a byte of the first node */
+    expect_tree(vol, bad, ISO_E_CORRUPT, "%s: node checksum mismatch");
+    /* Checksums right, a floor wrong: a negative or NaN floor would skip bricks. */
+    floor_forged_copy(good, bad, tree->node_count, bricks - 1, -1.0f);
+    snprintf(format, sizeof format, "%%s: brick %zu's fan floor is -1", bricks - 1);
+    expect_tree(vol, bad, ISO_E_CORRUPT, format);
+    floor_forged_copy(good, bad, tree->node_count, 0, NAN);
+    expect_tree(vol, bad, ISO_E_CORRUPT, "%s: brick 0's fan floor is nan");
     damaged_copy(good, bad, -1, 16); /* dims[0] in the header */
     expect_tree(vol, bad, ISO_E_CORRUPT, "%s: header checksum mismatch");
     damaged_copy(good, bad, -1, 0);
