@@ -185,41 +185,42 @@ static void gradient_3(const iso_volume *vol, const double p[3], double g[3]) { 
  * normal's rounding. */
 #define EDGE_SLACK 1e-4
 
-/* 1 if p is on a sample plane and its axis's vanishing tap was dropped: first, w and d
- * then describe the three taps kept. */
-static inline __attribute__((always_inline)) int drop_vanishing_tap(double p, long *first, double w[4], double d[4])
+/* Which of coordinate p's four taps vanishes: 1 the last (t^3 / 6, p just above a sample
+ * plane), 2 the first ((1 - t)^3 / 6, just below one), 0 none. */
+static inline __attribute__((always_inline)) int vanishing_tap(double p)
 {
     double t = p - floor(p);
-    if (t < EDGE_SLACK)
-        return 1; /* the last tap, t^3 / 6 */
-    if (t > 1 - EDGE_SLACK) { /* the first tap, (1 - t)^3 / 6 */
-        for (int i = 0; i < 3; i++)
-            w[i] = w[i + 1], d[i] = d[i + 1];
-        ++*first;
-        return 1;
-    }
-    return 0;
+    return t < EDGE_SLACK ? 1 : t > 1 - EDGE_SLACK ? 2 : 0;
 }
 
 static void gradient_4(const iso_volume *vol, const double p[3], double g[3])
 {
     double w[3][4], d[3][4];
     long first[3];
-    for (int a = 0; a < 3; a++)
-        basis(4, p[a], vol->dims[a], &first[a], w[a], d[a]);
-    long trimmed_first[3] = {first[0], first[1], first[2]};
-    double tw[3][4], td[3][4];
-    memcpy(tw, w, sizeof tw);
-    memcpy(td, d, sizeof td);
+    int tap[3];
     unsigned planes = 0;
-    for (int a = 0; a < 3; a++)
-        planes |= (unsigned)drop_vanishing_tap(p[a], &trimmed_first[a], tw[a], td[a]) << a;
-    switch (planes) {
-    case 6: spline_gradient(vol, 4, 3, 3, trimmed_first, tw, td, g); return; /* on an x edge */
-    case 5: spline_gradient(vol, 3, 4, 3, trimmed_first, tw, td, g); return; /* a y edge */
-    case 3: spline_gradient(vol, 3, 3, 4, trimmed_first, tw, td, g); return; /* a z edge */
-    default: spline_gradient(vol, 4, 4, 4, first, w, d, g); return;       /* a fan centre, a sample */
+    for (int a = 0; a < 3; a++) {
+        basis(4, p[a], vol->dims[a], &first[a], w[a], d[a]);
+        tap[a] = vanishing_tap(p[a]);
+        planes |= (unsigned)(tap[a] != 0) << a;
     }
+    if (planes != 3 && planes != 5 && planes != 6) {
+        spline_gradient(vol, 4, 4, 4, first, w, d, g); /* a fan centre, a sample */
+        return;
+    }
+    /* On a grid edge: the two plane axes keep their three taps that do not vanish. */
+    for (int a = 0; a < 3; a++)
+        if (tap[a] == 2) {
+            for (int i = 0; i < 3; i++)
+                w[a][i] = w[a][i + 1], d[a][i] = d[a][i + 1];
+            first[a]++;
+        }
+    if (planes == 6)
+        spline_gradient(vol, 4, 3, 3, first, w, d, g); /* an x edge */
+    else if (planes == 5)
+        spline_gradient(vol, 3, 4, 3, first, w, d, g); /* a y edge */
+    else
+        spline_gradient(vol, 3, 3, 4, first, w, d, g); /* a z edge */
 }
 
 static void gradient(const iso_volume *vol, int order, const double p[3], double g[3])
