@@ -13,14 +13,12 @@
  * tries it (a box is tried only when it holds a mixed cell). */
 static int constant_box(const iso_fit_block *block, const iso_box *box)
 {
-    const double *first = block->samples +
-                          ((size_t)(box->lo[2] - block->lo[2]) * block->n[1] + (box->lo[1] - block->lo[1])) *
-                              block->n[0] + (box->lo[0] - block->lo[0]);
+    double first = *iso_fit_sample(block, box->lo[0], box->lo[1], box->lo[2]);
     for (uint32_t z = box->lo[2]; z <= box->hi[2]; z++)
         for (uint32_t y = box->lo[1]; y <= box->hi[1]; y++) {
-            const double *row = first + ((size_t)(z - box->lo[2]) * block->n[1] + (y - box->lo[1])) * block->n[0];
+            const double *row = iso_fit_sample(block, box->lo[0], y, z);
             for (uint32_t x = 0; x <= box->hi[0] - box->lo[0]; x++)
-                if (row[x] != *first)
+                if (row[x] != first)
                     return 0;
         }
     return 1;

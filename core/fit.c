@@ -7,18 +7,13 @@
 
 #include "trilinear.h"
 
-static const double *sample_ptr(const iso_fit_block *b, uint32_t x, uint32_t y, uint32_t z)
-{
-    return b->samples + ((size_t)(z - b->lo[2]) * b->n[1] + (y - b->lo[1])) * b->n[0] + (x - b->lo[0]);
-}
-
 double iso_fit_error_past(const iso_fit_block *block, const iso_box *box, double limit)
 {
     /* 1 / the box's extent, by table: it is at most a brick's (the same quotients). */
     static const double reciprocal[ISO_BRICK_SAMPLES] = {0.0, 1.0, 1.0 / 2, 1.0 / 3, 1.0 / 4,
                                                          1.0 / 5, 1.0 / 6, 1.0 / 7, 1.0 / 8};
     double c[8], inv[3], worst = 0;
-    const double *low = sample_ptr(block, box->lo[0], box->lo[1], box->lo[2]);
+    const double *low = iso_fit_sample(block, box->lo[0], box->lo[1], box->lo[2]);
     size_t step[3] = {1, block->n[0], (size_t)block->n[0] * block->n[1]};
     _Static_assert(ISO_BRICK_CELLS == 8, "reciprocal[] lists 1/0..1/8");
     for (int d = 0; d < 3; d++) {
@@ -32,7 +27,7 @@ double iso_fit_error_past(const iso_fit_block *block, const iso_box *box, double
     uint32_t m[3];
     for (int d = 0; d < 3; d++)
         m[d] = (box->lo[d] + box->hi[d]) / 2;
-    double at_middle = *sample_ptr(block, m[0], m[1], m[2]);
+    double at_middle = *iso_fit_sample(block, m[0], m[1], m[2]);
     double middle = fabs(at_middle - iso_tri_eval(c, (m[0] - box->lo[0]) * inv[0], (m[1] - box->lo[1]) * inv[1],
                                           (m[2] - box->lo[2]) * inv[2]));
     if (middle > limit)
@@ -46,7 +41,7 @@ double iso_fit_error_past(const iso_fit_block *block, const iso_box *box, double
         for (uint32_t y = box->lo[1]; y <= box->hi[1]; y++) {
             double v = (y - box->lo[1]) * inv[1], t = (z - box->lo[2]) * inv[2];
             double a = iso_tri_eval(c, 0, v, t), e = iso_tri_eval(c, 1, v, t) - a;
-            const double *row = sample_ptr(block, box->lo[0], y, z);
+            const double *row = iso_fit_sample(block, box->lo[0], y, z);
             if (block->integer_samples)
                 for (uint32_t i = 0; i < nx; i++) {
                     double d = fabs(row[i] - (a + e * ux[i]));

@@ -7,6 +7,7 @@
 #ifndef ISO_FIT_H
 #define ISO_FIT_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "bricks.h"
@@ -18,6 +19,12 @@ typedef struct iso_fit_block {
     uint32_t n[3];         /* its samples per axis, at most ISO_BRICK_SAMPLES */
     int integer_samples;   /* no NaN or infinity can occur: a branch-free maximum */
 } iso_fit_block;
+
+/* The block's sample at (x, y, z), a point inside it. */
+static inline const double *iso_fit_sample(const iso_fit_block *b, uint32_t x, uint32_t y, uint32_t z)
+{
+    return b->samples + ((size_t)(z - b->lo[2]) * b->n[1] + (y - b->lo[1])) * b->n[0] + (x - b->lo[0]);
+}
 
 /* max |p(s) - T(s)| over the samples s of box, T the trilinear through its 8 corners; or
  * any value above limit as soon as one row shows the error passes it (INFINITY if a sample
