@@ -10,7 +10,9 @@
  *   fit error is within the fit share of the tolerance and whose face loops fan within
  *   the tolerance (fan.c). The bricks inside a fanned node are marked: the kernel numbers
  *   their crossings but marches none of their cells. Stored leaves are the kernel's
- *   bricks (tree.h), so an unfanned leaf goes to PASS 2 whole.
+ *   bricks (tree.h), so an unfanned leaf goes to PASS 2 whole. The top of the tree is
+ *   walked on one thread down to a depth with several subtrees per thread; the subtrees
+ *   are walked on the threads, and their fans kept in the serial walk's order.
  * PASS 2 (march): the kernel classifies the active bricks; for each unmarked one, the
  *   same rule runs on the fly below it (cover), on its samples read once: a sub-box is
  *   active when it holds a mixed cell (the kernel's bits), its fit error is scanned with
@@ -26,7 +28,9 @@
 #include "extract.h"
 
 #include <assert.h>
+#include <limits.h>
 #include <math.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -42,6 +46,9 @@
 
 /* The smallest box a fan may replace (tree.h says why). */
 #define MIN_FAN_CELLS ISO_TREE_FAN_MIN_CELLS
+/* Subtrees per thread PASS 1 splits the tree into: enough that a thread which finishes
+ * early takes another. */
+#define TOP_UNITS_PER_THREAD 8
 /* Share of the tolerance a fan's centre may be off the level (Newton lands far closer). */
 #define CENTRE_SHARE (1.0 / 64)
 
@@ -75,18 +82,45 @@ typedef struct sub_walk {
     size_t mark_count, mark_capacity;
 } sub_walk;
 
+/* A piece of PASS 1 in the serial walk's order: a node the top walk fanned, or a subtree
+ * it left to the threads. Its fans are [centre, centre_end) and [triangle,
+ * triangle_end) of *fans once walked. */
+typedef struct top_unit {
+    uint32_t node;
+    iso_box box;
+    const iso_fan_output *fans;
+    size_t centre, centre_end, triangle, triangle_end;
+} top_unit;
+
 typedef struct coarse {
     const iso_tree *tree;
     const iso_volume *vol;
     double level, fit_limit, centre_limit;
     int prune;
     uint8_t *skip;            /* per brick of the grid: inside a node fanned whole */
-    iso_fan_scratch scratch;  /* PASS 1's */
+    iso_fan_scratch scratch;  /* the top walk's (PASS 1) */
     iso_fan_output fans;
     fan_tally tally;
+    unsigned split_depth;     /* the top walk's last depth; deeper subtrees go to threads */
+    top_unit *units;
+    size_t unit_count, unit_capacity;
+    atomic_size_t next_unit;  /* the next unit a thread may take */
+    int status[ISO_PARALLEL_MAX_THREADS];
     sub_walk *threads;
     int thread_count;
 } coarse;
+
+/* Doubles a list's room (at least 64 items). */
+static int grow_list(void **list, size_t *capacity, size_t item)
+{
+    size_t more = *capacity ? 2 * *capacity : 64;
+    void *grown = realloc(*list, more * item);
+    if (!grown)
+        return ISO_E_NOMEM;
+    *list = grown;
+    *capacity = more;
+    return 0;
+}
 
 /* Fans box if its fit error and face loops allow: 1 done, 0 not, <0 error. Below a brick,
  * where counting is cheap, a small node with a tangled surface can fan into more
@@ -118,7 +152,7 @@ static int try_fan(const coarse *c, const iso_box *box, double fit_error, size_t
 /* Marks the bricks of a fanned box: those on its boundary still number their crossings
  * (the fan's loop vertices and the marched cells next to it use them), those inside it
  * are not even read. */
-static void skip_bricks_of(coarse *c, const iso_box *box)
+static void skip_bricks_of(const coarse *c, const iso_box *box)
 {
     const iso_bricks *g = &c->tree->bricks;
     uint32_t lo[3], hi[3];
@@ -135,21 +169,108 @@ static void skip_bricks_of(coarse *c, const iso_box *box)
             }
 }
 
-static int descend(coarse *c, uint32_t index, const iso_box *box)
+/* The subtree of node index: its fans go to fans, its counts to tally. */
+static int descend(const coarse *c, iso_fan_scratch *scratch, iso_fan_output *fans, fan_tally *tally,
+                   uint32_t index, const iso_box *box)
 {
     const iso_tree_node *node = &c->tree->nodes[index];
-    c->tally.nodes_visited++;
+    tally->nodes_visited++;
     if (c->prune && !(node->min <= c->level && c->level < node->max))
         return 0;
-    int rc = try_fan(c, box, node->err, SIZE_MAX, NULL, &c->scratch, &c->fans, &c->tally);
+    int rc = try_fan(c, box, node->err, SIZE_MAX, NULL, scratch, fans, tally);
     if (rc == 1)
         skip_bricks_of(c, box);
     if (rc || !node->first_child)
         return rc < 0 ? rc : 0; /* fanned, or a brick left to PASS 2 */
     iso_box left, right;
     iso_box_split(box, &left, &right);
-    rc = descend(c, node->first_child, &left);
-    return rc ? rc : descend(c, node->first_child + 1, &right);
+    rc = descend(c, scratch, fans, tally, node->first_child, &left);
+    return rc ? rc : descend(c, scratch, fans, tally, node->first_child + 1, &right);
+}
+
+static int add_unit(coarse *c, top_unit unit)
+{
+    top_unit *last = c->unit_count ? &c->units[c->unit_count - 1] : NULL;
+    if (unit.fans && last && last->fans == unit.fans && last->centre_end == unit.centre &&
+        last->triangle_end == unit.triangle) {
+        last->centre_end = unit.centre_end; /* one slice for consecutive fans of the top walk */
+        last->triangle_end = unit.triangle_end;
+        return 0;
+    }
+    if (c->unit_count == c->unit_capacity && grow_list((void **)&c->units, &c->unit_capacity, sizeof unit))
+        return ISO_E_NOMEM;
+    c->units[c->unit_count++] = unit;
+    return 0;
+}
+
+/* The top of the tree, as descend, down to split_depth: a node there is left to the
+ * threads whole (its own fan attempt included), as a unit. */
+static int descend_top(coarse *c, uint32_t index, const iso_box *box, unsigned depth)
+{
+    const iso_tree_node *node = &c->tree->nodes[index];
+    if (depth == c->split_depth && node->first_child)
+        return add_unit(c, (top_unit){.node = index, .box = *box});
+    c->tally.nodes_visited++;
+    if (c->prune && !(node->min <= c->level && c->level < node->max))
+        return 0;
+    size_t centre = c->fans.centre_count, triangle = c->fans.triangle_count;
+    int rc = try_fan(c, box, node->err, SIZE_MAX, NULL, &c->scratch, &c->fans, &c->tally);
+    if (rc == 1) {
+        skip_bricks_of(c, box);
+        return add_unit(c, (top_unit){index, *box, &c->fans, centre, c->fans.centre_count, triangle,
+                                      c->fans.triangle_count});
+    }
+    if (rc || !node->first_child)
+        return rc < 0 ? rc : 0;
+    iso_box left, right;
+    iso_box_split(box, &left, &right);
+    rc = descend_top(c, node->first_child, &left, depth + 1);
+    return rc ? rc : descend_top(c, node->first_child + 1, &right, depth + 1);
+}
+
+/* The units left to the threads, taken one at a time from a shared counter; a thread's
+ * fans go one unit after another into its sub_walk's output (before PASS 2's). */
+static void descend_share(void *context, int t, int threads)
+{
+    (void)threads;
+    coarse *c = context;
+    sub_walk *w = &c->threads[t];
+    c->status[t] = 0;
+    for (;;) {
+        size_t i = atomic_fetch_add_explicit(&c->next_unit, 1, memory_order_relaxed);
+        if (i >= c->unit_count)
+            return;
+        top_unit *u = &c->units[i];
+        if (u->fans)
+            continue; /* fanned by the top walk */
+        u->fans = &w->fans;
+        u->centre = w->fans.centre_count;
+        u->triangle = w->fans.triangle_count;
+        c->status[t] = descend(c, &w->scratch, &w->fans, &w->tally, u->node, &u->box);
+        u->centre_end = w->fans.centre_count;
+        u->triangle_end = w->fans.triangle_count;
+        if (c->status[t])
+            return;
+    }
+}
+
+/* PASS 1. With one thread the top walk is the whole walk. */
+static int descend_all(coarse *c)
+{
+    iso_box root = iso_box_root(c->vol);
+    unsigned depth = 0;
+    while (c->thread_count > 1 && (1u << depth) < TOP_UNITS_PER_THREAD * (unsigned)c->thread_count)
+        depth++;
+    c->split_depth = c->thread_count > 1 ? depth : UINT_MAX;
+    int rc = descend_top(c, 0, &root, 0);
+    if (rc || c->thread_count == 1)
+        return rc;
+    atomic_store_explicit(&c->next_unit, 0, memory_order_relaxed);
+    iso_parallel_run(c->thread_count, descend_share, c);
+    for (int t = 0; t < c->thread_count; t++)
+        if (c->status[t])
+            return c->status[t];
+    return 0;
 }
 
 /* ---- PASS 2: below the bricks ---- */
@@ -236,14 +357,8 @@ static size_t brick_index(const iso_bricks *g, const iso_march_brick *brick)
 
 static int add_mark(sub_walk *w, fan_mark mark)
 {
-    if (w->mark_count == w->mark_capacity) {
-        size_t capacity = w->mark_capacity ? 2 * w->mark_capacity : 256;
-        fan_mark *grown = realloc(w->marks, capacity * sizeof *grown);
-        if (!grown)
-            return ISO_E_NOMEM;
-        w->marks = grown;
-        w->mark_capacity = capacity;
-    }
+    if (w->mark_count == w->mark_capacity && grow_list((void **)&w->marks, &w->mark_capacity, sizeof mark))
+        return ISO_E_NOMEM;
     w->marks[w->mark_count++] = mark;
     return 0;
 }
@@ -329,20 +444,23 @@ static int number_slice(const iso_volume *vol, const fan_slice *s, const iso_mar
     return 0;
 }
 
-/* PASS 1's fans, then the bricks' in grid order, merged from the threads' marks (each
- * thread's are in grid order already), placed one after another from the mesh's end.
- * Returns how many, or 0 if the array cannot be had (*slices NULL). */
+/* PASS 1's fans in its units' order, then the bricks' in grid order, merged from the
+ * threads' marks (each thread's are in grid order already), placed one after another
+ * from the mesh's end. Returns how many, or 0 if the array cannot be had (*slices NULL). */
 static size_t order_slices(const coarse *c, const iso_mesh *mesh, fan_slice **slices)
 {
-    size_t count = 1, next[ISO_PARALLEL_MAX_THREADS] = {0};
+    size_t count = c->unit_count, next[ISO_PARALLEL_MAX_THREADS] = {0};
     assert(c->thread_count <= ISO_PARALLEL_MAX_THREADS);
     for (int t = 0; t < c->thread_count; t++)
         count += c->threads[t].mark_count;
-    fan_slice *s = *slices = malloc(count * sizeof *s);
+    fan_slice *s = *slices = malloc((count ? count : 1) * sizeof *s);
     if (!s)
         return 0;
-    s[0] = (fan_slice){&c->fans, 0, c->fans.centre_count, 0, c->fans.triangle_count, 0, 0};
-    for (size_t i = 1; i < count; i++) {
+    for (size_t i = 0; i < c->unit_count; i++) {
+        const top_unit *u = &c->units[i];
+        s[i] = (fan_slice){u->fans, u->centre, u->centre_end, u->triangle, u->triangle_end, 0, 0};
+    }
+    for (size_t i = c->unit_count; i < count; i++) {
         int t = -1;
         for (int u = 0; u < c->thread_count; u++)
             if (next[u] < c->threads[u].mark_count &&
@@ -391,6 +509,10 @@ static int number_fans(const coarse *c, const iso_march *march, int world, iso_m
     size_t count = order_slices(c, mesh, &slices);
     if (!slices)
         return ISO_E_NOMEM;
+    if (!count) {
+        free(slices);
+        return 0;
+    }
     const fan_slice *last = &slices[count - 1];
     size_t vertices = last->first_vertex + last->centre_end - last->centre;
     size_t triangles = last->first_triangle + last->triangle_end - last->triangle;
@@ -489,8 +611,10 @@ static int march_and_finish(const iso_tree *tree, const iso_extract_params *para
         options.skip = c->skip;
         options.cover = cover;
         options.cover_context = c;
-        options.extra_vertices = c->fans.centre_count;
-        options.extra_triangles = c->fans.triangle_count;
+        for (size_t i = 0; i < c->unit_count; i++) {
+            options.extra_vertices += c->units[i].centre_end - c->units[i].centre;
+            options.extra_triangles += c->units[i].triangle_end - c->units[i].triangle;
+        }
     }
     iso_march *march;
     iso_march_stats ms;
@@ -536,6 +660,7 @@ static void coarse_free(coarse *c)
     }
     free(c->threads);
     free(c->skip);
+    free(c->units);
 }
 
 /* Tolerance > 0: PASS 1, then the rest. */
@@ -548,8 +673,7 @@ static int extract_coarse(const iso_tree *tree, const iso_extract_params *params
     c.thread_count = iso_parallel_threads(params->threads);
     c.threads = calloc((size_t)c.thread_count, sizeof *c.threads);
     c.skip = calloc(iso_bricks_total(&tree->bricks), 1);
-    iso_box root = iso_box_root(tree->vol);
-    int rc = c.threads && c.skip ? descend(&c, 0, &root) : ISO_E_NOMEM;
+    int rc = c.threads && c.skip ? descend_all(&c) : ISO_E_NOMEM;
     if (rc) {
         coarse_free(&c);
         iso_mesh_free(mesh);

@@ -493,6 +493,46 @@ static void test_fans_join_the_kernel_without_weld(void)
     }
 }
 
+/* PASS 1 walks the top of the tree on one thread and leaves the subtrees below to the
+ * threads: their fans must come out in the one-thread walk's order, whatever the thread
+ * count. On this sphere, tolerance 4 with 5 threads and 8 with 2 threads fan stored nodes
+ * both in the top walk and in the threads' subtrees (counted when this test was written);
+ * 1 fans only below the top. */
+static void test_top_walk_on_threads_keeps_the_order(void)
+{
+    iso_volume *vol;
+    iso_error err;
+    CHECK_OK(iso_load("field:sphere:61x47x53", NULL, &vol, &err), &err);
+    iso_tree *tree = surface_build(vol);
+    static const double tolerances[] = {1, 4, 8};
+    static const int thread_counts[] = {2, 3, 5, 8, 64};
+    for (int i = 0; i < 3 && !check_failed(); i++) {
+        iso_mesh one;
+        iso_mesh_init(&one);
+        iso_extract_stats st;
+        extract_threads(tree, 0.5, tolerances[i], 1, &one, &st);
+        CHECKF(st.nodes_polygonized > 0, "tolerance %g fanned nothing", tolerances[i]);
+        for (int k = 0; k < 5; k++) {
+            iso_mesh many;
+            iso_mesh_init(&many);
+            iso_extract_stats sm;
+            extract_threads(tree, 0.5, tolerances[i], thread_counts[k], &many, &sm);
+            CHECKF(many.vertex_count == one.vertex_count && many.triangle_count == one.triangle_count &&
+                       memcmp(many.positions, one.positions, 12 * one.vertex_count) == 0 &&
+                       memcmp(many.indices, one.indices, 12 * one.triangle_count) == 0,
+                   "tolerance %g, %d threads: %zu vertices and %zu triangles, not the same mesh as one "
+                   "thread's %zu and %zu", tolerances[i], thread_counts[k], many.vertex_count,
+                   many.triangle_count, one.vertex_count, one.triangle_count);
+            CHECK_EQ(sm.nodes_polygonized, st.nodes_polygonized);
+            CHECK_EQ(sm.nodes_visited, st.nodes_visited);
+            iso_mesh_free(&many);
+        }
+        iso_mesh_free(&one);
+    }
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
 /* ---- the bricks' fan floors ---- */
 
 /* The least fit error of the non-constant boxes from box down to the fan size, by scanning
@@ -693,6 +733,7 @@ int main(void)
     CHECK_RUN(test_tree_file_round_trip_and_refusals);
     CHECK_RUN(test_tree_is_small);
     CHECK_RUN(test_fans_join_the_kernel_without_weld);
+    CHECK_RUN(test_top_walk_on_threads_keeps_the_order);
     CHECK_RUN(test_tolerance_on_one_cell_bricks);
     CHECK_RUN(test_fan_floor_is_the_least_fit_below);
     CHECK_RUN(test_fan_floor_skips_only_what_cannot_fan);
