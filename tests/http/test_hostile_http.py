@@ -253,7 +253,8 @@ def slow_clients(port, timeout_s, max_conn):
     assert time.time() - t0 < timeout_s + 4, time.time() - t0
     # Fill every slot with idle connections: one more is refused (closed at once). A slot
     # of a closed connection is free only once its thread has finished, which under load
-    # takes a moment, so each idle connection is checked to be held before the next.
+    # takes a moment, so the idle connections are checked to be held, and any the server
+    # closed for want of a slot are opened again.
     idle = held_connections(port, max_conn)
     extra = socket.create_connection(("127.0.0.1", port), timeout=5)
     try:
