@@ -433,6 +433,14 @@ static void extract_threads(const iso_tree *tree, double level, double tolerance
     CHECK_OK(iso_extract(tree, &p, m, st, &err), &err);
 }
 
+/* 1 if the two meshes are the same bytes: counts, positions and indices. */
+static int same_mesh(const iso_mesh *a, const iso_mesh *b)
+{
+    return a->vertex_count == b->vertex_count && a->triangle_count == b->triangle_count &&
+           memcmp(a->positions, b->positions, 12 * a->vertex_count) == 0 &&
+           memcmp(a->indices, b->indices, 12 * a->triangle_count) == 0;
+}
+
 /* Fans name their loop vertices by grid edge and take the kernel's ids for them, so the
  * mesh comes out welded: welding again merges nothing, every vertex is used, every
  * interior edge has two triangles, and the bytes do not depend on the thread count. */
@@ -517,9 +525,7 @@ static void test_top_walk_on_threads_keeps_the_order(void)
             iso_mesh_init(&many);
             iso_extract_stats sm;
             extract_threads(tree, 0.5, tolerances[i], thread_counts[k], &many, &sm);
-            CHECKF(many.vertex_count == one.vertex_count && many.triangle_count == one.triangle_count &&
-                       memcmp(many.positions, one.positions, 12 * one.vertex_count) == 0 &&
-                       memcmp(many.indices, one.indices, 12 * one.triangle_count) == 0,
+            CHECKF(same_mesh(&many, &one),
                    "tolerance %g, %d threads: %zu vertices and %zu triangles, not the same mesh as one "
                    "thread's %zu and %zu", tolerances[i], thread_counts[k], many.vertex_count,
                    many.triangle_count, one.vertex_count, one.triangle_count);
@@ -625,9 +631,7 @@ static void test_fan_floor_skips_only_what_cannot_fan(void)
             tree->fan_floor = zero;
             extract_threads(tree, 0.5, share * range, 2, &walked, &b);
             tree->fan_floor = floors;
-            CHECKF(gated.vertex_count == walked.vertex_count && gated.triangle_count == walked.triangle_count &&
-                       memcmp(gated.positions, walked.positions, 12 * gated.vertex_count) == 0 &&
-                       memcmp(gated.indices, walked.indices, 12 * gated.triangle_count) == 0,
+            CHECKF(same_mesh(&gated, &walked),
                    "%s tol %g: %zu/%zu triangles gated, %zu/%zu walked", fields[f], share * range,
                    gated.triangle_count, gated.vertex_count, walked.triangle_count, walked.vertex_count);
             CHECK_EQ(a.nodes_polygonized, b.nodes_polygonized);
