@@ -8,7 +8,7 @@ WARN     := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototy
             -Wpointer-arith -Wcast-qual -Wvla
 OPT      ?= -O2 -g
 CFLAGS   := $(OPT) -std=c11 -D_DEFAULT_SOURCE -D_POSIX_C_SOURCE=200809L $(WARN) -pthread -Icore -Iproto -I/usr/include/nifti
-# GDCM (DICOM, core/dicom_gdcm.cc) ships CMake files but no pkg-config file on Debian 12.
+# GDCM (DICOM, core/io/dicom_gdcm.cc) ships CMake files but no pkg-config file on Debian 12.
 GDCM_INC := /usr/include/gdcm-3.0
 GDCM_LIBS := -lgdcmMSFF -lgdcmDSED -lgdcmCommon
 CXXFLAGS := $(OPT) -std=c++17 -Wall -Wextra -Werror -Icore -Iproto $(shell pkg-config --cflags draco 2>/dev/null) \
@@ -20,8 +20,8 @@ BUILD    ?= build
 SAN_BUILD := build/san
 SAN_FLAGS := -O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all
 
-CORE_SRC   := $(sort $(wildcard core/*.c))
-CORE_CXX   := $(sort $(wildcard core/*.cc))
+CORE_SRC   := $(sort $(wildcard core/*/*.c))
+CORE_CXX   := $(sort $(wildcard core/*/*.cc))
 PROTO_SRC  := $(sort $(wildcard proto/*.c))
 PROTO_CXX  := $(sort $(wildcard proto/*.cc))
 SERVER_SRC := $(sort $(wildcard server/*.c))
@@ -60,13 +60,13 @@ $(BUILD)/tests/%: tests/unit/%.c $(SUPPORT_OBJ) $(BUILD)/libisoserve.a
 
 # test_march again over the kernel built without SSE2 (as on a machine without it): the
 # row-by-row paths then classify every brick, full ones included.
-$(BUILD)/scalar/core/march.o: core/march.c
+$(BUILD)/scalar/core/extract/march.o: core/extract/march.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -U__SSE2__ -MMD -MP -c $< -o $@
 
-$(BUILD)/tests/test_march_scalar: tests/unit/test_march.c $(SUPPORT_OBJ) $(BUILD)/scalar/core/march.o $(BUILD)/libisoserve.a
+$(BUILD)/tests/test_march_scalar: tests/unit/test_march.c $(SUPPORT_OBJ) $(BUILD)/scalar/core/extract/march.o $(BUILD)/libisoserve.a
 	@mkdir -p $(dir $@)
-	$(CC) $(CFLAGS) -Itests/support $< $(SUPPORT_OBJ) $(BUILD)/scalar/core/march.o $(BUILD)/libisoserve.a $(LIBS) -o $@
+	$(CC) $(CFLAGS) -Itests/support $< $(SUPPORT_OBJ) $(BUILD)/scalar/core/extract/march.o $(BUILD)/libisoserve.a $(LIBS) -o $@
 
 unit-tests: $(TEST_BIN) $(BUILD)/tests/test_march_scalar
 

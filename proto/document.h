@@ -8,7 +8,7 @@
 #include <stdint.h>
 
 #include "query.h"
-#include "volume.h"
+#include "volume/volume.h"
 
 /* What the API says about one volume. Strings are borrowed. */
 typedef struct proto_volume_doc {

@@ -20,7 +20,7 @@
 #include <vector>
 
 extern "C" {
-#include "parallel.h"
+#include "base/base.h"
 }
 
 namespace {

@@ -1,8 +1,8 @@
 /* encode.h: mesh encoders for the wire (binary PLY, OBJ text, binary STL, Draco, glTF
  * binary with KHR_draco_mesh_compression) and the Draco decoder that tests and fuzzers check them with.
  *
- * Every encoder takes an iso_mesh (core/mesh.h) and returns a malloc'd byte buffer that the
- * caller frees with free(). Functions return 0 or a negative ISO_E_* code (core/error.h) and
+ * Every encoder takes an iso_mesh (core/mesh/mesh.h) and returns a malloc'd byte buffer that the
+ * caller frees with free(). Functions return 0 or a negative ISO_E_* code (core/base/base.h) and
  * fill `err` when it is not NULL; on error *out is NULL and *out_size 0. NULL mesh, out or
  * out_size pointers are caller bugs (asserted). A mesh whose indices are out of range, whose
  * counts do not fit uint32, or (for Draco and glb) whose positions are not finite is refused
@@ -18,8 +18,8 @@
 extern "C" {
 #endif
 
-#include "error.h"
-#include "mesh.h"
+#include "base/base.h"
+#include "mesh/mesh.h"
 
 /* Ranges of the options, for request validation in callers. */
 enum {

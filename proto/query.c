@@ -10,7 +10,7 @@
 #include <strings.h>
 
 #include "encode.h"
-#include "normals.h"
+#include "mesh/mesh.h"
 
 int proto_problem_set(proto_problem *problem, int status, const char *parameter,
                       const char *fmt, ...)

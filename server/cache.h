@@ -24,7 +24,7 @@ typedef struct srv_body {
     double volume_mm3;              /* enclosed volume; meaningful only when closed */
     int closed;                     /* no open or non-manifold edge */
     int budget_fits;                /* -1: no budget asked; else 0 or 1 */
-    int simplified;                 /* the budget was met by meshoptimizer (budget.h) */
+    int simplified;                 /* the budget was met by meshoptimizer (mesh/mesh.h) */
     double simplify_error_mm, simplify_error_voxels; /* its error estimate, when simplified */
 } srv_body;
 

@@ -9,10 +9,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "dicom.h"
-#include "loader.h"
+#include "io/io.h"
 #include "orthanc.h"
-#include "sidecar.h"
 
 int srv_catalog_id_valid(const char *id)
 {
@@ -237,7 +235,7 @@ int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err)
         char id[256];
         id_of(ent->d_name, id, sizeof id);
         int series = !stat(path, &st) && S_ISDIR(st.st_mode) && iso_dicom_dir_has_files(path);
-        if (stat(path, &st) || !(S_ISREG(st.st_mode) || series) || !srv_load_recognises(path))
+        if (stat(path, &st) || !(S_ISREG(st.st_mode) || series) || !iso_load_recognises(path))
             ; /* not a volume of its own */
         else if (!srv_catalog_id_valid(id) || has_id(out, id))
             fprintf(stderr, "isoserve: %s: id \"%s\" is %s; skipped\n", path, id,

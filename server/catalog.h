@@ -6,7 +6,7 @@
 
 #include <stddef.h>
 
-#include "error.h"
+#include "base/base.h"
 
 #define SRV_ID_MAX 64
 #define SRV_LEVELS_MAX 8

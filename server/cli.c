@@ -11,10 +11,9 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "clock.h"
-#include "loader.h"
-#include "resample.h"
-#include "sidecar.h"
+#include "base/base.h"
+#include "io/io.h"
+#include "volume/volume.h"
 
 int srv_fail(const char *fmt, ...)
 {
@@ -89,7 +88,7 @@ int srv_open(const srv_open_options *opt, srv_subject *out)
     out->name = opt->path;
     char label[] = "loading"; /* drawn only for slow loads that report progress (DICOM series) */
     iso_load_options lopt = {.progress = srv_progress, .progress_context = label};
-    if (srv_load_volume(opt->path, &lopt, &out->vol, &err))
+    if (iso_load(opt->path, &lopt, &out->vol, &err))
         return srv_fail("%s", err.message);
     if (opt->resample) {
         size_t dims[3];

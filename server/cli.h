@@ -5,9 +5,9 @@
 
 #include <stddef.h>
 
-#include "extract.h"
-#include "tree.h"
-#include "volume.h"
+#include "extract/extract.h"
+#include "hierarchy/tree.h"
+#include "volume/volume.h"
 
 /* A volume opened for a command: the volume (resampled if asked) and its hierarchy (read
  * from a file if asked, else built with progress on stderr). */

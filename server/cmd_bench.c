@@ -9,7 +9,7 @@
 #include <string.h>
 
 #include "cli.h"
-#include "parallel.h"
+#include "base/base.h"
 
 typedef struct bench_row {
     double tolerance;

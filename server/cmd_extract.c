@@ -5,10 +5,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "budget.h"
-#include "census.h"
+#include "extract/extract.h"
+#include "mesh/mesh.h"
 #include "cli.h"
-#include "normals.h"
 #include "encode.h"
 
 static int ends_with(const char *s, const char *suffix)

@@ -13,11 +13,10 @@
 #include <unistd.h>
 
 #include "cli.h"
-#include "clock.h"
-#include "histogram.h"
-#include "loader.h"
+#include "base/base.h"
+#include "volume/volume.h"
+#include "io/io.h"
 #include "orthanc.h"
-#include "sidecar.h"
 
 /* Bump when extraction or encoding changes what a mesh URL returns: it is part of every
  * volume's version, so ETags and caches in front of the server move on. */
@@ -141,7 +140,7 @@ static int load_volume(const srv_catalog_entry *e, const srv_preload_options *op
     *upstream = 0;
     if (e->orthanc_url)
         return srv_orthanc_load(e->orthanc_url, e->orthanc_series, opt->cache_dir, &lopt, vol, err, upstream);
-    return srv_load_volume(e->path, &lopt, vol, err);
+    return iso_load(e->path, &lopt, vol, err);
 }
 
 /* Loads one entry into v; 0, or 1 when it is skipped (reported, and said in err). */

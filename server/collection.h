@@ -15,8 +15,8 @@
 #include <stdint.h>
 
 #include "catalog.h"
-#include "tree.h"
-#include "volume.h"
+#include "hierarchy/tree.h"
+#include "volume/volume.h"
 
 #define SRV_HISTOGRAM_BINS 256
 /* A hierarchy's temporary file unchanged for this long before a start has no writer left

@@ -16,7 +16,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "clock.h"
+#include "base/base.h"
 #include "document.h"
 #include "mesh_job.h"
 #include "query.h"

@@ -13,7 +13,7 @@
 
 #include "cache.h"
 #include "collection.h"
-#include "error.h"
+#include "base/base.h"
 #include "metrics.h"
 #include "pool.h"
 #include "shard.h"

@@ -5,12 +5,10 @@
 #include <pthread.h>
 #include <stdlib.h>
 
-#include "budget.h"
-#include "census.h"
-#include "clock.h"
+#include "mesh/mesh.h"
+#include "base/base.h"
 #include "draco_shim.h"
-#include "extract.h"
-#include "normals.h"
+#include "extract/extract.h"
 
 void srv_mesh_job_free(void *arg)
 {
@@ -21,7 +19,7 @@ void srv_mesh_job_free(void *arg)
 }
 
 /* Extraction, under the budget when one is asked: the ladder up to a faithful tolerance,
- * then meshoptimizer (budget.h). */
+ * then meshoptimizer (mesh/mesh.h). */
 static int extract(const srv_mesh_job *job, iso_mesh *mesh, iso_extract_stats *stats,
                    srv_body *facts, iso_error *err)
 {

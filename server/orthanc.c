@@ -13,7 +13,7 @@
 #include <unistd.h>
 
 #include "cli.h"
-#include "clock.h"
+#include "base/base.h"
 
 /* The series document lists ids only: a few hundred bytes per instance. */
 #define SERIES_JSON_MAX ((size_t)16 << 20)

@@ -2,7 +2,7 @@
  * volume source of the catalog.
  *
  * GET {url}/series/{id} lists the instances, GET {url}/instances/{iid}/file fetches each
- * one's DICOM file; the files then load as a DICOM series directory (core/dicom.h). With a
+ * one's DICOM file; the files then load as a DICOM series directory (core/io/io.h). With a
  * cache dir the files stay in {cache_dir}/orthanc/{id}/ (written under a temporary name,
  * renamed when complete), and later loads read them without asking the server: an Orthanc
  * series id is a hash of the patient, study and series UIDs, so it names the same
@@ -11,8 +11,8 @@
 #ifndef SRV_ORTHANC_H
 #define SRV_ORTHANC_H
 
-#include "loader.h"
-#include "volume.h"
+#include "io/io.h"
+#include "volume/volume.h"
 
 /* 1 if url is http:// or https:// followed by a host (no spaces, quotes or control bytes). */
 int srv_orthanc_url_valid(const char *url);

@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "error.h"
+#include "base/base.h"
 
 #define SRV_SHARD_PEERS_MAX 1024
 #define SRV_SHARD_POINTS_PER_PEER 160

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Raw volumes with a JSON sidecar through the CLI (the sidecar's JSON is read in server/):
+# Raw volumes with a JSON sidecar through the CLI (core/io/sidecar.c reads the sidecar):
 # a good pair loads with its geometry, extraction lands where the sidecar says, and
 # hostile sidecars fail with a message naming the file and the field. PASS/FAIL lines.
 set -uo pipefail

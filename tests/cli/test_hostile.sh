@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Hostile raw volumes with a JSON sidecar (server/sidecar.c, outside the core's unit tests):
+# Hostile raw volumes with a JSON sidecar (core/io/sidecar.c, outside the core's unit tests):
 # each is refused by `isoserve info` with exit status 1 and exactly the message expected,
 # never a crash. The core loaders' hostile files are in tests/unit/test_hostile.c.
 # Prints PASS/FAIL lines.

@@ -9,7 +9,7 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "loader.h"
+#include "io/io.h"
 
 #ifndef FUZZ_SUFFIX
 #error "build with -DFUZZ_SUFFIX=\".nrrd\" (or .nii, .mha)"

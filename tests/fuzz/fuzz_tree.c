@@ -1,4 +1,4 @@
-/* fuzz_tree.c: libFuzzer target for the hierarchy-file reader (core/tree.c's
+/* fuzz_tree.c: libFuzzer target for the hierarchy-file reader (core/hierarchy/tree.c's
  * iso_tree_load): the input is a hierarchy file for a fixed 12^3 sphere. It must be
  * refused with an error or, when it passes every check, be the very tree iso_tree_build
  * makes; extraction from an accepted tree must run. */
@@ -8,9 +8,9 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "extract.h"
-#include "loader.h"
-#include "tree.h"
+#include "extract/extract.h"
+#include "io/io.h"
+#include "hierarchy/tree.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 

@@ -188,7 +188,7 @@ def main_tests(s, tmp, blob):
         top = int(np.floor((blob.max() - h["min"]) / (h["max"] - h["min"]) * 256))
         assert h["counts"][255] >= 1 and top >= 255
         # 16 bytes per kd-tree node plus, per brick of 8^3 cells, its float min, max and
-        # fan floor (core/fan_floor.h).
+        # fan floor (core/hierarchy/fan_floor.h).
         bricks = int(np.prod([-(-(d - 1) // 8) for d in v["dims"]]))
         assert v["hierarchy"]["nodes"] >= 1 and v["hierarchy"]["bytes"] == 16 * v["hierarchy"]["nodes"] + 12 * bricks, \
             (v["hierarchy"], bricks)

@@ -6,9 +6,9 @@
 #include <stdio.h>
 
 #include "check.h"
-#include "loader.h"
-#include "mc.h"
-#include "trilinear.h"
+#include "io/io.h"
+#include "extract/mc.h"
+#include "volume/volume.h"
 
 static uint64_t rng_state = 0x2545F4914F6CDD1Dull;
 

@@ -4,10 +4,10 @@
 
 #include <stddef.h>
 
-#include "extract.h"
-#include "mesh.h"
-#include "tree.h"
-#include "volume.h"
+#include "extract/extract.h"
+#include "mesh/mesh.h"
+#include "hierarchy/tree.h"
+#include "volume/volume.h"
 
 /* Uniform in [0, 1) from xorshift64* with a fixed seed: failures reproduce. */
 double surface_uniform(void);

@@ -14,7 +14,7 @@
 #include <unistd.h>
 
 #include "check.h"
-#include "loader.h"
+#include "io/io.h"
 
 #define PYDICOM_FILES "/usr/lib/python3/dist-packages/pydicom/data/test_files"
 #define HELPER "/usr/bin/python3 tests/support/dicom_series.py"

@@ -7,16 +7,15 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "census.h"
+#include "mesh/mesh.h"
 #include "check.h"
 #include "surface.h"
-#include "extract.h"
-#include "field.h"
-#include "loader.h"
-#include "mc.h"
-#include "round.h"
-#include "tree.h"
-#include "trilinear.h"
+#include "extract/extract.h"
+#include "io/io.h"
+#include "extract/mc.h"
+#include "base/base.h"
+#include "hierarchy/tree.h"
+#include "volume/volume.h"
 
 /* ---- helpers ---- */
 

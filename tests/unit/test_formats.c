@@ -10,9 +10,9 @@
 #include <zlib.h>
 
 #include "check.h"
-#include "extract.h"
-#include "loader.h"
-#include "tree.h"
+#include "extract/extract.h"
+#include "io/io.h"
+#include "hierarchy/tree.h"
 
 #define MRICRON "/usr/share/mricron/templates/"
 

@@ -14,10 +14,10 @@
 #include <zlib.h>
 
 #include "check.h"
-#include "extract.h"
-#include "loader.h"
-#include "tree.h"
-#include "volume.h"
+#include "extract/extract.h"
+#include "io/io.h"
+#include "hierarchy/tree.h"
+#include "volume/volume.h"
 
 /* ---- files ---- */
 

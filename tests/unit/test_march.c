@@ -6,7 +6,7 @@
 #include <string.h>
 
 #include "check.h"
-#include "march.h"
+#include "extract/march.h"
 #include "surface.h"
 
 typedef struct triangle {

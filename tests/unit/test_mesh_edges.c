@@ -6,7 +6,7 @@
 #include <string.h>
 
 #include "check.h"
-#include "mesh.h"
+#include "mesh/mesh.h"
 
 /* A mesh over `vertices` points (positions unused by the census) and the given triangles. */
 static void build(iso_mesh *m, size_t vertices, const uint32_t *tri, size_t triangles)

@@ -8,10 +8,10 @@
 #include <string.h>
 
 #include "check.h"
-#include "extract.h"
-#include "field.h"
-#include "normals.h"
-#include "tree.h"
+#include "extract/extract.h"
+#include "io/io.h"
+#include "mesh/mesh.h"
+#include "hierarchy/tree.h"
 
 static void test_names(void)
 {

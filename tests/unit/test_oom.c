@@ -17,14 +17,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "budget.h"
-#include "census.h"
+#include "mesh/mesh.h"
 #include "check.h"
 #include "encode.h"
-#include "extract.h"
-#include "field.h"
-#include "normals.h"
-#include "tree.h"
+#include "extract/extract.h"
+#include "io/io.h"
+#include "hierarchy/tree.h"
 
 #if defined(__SANITIZE_ADDRESS__)
 #define OOM_INJECTION 0

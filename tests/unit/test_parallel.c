@@ -6,7 +6,7 @@
 #include <string.h>
 
 #include "check.h"
-#include "parallel.h"
+#include "base/base.h"
 
 #define MOST ISO_PARALLEL_MAX_THREADS
 

@@ -7,14 +7,15 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "budget.h"
+#include "extract/extract.h"
+#include "mesh/mesh.h"
 #include "check.h"
 #include "document.h"
 #include "encode.h"
-#include "field.h"
-#include "histogram.h"
+#include "io/io.h"
+#include "volume/volume.h"
 #include "query.h"
-#include "tree.h"
+#include "hierarchy/tree.h"
 
 #define P(k, v) ((proto_param){k, v})
 #define COUNT(a) (sizeof(a) / sizeof((a)[0]))

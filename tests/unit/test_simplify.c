@@ -11,14 +11,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "budget.h"
-#include "census.h"
+#include "mesh/mesh.h"
 #include "check.h"
-#include "extract.h"
-#include "field.h"
-#include "simplify.h"
+#include "extract/extract.h"
+#include "io/io.h"
 #include "surface.h"
-#include "tree.h"
+#include "hierarchy/tree.h"
 
 /* ---- helpers ---- */
 
@@ -333,7 +331,7 @@ static void test_analytic_fields_stay_within_reported_error(void)
                c.open_edges, c.nonmanifold_edges, c.misoriented_edges, c.degenerate_triangles);
         CHECK_EQ(r.unpaired_edges, 0);
         CHECK(surface_worst_vertex_error(vol, &m, cases[i].level) <= st.error_bound + surface_rounding_slack(vol));
-        /* meshoptimizer's error is an estimate, not a bound (simplify.h): on these smooth
+        /* meshoptimizer's error is an estimate, not a bound (mesh/mesh.h): on these smooth
          * surfaces the largest measured distance is 1-2 times it. A unit slip (the
          * relative error left unscaled, the extent is ~40 voxels) would be far outside. */
         double measured = measured_distance(&exact, &m);
@@ -399,7 +397,7 @@ static void test_budget_policy(void)
 /* CThead's skin at 100k triangles: at most 100k; its 1,068 open edges on the volume's
  * border come out as they went in (the same count, still on the border); no crack, no
  * misoriented or unpaired edge; non-manifold edges few (meshoptimizer's pinches,
- * simplify.h: 70-90 measured); every vertex one of the exact mesh's. */
+ * mesh/mesh.h: 70-90 measured); every vertex one of the exact mesh's. */
 static void test_cthead_skin(void)
 {
     iso_volume *vol = surface_load_shared("CThead_256x256x113_u16be.nhdr");

@@ -10,11 +10,10 @@
 #include <zlib.h>
 
 #include "check.h"
-#include "field.h"
-#include "loader.h"
-#include "nrrd.h"
+#include "io/io.h"
+#include "io/nrrd.h"
 #include "sha256.h"
-#include "volume.h"
+#include "volume/volume.h"
 
 /* ---- helpers ---- */
 

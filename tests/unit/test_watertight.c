@@ -12,12 +12,12 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "census.h"
+#include "mesh/mesh.h"
 #include "check.h"
-#include "extract.h"
-#include "loader.h"
+#include "extract/extract.h"
+#include "io/io.h"
 #include "surface.h"
-#include "tree.h"
+#include "hierarchy/tree.h"
 
 #define MRICRON_CH2BET "/usr/share/mricron/templates/ch2bet.nii.gz"
 

@@ -1,0 +1,528 @@
+/* tree.c: building, saving and mapping the hierarchy of trilinear fits (see tree.h).
+ *
+ * PASS 1 (layout): walk the split rule breadth-first from the root, one box per node,
+ *   until bricks; children of node n are appended together, so first_child is known.
+ * PASS 2 (fit): scan every node's samples once for min, max and the Lemma 1 error of the
+ *   trilinear through its corners. Nodes are independent; the pass runs on all cores.
+ * The file is a 64-byte header (magic, version, volume identity, checksums) followed by
+ * the nodes exactly as in memory, so loading is one mmap plus verification. */
+#include "tree.h"
+
+#include <assert.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include "base/base.h"
+#include "fan_floor.h"
+#include "volume/volume.h"
+
+/* ---- boxes ---- */
+
+iso_box iso_box_root(const iso_volume *vol)
+{
+    iso_box b;
+    for (int d = 0; d < 3; d++) {
+        b.lo[d] = 0;
+        b.hi[d] = (uint32_t)(vol->dims[d] - 1);
+    }
+    return b;
+}
+
+int iso_box_split(const iso_box *box, iso_box *left, iso_box *right)
+{
+    int axis = 0;
+    uint32_t longest = 0;
+    for (int d = 0; d < 3; d++) {
+        uint32_t n = box->hi[d] - box->lo[d];
+        if (n > longest) {
+            longest = n;
+            axis = d;
+        }
+    }
+    if (longest <= 1 && iso_box_cells(box) <= 1)
+        return -1;
+    /* Above brick size the split falls on a multiple of the brick (the root starts at 0,
+     * so every stored box does too): stored leaves are then exactly the bricks of the
+     * regular grid (tree.h), whatever the volume's dimensions, and extraction can hand a
+     * leaf to the brick kernel as it is. Below, the paper's middle split. */
+    uint32_t half = longest > ISO_TREE_BRICK
+                        ? ISO_TREE_BRICK * ((longest + ISO_TREE_BRICK) / (2 * ISO_TREE_BRICK))
+                        : longest / 2;
+    uint32_t mid = box->lo[axis] + half;
+    *left = *box;
+    *right = *box;
+    left->hi[axis] = mid;
+    right->lo[axis] = mid;
+    return axis;
+}
+
+int iso_box_is_brick(const iso_box *box)
+{
+    for (int d = 0; d < 3; d++)
+        if (box->hi[d] - box->lo[d] > ISO_TREE_BRICK)
+            return 0;
+    return 1;
+}
+
+/* ---- scanning one box: min, max, Lemma 1 error ---- */
+
+/* One function per voxel type; the trilinear is evaluated along each x-row as a line
+ * between its values at the row's ends, so a sample costs a multiply-add and compares. */
+#define DEFINE_SCAN(NAME, T)                                                                 \
+    static void NAME(const iso_volume *vol, const iso_box *b, double *mn, double *mx,         \
+                     double *er)                                                              \
+    {                                                                                         \
+        const T *p = (const T *)vol->data;                                                    \
+        size_t nx = vol->dims[0], nxy = vol->dims[0] * vol->dims[1];                          \
+        double c[8], lo = INFINITY, hi = -INFINITY, worst = 0;                                \
+        int nan = 0;                                                                          \
+        for (int k = 0; k < 8; k++)                                                           \
+            c[k] = (double)p[(k & 4 ? b->hi[2] : b->lo[2]) * nxy +                            \
+                             (size_t)(k & 2 ? b->hi[1] : b->lo[1]) * nx + (k & 1 ? b->hi[0] : b->lo[0])]; \
+        double inv[3];                                                                        \
+        for (int d = 0; d < 3; d++)                                                           \
+            inv[d] = b->hi[d] > b->lo[d] ? 1.0 / (b->hi[d] - b->lo[d]) : 0.0;                 \
+        for (uint32_t z = b->lo[2]; z <= b->hi[2]; z++) {                                     \
+            double w = (z - b->lo[2]) * inv[2];                                               \
+            for (uint32_t y = b->lo[1]; y <= b->hi[1]; y++) {                                 \
+                double v = (y - b->lo[1]) * inv[1];                                           \
+                double a = iso_tri_eval(c, 0, v, w), e = iso_tri_eval(c, 1, v, w) - a;        \
+                const T *row = p + z * nxy + (size_t)y * nx;                                  \
+                for (uint32_t x = b->lo[0]; x <= b->hi[0]; x++) {                             \
+                    double s = (double)row[x];                                                \
+                    double d = fabs(s - (a + e * ((x - b->lo[0]) * inv[0])));                 \
+                    if (s < lo) lo = s;                                                       \
+                    if (s > hi) hi = s;                                                       \
+                    if (d > worst) worst = d;                                                 \
+                    if (s != s) nan = 1;                                                      \
+                }                                                                             \
+            }                                                                                 \
+        }                                                                                     \
+        *mn = lo;                                                                             \
+        *mx = hi;                                                                             \
+        *er = nan ? INFINITY : worst;                                                         \
+    }
+
+DEFINE_SCAN(scan_u8, uint8_t)
+DEFINE_SCAN(scan_i8, int8_t)
+DEFINE_SCAN(scan_u16, uint16_t)
+DEFINE_SCAN(scan_i16, int16_t)
+DEFINE_SCAN(scan_u32, uint32_t)
+DEFINE_SCAN(scan_i32, int32_t)
+DEFINE_SCAN(scan_f32, float)
+DEFINE_SCAN(scan_f64, double)
+
+void iso_tree_scan_box(const iso_volume *vol, const iso_box *box, double *min, double *max,
+                       double *err)
+{
+    switch (vol->type) {
+    case ISO_U8: scan_u8(vol, box, min, max, err); break;
+    case ISO_I8: scan_i8(vol, box, min, max, err); break;
+    case ISO_U16: scan_u16(vol, box, min, max, err); break;
+    case ISO_I16: scan_i16(vol, box, min, max, err); break;
+    case ISO_U32: scan_u32(vol, box, min, max, err); break;
+    case ISO_I32: scan_i32(vol, box, min, max, err); break;
+    case ISO_F32: scan_f32(vol, box, min, max, err); break;
+    case ISO_F64: scan_f64(vol, box, min, max, err); break;
+    }
+}
+
+/* ---- PASS 1: layout ---- */
+
+typedef struct layout {
+    iso_tree_node *nodes;
+    iso_box *boxes;
+    size_t count, capacity;
+} layout;
+
+static int layout_push(layout *l, const iso_box *b)
+{
+    if (l->count == l->capacity) {
+        size_t cap = l->capacity ? l->capacity * 2 : 1024;
+        iso_tree_node *n = realloc(l->nodes, cap * sizeof *n);
+        if (!n)
+            return ISO_E_NOMEM;
+        l->nodes = n;
+        iso_box *bx = realloc(l->boxes, cap * sizeof *bx);
+        if (!bx)
+            return ISO_E_NOMEM;
+        l->boxes = bx;
+        l->capacity = cap;
+    }
+    memset(&l->nodes[l->count], 0, sizeof l->nodes[0]);
+    l->boxes[l->count++] = *b;
+    return 0;
+}
+
+static int lay_out(const iso_volume *vol, layout *l)
+{
+    iso_box root = iso_box_root(vol);
+    if (layout_push(l, &root))
+        return ISO_E_NOMEM;
+    for (size_t n = 0; n < l->count; n++) {
+        iso_box left, right, box = l->boxes[n];
+        if (iso_box_is_brick(&box))
+            continue;
+        iso_box_split(&box, &left, &right);
+        l->nodes[n].first_child = (uint32_t)l->count;
+        if (layout_push(l, &left) || layout_push(l, &right))
+            return ISO_E_NOMEM;
+    }
+    return 0;
+}
+
+/* ---- PASS 2: fit, in parallel ---- */
+
+typedef struct fit_job {
+    const iso_volume *vol;
+    layout *l;
+    atomic_size_t next;      /* next node to claim */
+    atomic_size_t samples;   /* samples scanned so far, for progress */
+} fit_job;
+
+enum { FIT_CHUNK = 16 };
+
+static uint64_t box_samples(const iso_box *b)
+{
+    return (uint64_t)(b->hi[0] - b->lo[0] + 1) * (b->hi[1] - b->lo[1] + 1) * (b->hi[2] - b->lo[2] + 1);
+}
+
+static void *fit_worker(void *arg)
+{
+    fit_job *job = arg;
+    for (;;) {
+        size_t first = atomic_fetch_add(&job->next, FIT_CHUNK);
+        if (first >= job->l->count)
+            return NULL;
+        size_t last = first + FIT_CHUNK < job->l->count ? first + FIT_CHUNK : job->l->count;
+        uint64_t scanned = 0;
+        for (size_t n = first; n < last; n++) {
+            double mn, mx, er;
+            iso_tree_scan_box(job->vol, &job->l->boxes[n], &mn, &mx, &er);
+            iso_tree_node *node = &job->l->nodes[n];
+            node->min = mn <= mx ? iso_float_down(mn) : INFINITY; /* all-NaN box: never active */
+            node->max = mn <= mx ? iso_float_up(mx) : -INFINITY;
+            node->err = iso_float_up(er);
+            scanned += box_samples(&job->l->boxes[n]);
+        }
+        atomic_fetch_add(&job->samples, (size_t)scanned);
+    }
+}
+
+int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress, void *context,
+                   iso_tree **out, iso_error *err)
+{
+    double start = iso_clock_ms();
+    layout l = {0};
+    iso_tree *tree = NULL;
+    *out = NULL;
+    for (int d = 0; d < 3; d++)
+        if (vol->dims[d] < 2 || vol->dims[d] > UINT32_MAX)
+            return iso_error_set(err, ISO_E_ARGUMENT, "volume dimension %zu out of range", vol->dims[d]);
+    if (lay_out(vol, &l))
+        goto nomem;
+    if (l.count > UINT32_MAX)
+        goto nomem;
+
+    fit_job job = {.vol = vol, .l = &l};
+    atomic_init(&job.next, 0);
+    atomic_init(&job.samples, 0);
+    uint64_t total = 0;
+    for (size_t n = 0; n < l.count; n++)
+        total += box_samples(&l.boxes[n]);
+    /* `threads` workers fit; the calling thread only reports progress, then joins. */
+    int started = 0;
+    threads = iso_parallel_threads(threads);
+    pthread_t tid[64];
+    for (; started < threads; started++)
+        if (pthread_create(&tid[started], NULL, fit_worker, &job) != 0)
+            break;
+    while (progress && started && atomic_load(&job.next) < l.count) {
+        progress(context, (double)atomic_load(&job.samples) / (double)total);
+        struct timespec ts = {0, 5 * 1000 * 1000}; /* 5 ms: short builds stay short */
+        nanosleep(&ts, NULL);
+    }
+    fit_worker(&job); /* does everything if no thread could start, else finds nothing left */
+    for (int t = 0; t < started; t++)
+        pthread_join(tid[t], NULL);
+    if (progress)
+        progress(context, 1.0);
+
+    tree = calloc(1, sizeof *tree);
+    if (!tree)
+        goto nomem;
+    tree->vol = vol;
+    tree->nodes = l.nodes;
+    tree->node_count = l.count;
+    tree->volume_crc = iso_tree_volume_crc(vol);
+    l.nodes = NULL;
+    int rc = iso_bricks_build(vol, threads, &tree->bricks, err);
+    if (!rc)
+        rc = iso_fan_floor_build(vol, &tree->bricks, threads, &tree->fan_floor, err);
+    if (rc) {
+        iso_tree_destroy(tree);
+        free(l.boxes);
+        return rc;
+    }
+    tree->build_ms = iso_clock_ms() - start;
+    free(l.boxes);
+    *out = tree;
+    return 0;
+nomem:
+    free(l.nodes);
+    free(l.boxes);
+    return iso_error_set(err, ISO_E_NOMEM, "out of memory building the hierarchy");
+}
+
+void iso_tree_destroy(iso_tree *tree)
+{
+    if (!tree)
+        return;
+    if (tree->mapping)
+        munmap(tree->mapping, tree->mapping_bytes);
+    else
+        free(tree->nodes);
+    iso_bricks_free(&tree->bricks);
+    free(tree->fan_floor);
+    free(tree);
+}
+
+size_t iso_tree_bytes(const iso_tree *tree)
+{
+    return tree->node_count * sizeof(iso_tree_node);
+}
+
+size_t iso_tree_memory(const iso_tree *tree)
+{
+    return iso_tree_bytes(tree) + iso_bricks_total(&tree->bricks) * 3 * sizeof(float);
+}
+
+uint32_t iso_tree_volume_crc(const iso_volume *vol)
+{
+    uint64_t head[4] = {vol->dims[0], vol->dims[1], vol->dims[2], (uint64_t)vol->type};
+    uLong crc = crc32(0L, (const Bytef *)head, sizeof head);
+    const unsigned char *p = vol->data;
+    size_t left = iso_vol_count(vol) * iso_vol_type_size(vol->type);
+    while (left) {
+        size_t n = left > (1u << 30) ? (1u << 30) : left;
+        crc = crc32(crc, p, (uInt)n);
+        p += n;
+        left -= n;
+    }
+    return (uint32_t)crc;
+}
+
+/* ---- the file ---- */
+
+#define TREE_MAGIC "ISOTREE"
+/* 2: splits above brick size aligned to the brick grid; 3: the bricks' fan floors after
+ * the nodes (fan_floor.h), so that loading need not compute them again. */
+#define TREE_VERSION 3
+
+typedef struct tree_header {
+    char magic[8];          /* "ISOTREE\0" */
+    uint32_t version;
+    uint32_t brick;
+    uint64_t dims[3];
+    uint32_t type;
+    uint32_t volume_crc;    /* iso_tree_volume_crc of the volume it was built from */
+    uint64_t node_count;
+    uint32_t node_crc;      /* CRC-32 of the bytes after the header: nodes, then floors */
+    uint32_t header_crc;    /* CRC-32 of the header with this field zero */
+} tree_header;
+
+_Static_assert(sizeof(tree_header) == 64, "the header is 64 bytes so nodes stay aligned");
+
+static uint32_t header_crc(tree_header h)
+{
+    h.header_crc = 0;
+    return (uint32_t)crc32(0L, (const Bytef *)&h, sizeof h);
+}
+
+static int write_all(int fd, const void *buf, size_t n)
+{
+    const char *p = buf;
+    while (n) {
+        ssize_t w = write(fd, p, n);
+        if (w < 0) {
+            if (errno == EINTR)
+                continue;
+            return -1;
+        }
+        p += w;
+        n -= (size_t)w;
+    }
+    return 0;
+}
+
+int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err)
+{
+    tree_header h;
+    memset(&h, 0, sizeof h);
+    memcpy(h.magic, TREE_MAGIC, sizeof TREE_MAGIC);
+    h.version = TREE_VERSION;
+    h.brick = ISO_TREE_BRICK;
+    for (int d = 0; d < 3; d++)
+        h.dims[d] = tree->vol->dims[d];
+    h.type = (uint32_t)tree->vol->type;
+    h.volume_crc = tree->volume_crc;
+    h.node_count = tree->node_count;
+    size_t floor_bytes = iso_bricks_total(&tree->bricks) * sizeof(float);
+    uLong crc = crc32(0L, (const Bytef *)tree->nodes, (uInt)iso_tree_bytes(tree));
+    h.node_crc = (uint32_t)crc32(crc, (const Bytef *)tree->fan_floor, (uInt)floor_bytes);
+    h.header_crc = header_crc(h);
+
+    size_t len = strlen(path);
+    char *tmp = malloc(len + 16);
+    if (!tmp)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory saving %s", path);
+    snprintf(tmp, len + 16, "%s.tmp.XXXXXX", path);
+    int fd = mkstemp(tmp);
+    if (fd < 0) {
+        int e = errno;
+        free(tmp);
+        return iso_error_set(err, ISO_E_IO, "%s: cannot create a temporary file: %s", path, strerror(e));
+    }
+    if (write_all(fd, &h, sizeof h) || write_all(fd, tree->nodes, iso_tree_bytes(tree)) ||
+        write_all(fd, tree->fan_floor, floor_bytes) || fsync(fd) != 0) {
+        int e = errno;
+        close(fd);
+        unlink(tmp);
+        free(tmp);
+        return iso_error_set(err, ISO_E_IO, "%s: write failed: %s", path, strerror(e));
+    }
+    if (close(fd) != 0 || rename(tmp, path) != 0) {
+        int e = errno;
+        unlink(tmp);
+        free(tmp);
+        return iso_error_set(err, ISO_E_IO, "%s: cannot put the file in place: %s", path, strerror(e));
+    }
+    free(tmp);
+    return 0;
+}
+
+/* The nodes must be exactly what lay_out gives for these dims, with sane values: a file
+ * that passes its checksums but was written by a different rule is still refused. */
+static int check_structure(const iso_volume *vol, const iso_tree_node *nodes, size_t count,
+                           const char *path, iso_error *err)
+{
+    layout l = {0};
+    if (lay_out(vol, &l)) {
+        free(l.nodes);
+        free(l.boxes);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory checking %s", path);
+    }
+    int rc = 0;
+    if (l.count != count)
+        rc = iso_error_set(err, ISO_E_CORRUPT, "%s: %zu nodes, the volume's hierarchy has %zu", path, count, l.count);
+    for (size_t n = 0; rc == 0 && n < count; n++) {
+        const iso_tree_node *node = &nodes[n];
+        if (node->first_child != l.nodes[n].first_child || !(node->err >= 0) ||
+            (node->min > node->max && !(node->min == INFINITY && node->max == -INFINITY)))
+            rc = iso_error_set(err, ISO_E_CORRUPT, "%s: node %zu is inconsistent", path, n);
+    }
+    free(l.nodes);
+    free(l.boxes);
+    return rc;
+}
+
+int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_error *err)
+{
+    double start = iso_clock_ms();
+    *out = NULL;
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0)
+        return iso_error_set(err, ISO_E_IO, "%s: %s", path, strerror(errno));
+    struct stat st;
+    if (fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+        close(fd);
+        return iso_error_set(err, ISO_E_IO, "%s: not a regular file", path);
+    }
+    if ((uint64_t)st.st_size < sizeof(tree_header)) {
+        close(fd);
+        return iso_error_set(err, ISO_E_FORMAT, "%s: %lld bytes, shorter than the 64-byte header",
+                             path, (long long)st.st_size);
+    }
+    size_t bytes = (size_t)st.st_size;
+    void *map = mmap(NULL, bytes, PROT_READ, MAP_PRIVATE, fd, 0);
+    close(fd);
+    if (map == MAP_FAILED)
+        return iso_error_set(err, ISO_E_IO, "%s: mmap failed: %s", path, strerror(errno));
+
+    tree_header h;
+    memcpy(&h, map, sizeof h);
+    uint32_t count[3];
+    iso_bricks_count(vol, count);
+    size_t floors = (size_t)count[0] * count[1] * count[2]; /* one per brick (tree.h) */
+    int rc = 0;
+    if (memcmp(h.magic, TREE_MAGIC, sizeof TREE_MAGIC) != 0)
+        rc = iso_error_set(err, ISO_E_FORMAT, "%s: not a hierarchy file (bad magic)", path);
+    else if (h.version != TREE_VERSION)
+        rc = iso_error_set(err, ISO_E_STALE, "%s: version %u, this build reads version %u", path, h.version, TREE_VERSION);
+    else if (header_crc(h) != h.header_crc)
+        rc = iso_error_set(err, ISO_E_CORRUPT, "%s: header checksum mismatch", path);
+    else if (h.brick != ISO_TREE_BRICK)
+        rc = iso_error_set(err, ISO_E_STALE, "%s: brick size %u, this build uses %d", path, h.brick, ISO_TREE_BRICK);
+    else if (h.dims[0] != vol->dims[0] || h.dims[1] != vol->dims[1] || h.dims[2] != vol->dims[2] ||
+             h.type != (uint32_t)vol->type)
+        rc = iso_error_set(err, ISO_E_STALE, "%s: built for a %llux%llux%llu volume of another shape or type",
+                           path, (unsigned long long)h.dims[0], (unsigned long long)h.dims[1],
+                           (unsigned long long)h.dims[2]);
+    else if (h.node_count > (bytes - sizeof h) / sizeof(iso_tree_node) ||
+             sizeof h + h.node_count * sizeof(iso_tree_node) + floors * sizeof(float) != bytes)
+        rc = iso_error_set(err, ISO_E_CORRUPT,
+                           "%s: %zu bytes do not hold the %llu nodes the header announces and %zu brick floors",
+                           path, bytes, (unsigned long long)h.node_count, floors);
+    else if ((uint32_t)crc32(0L, (const Bytef *)map + sizeof h, (uInt)(bytes - sizeof h)) != h.node_crc)
+        rc = iso_error_set(err, ISO_E_CORRUPT, "%s: node checksum mismatch", path);
+    else if (h.volume_crc != iso_tree_volume_crc(vol))
+        rc = iso_error_set(err, ISO_E_STALE, "%s: built from different samples than this volume", path);
+    else
+        rc = check_structure(vol, (const iso_tree_node *)((const char *)map + sizeof h), h.node_count, path, err);
+    const float *floor = NULL;
+    if (rc == 0) {
+        floor = (const float *)((const char *)map + sizeof h + h.node_count * sizeof(iso_tree_node));
+        for (size_t b = 0; rc == 0 && b < floors; b++)
+            if (!(floor[b] >= 0))
+                rc = iso_error_set(err, ISO_E_CORRUPT, "%s: brick %zu's fan floor is %g", path, b, (double)floor[b]);
+    }
+    if (rc) {
+        munmap(map, bytes);
+        return rc;
+    }
+    iso_tree *tree = calloc(1, sizeof *tree);
+    if (!tree) {
+        munmap(map, bytes);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory loading %s", path);
+    }
+    tree->vol = vol;
+    tree->nodes = (iso_tree_node *)((char *)map + sizeof h);
+    tree->node_count = h.node_count;
+    tree->volume_crc = h.volume_crc;
+    tree->mapping = map;
+    tree->mapping_bytes = bytes;
+    tree->fan_floor = malloc(floors * sizeof(float));
+    if (!tree->fan_floor) {
+        iso_tree_destroy(tree);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory loading %s", path);
+    }
+    memcpy(tree->fan_floor, floor, floors * sizeof(float));
+    if ((rc = iso_bricks_build(vol, 0, &tree->bricks, err))) {
+        iso_tree_destroy(tree);
+        return rc;
+    }
+    tree->build_ms = iso_clock_ms() - start;
+    *out = tree;
+    return 0;
+}

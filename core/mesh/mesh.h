@@ -1,0 +1,283 @@
+/* mesh.h: indexed triangle meshes and what is done to them after extraction: the
+ * watertightness census with area and enclosed volume, vertex normals from the samples,
+ * simplification, and extraction under a triangle budget.
+ *
+ * Ownership: a mesh owns its arrays (iso_mesh_destroy frees them); functions that change
+ * a mesh grow or replace its arrays, never the caller's other buffers. Errors: ISO_E_NOMEM,
+ * ISO_E_ARGUMENT for a parameter out of range, each through iso_error. Thread-safety: a
+ * mesh is not shared while it is changed; reading one from several threads is safe.
+ * Cost: the census and simplification are O(n log n) in the triangles, normals O(n) with
+ * up to 64 sample reads per vertex, the budget a few extractions (see iso_extract_budget). */
+#ifndef ISO_MESH_H
+#define ISO_MESH_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "base/base.h"
+#include "volume/volume.h"
+
+/* Extraction (extract/extract.h) produces meshes; the budget section below drives it, so
+ * its types are named here without their definitions. */
+struct iso_tree;
+struct iso_extract_params;
+struct iso_extract_stats;
+
+/* Indexed triangle meshes, the output of extraction and the input of encoders.
+ *
+ * Positions are float x,y,z triples; triangles are uint32 index triples whose winding
+ * (counter-clockwise seen from the side the normal points to) makes normals point from
+ * higher values toward lower values. Normals, when present, are unit float triples per
+ * vertex. A mesh owns its arrays; iso_mesh_destroy frees them. */
+
+/* Where a mesh's positions live: world millimetres (the volume's geometry applied) or
+ * index space (sample i at coordinate i). */
+typedef enum iso_space { ISO_SPACE_WORLD = 0, ISO_SPACE_INDEX = 1 } iso_space;
+
+typedef struct iso_mesh {
+    float *positions;      /* 3 * vertex_count */
+    float *normals;        /* 3 * vertex_count, or NULL */
+    uint32_t *indices;     /* 3 * triangle_count */
+    size_t vertex_count, triangle_count;
+    size_t vertex_capacity, triangle_capacity;
+} iso_mesh;
+
+/* Initialises an empty mesh (no allocation). */
+void iso_mesh_init(iso_mesh *mesh);
+/* Frees the arrays and leaves an empty mesh; NULL is allowed. */
+void iso_mesh_free(iso_mesh *mesh);
+/* Empties the mesh but keeps its position and index arrays for reuse (normals are
+ * freed): extracting again into the same mesh then faults no fresh pages in. */
+void iso_mesh_clear(iso_mesh *mesh);
+/* Makes room for at least the given totals. Returns 0 or ISO_E_NOMEM (mesh unchanged). */
+int iso_mesh_reserve(iso_mesh *mesh, size_t vertices, size_t triangles);
+/* Moves everything of `src` onto the end of `dst`, offsetting its indices; src is emptied
+ * but keeps no memory. Returns 0 or ISO_E_NOMEM (both unchanged). */
+int iso_mesh_append(iso_mesh *dst, iso_mesh *src);
+
+/* Merges vertices with bit-identical positions and drops triangles that become degenerate
+ * (two equal indices). Vertex order: first occurrence. O(V) expected, allocates a
+ * temporary hash table of ~2V entries. Returns 0 or ISO_E_NOMEM (mesh unchanged). */
+int iso_mesh_weld(iso_mesh *mesh);
+
+/* Removes the vertices no triangle uses, keeping the others in order, and renumbers the
+ * triangles. O(V + T), allocates a temporary V-entry table. Returns 0 or ISO_E_NOMEM
+ * (mesh unchanged). */
+int iso_mesh_drop_unused(iso_mesh *mesh);
+/* The same with the caller's scratch: remap has vertex_count entries (it ends up holding
+ * each old vertex's new index, UINT32_MAX for those dropped). Cannot fail. */
+void iso_mesh_drop_unused_into(iso_mesh *mesh, uint32_t *remap);
+
+/* Sum of triangle areas, in the square of the position unit. O(T). */
+double iso_mesh_area(const iso_mesh *mesh);
+/* Signed enclosed volume (divergence theorem), positive when normals point outward of
+ * the enclosed region; meaningful for closed meshes. O(T). */
+double iso_mesh_enclosed_volume(const iso_mesh *mesh);
+
+/* Edge census after welding: edges used by one triangle, by three or more, and by exactly
+ * two triangles in opposite directions. O(T) plus a sort of each vertex's few edges;
+ * allocates 24 bytes per triangle and 8 per vertex for the call. Returns 0, ISO_E_NOMEM,
+ * or ISO_E_ARGUMENT when an index is not below vertex_count (out is then undefined). */
+typedef struct iso_mesh_edges {
+    size_t edges, open, nonmanifold, misoriented;
+    size_t open_excused; /* open edges the classifier accepted (counted apart from open) */
+} iso_mesh_edges;
+int iso_mesh_count_edges(const iso_mesh *mesh, iso_mesh_edges *out);
+/* The same census, asking excuse(context, a, b) about every open edge (a, b): those it
+ * answers 1 for count in open_excused instead of open (a volume border, for example). */
+typedef int (*iso_mesh_edge_excuse_fn)(void *context, uint32_t a, uint32_t b);
+int iso_mesh_count_edges_excusing(const iso_mesh *mesh, iso_mesh_edge_excuse_fn excuse,
+                                  void *context, iso_mesh_edges *out);
+
+/* Calls visit(context, lo, hi, forward, backward) once for every edge (lo < hi) with its
+ * uses as lo->hi and as hi->lo, in order of lo, then hi. Allocates 24 bytes per triangle
+ * and 8 per vertex for the call; returns 0, ISO_E_NOMEM or ISO_E_ARGUMENT (an index not
+ * below vertex_count), nothing visited then. */
+typedef void (*iso_mesh_edge_visit_fn)(void *context, uint32_t lo, uint32_t hi,
+                                       uint32_t forward, uint32_t backward);
+int iso_mesh_visit_edges(const iso_mesh *mesh, iso_mesh_edge_visit_fn visit, void *context);
+
+/* 1 when triangle t has zero area: its edge vectors' cross product, in double from the
+ * float positions, is exactly zero. */
+int iso_mesh_zero_area(const iso_mesh *mesh, size_t t);
+
+/* Axis-aligned bounds of the positions; min > max for an empty mesh. */
+void iso_mesh_bounds(const iso_mesh *mesh, float min[3], float max[3]);
+
+/* Is an extracted surface watertight? Edge and triangle counts anyone can check.
+ *
+ * After welding, an edge is interior when exactly two triangles use it, once in each
+ * direction. Anything else is counted: open edges (one triangle) split into those on the
+ * volume's outer boundary, where a surface that leaves the data must end, and the rest,
+ * which are cracks; non-manifold edges (three or more triangles); misoriented edges (two
+ * triangles, same direction); degenerate triangles (zero area). A mesh is closed when it
+ * has no open edge of either kind and nothing else counted. */
+
+typedef struct iso_census {
+    size_t edges;
+    size_t open_edges;        /* one triangle, not on the volume border: cracks */
+    size_t boundary_edges;    /* one triangle, both ends on one border plane of the volume */
+    size_t nonmanifold_edges; /* three or more triangles */
+    size_t misoriented_edges; /* two triangles using it in the same direction */
+    size_t degenerate_triangles; /* zero area */
+    int closed;               /* every count above but edges is zero, and there are triangles */
+} iso_census;
+
+/* Counts mesh's edges; space says whether positions are world mm or index coordinates of
+ * vol (world positions are mapped back to find the border). O(T) with a temporary table;
+ * returns 0 or ISO_E_NOMEM. */
+int iso_census_compute(const iso_volume *vol, const iso_mesh *mesh, iso_space space,
+                       iso_census *out, iso_error *err);
+
+/* Per-vertex normals from the gradient of a B-spline of the samples
+ * (Elber and Malzbender, section 4: the samples as coefficients of a tensor-product uniform
+ * B-spline of order 2, 3 or 4, whose gradient is evaluated at each vertex).
+ *
+ * Order 2 is the trilinear interpolant itself; orders 3 (triquadratic) and 4 (tricubic)
+ * are smoother approximating splines: their normals vary continuously across cell faces,
+ * which shading shows. Normals point toward lower values (out of the region f > level),
+ * matching the mesh's winding (mesh.h). */
+
+/* "none" -> 0, "trilinear" -> 2, "triquadratic" -> 3, "tricubic" -> 4; -1 for anything
+ * else (NULL included). */
+int iso_normals_order_from_name(const char *name);
+/* The reverse; "none" for 0. order must be 0, 2, 3 or 4 (asserted). */
+const char *iso_normals_name(int order);
+
+/* Sets mesh->normals (allocated to the mesh's vertex capacity) to the unit negative
+ * gradient of the order-`order` B-spline of vol at each vertex; order 0 removes them.
+ * Positions are read, and normals written, in `space` (world normals use the inverse
+ * transpose of the index-to-world map, so anisotropic spacing is honoured). Samples
+ * outside the volume repeat the border; NaN samples count as the volume's minimum (below
+ * every level, as in extraction). Where the gradient vanishes the trilinear one is used,
+ * else (0, 0, 1): never NaN, always unit length. O(V * order^3) sample reads (36, not 64,
+ * for a tricubic normal on a grid edge, as marching cubes' vertices are), no allocation
+ * but the normals array; `threads` share the vertices (0 = all cores; the
+ * result does not depend on it). Returns 0, ISO_E_ARGUMENT (bad order, a singular
+ * geometry) or ISO_E_NOMEM (mesh unchanged). */
+int iso_normals_compute(const iso_volume *vol, iso_mesh *mesh, int order, iso_space space,
+                        int threads, iso_error *err);
+
+/* Fewer triangles for an extracted mesh, by edge collapse (meshoptimizer).
+ *
+ * The hierarchy's tolerance removes few triangles across sharp CT edges: a node's fit
+ * error stays above any faithful tolerance until the node is one cell wide. When a
+ * triangle budget must still be met, the extracted mesh is simplified with
+ * meshopt_simplify (Garland and Heckbert's quadric error metric, 1997), which collapses
+ * edges onto existing vertices: every vertex left is one of the input's, so the
+ * extraction's vertex guarantee (|f(v) - level| <= error bound, extract.h) still holds for
+ * every vertex, and the geometric error between the two surfaces is what is reported.
+ *
+ * Error units: meshoptimizer measures error relative to the mesh's extent (its largest
+ * bounding-box side, meshopt_simplifyScale); here it is converted to position units (world
+ * mm or index space, whatever the mesh holds) and to voxels. The figure is
+ * meshoptimizer's own: the square root of the largest quadric error of a collapse, the
+ * area-weighted distance of a kept vertex from the planes of the triangles it absorbed.
+ * It is an estimate, not a proof; tests/unit/test_simplify.c and tests/bench/bench_simplify.py
+ * measure the real distance against it.
+ *
+ * Topology. meshoptimizer 0.18 collapses a border vertex only along its border loop, so a
+ * closed mesh gets no open edge; with lock_border, vertices on open edges do not move at
+ * all and the open edges come out exactly as they went in (an extracted mesh's open edges
+ * lie on the volume's border planes, and collapsing along them could cut the volume's
+ * corners). Collapses keep every edge's balance: as many uses in one direction as in the
+ * other, so the result still bounds the same kind of solid and its enclosed volume means
+ * what it meant. But meshoptimizer does not check the link condition: where two sheets of
+ * surface come close (thin bone, skin folds) a collapse can lay a pair of triangles onto
+ * each other (a fold: same corners, opposite windings; dropped here, which keeps every
+ * balance) or pinch the sheets onto one edge of four triangles, which stays and is counted
+ * in result->nonmanifold_edges (on CThead skin at 100k triangles, 70-90 of ~150k edges).
+ * Freezing the triangles around such an edge and simplifying again was tried: it
+ * converges slowly and drives the error up, so it is not done. */
+
+typedef struct iso_simplify_params {
+    size_t target_triangles; /* at most this many triangles (>= 1) */
+    double target_error;     /* position units: no collapse beyond this error; INFINITY (or
+                              * anything >= the mesh's extent) for no limit, 0 for lossless
+                              * collapses only (meshoptimizer's own float rounding aside) */
+    double voxel_size;       /* position units per voxel, for error_voxels; 0 means 1 */
+    int lock_border;         /* 1: vertices on open edges stay where they are */
+} iso_simplify_params;
+
+typedef struct iso_simplify_result {
+    size_t triangles_in, vertices_in;
+    size_t triangles, vertices;  /* what the mesh has now */
+    double error;                /* meshoptimizer's error, position units (0 if untouched) */
+    double error_voxels;         /* error / voxel_size */
+    double scale;                /* position units per unit of meshoptimizer's relative error */
+    size_t folds_dropped;        /* triangles dropped as folds (pairs) */
+    size_t nonmanifold_edges;    /* edges of the result used by 3 or more triangles */
+    size_t unpaired_edges;       /* edges used twice or more, not as often in each direction
+                                  * (0 whenever the input had none: the tests check it) */
+    double ms;
+} iso_simplify_result;
+
+/* Simplifies mesh in place to at most params->target_triangles triangles, stopping
+ * earlier where the next collapse would exceed params->target_error, or where topology
+ * allows no more (then more triangles than the target remain: compare result->triangles).
+ * Unused vertices are dropped, the others keep their relative order, normals (if any)
+ * follow their vertices. A mesh already within the target is not touched (not a byte).
+ * Allocates an index buffer of the input's size, a remap table (4 bytes per vertex) and
+ * meshoptimizer's own scratch, all freed before return. O(T log T). result may be NULL. Returns 0, ISO_E_ARGUMENT (target 0, a NaN or
+ * negative target error, a voxel size <= 0) or ISO_E_NOMEM (mesh unchanged, meshoptimizer's
+ * own allocations included). Safe on any mesh whose indices are below vertex_count. */
+int iso_simplify(iso_mesh *mesh, const iso_simplify_params *params,
+                 iso_simplify_result *result, iso_error *err);
+
+/* Extraction under a triangle budget.
+ *
+ * A thin client asks for "the best mesh of at most N triangles" rather than a tolerance.
+ * Triangle counts fall as the tolerance grows, so the finest tolerance whose mesh fits is
+ * found by bisection over a ladder: the requested tolerance, then the value range halved
+ * again and again (range / 2^20 .. range). The guarantee of extract.h holds for the
+ * tolerance chosen.
+ *
+ * The ladder has a limit on CT: a node's fit error stays above any useful tolerance until
+ * the node is one cell wide, so even at tolerance = the whole value range CThead's skin
+ * keeps 38% of its triangles, and a faithful tolerance keeps 91-100%
+ * (docs/performance.md). So iso_extract_budget_faithful, the policy the server uses,
+ * climbs the ladder only as far as a faithful tolerance and, when that does not fit,
+ * simplifies the mesh of the requested tolerance with meshoptimizer instead (mesh.h).
+ * The comparison that chose it is tests/bench/bench_simplify.py: at the same triangle
+ * count the simplified mesh is closer to the exact surface than the ladder's coarse one. */
+
+/* The faithful top of the ladder: value range / 2^5 (3.1% of the range). bench_peer.py
+ * measured every tolerance up to 5% of the range within 0.5 voxel of the exact surface at
+ * the 99th percentile on all 8 of its cases. */
+#define ISO_BUDGET_FAITHFUL_SHIFT 5
+
+typedef struct iso_budget_result {
+    double tolerance;   /* the tolerance of the mesh extracted */
+    int fits;           /* 1 if the mesh has at most `budget` triangles; 0 when even the
+                         * coarsest tolerance of the ladder (or the simplifier) does not
+                         * get there */
+    int extractions;    /* extractions run to find it */
+    int simplified;     /* 1: the mesh was simplified, `simplify` says how */
+    iso_simplify_result simplify;
+} iso_budget_result;
+
+/* Extracts at params->level with the smallest ladder tolerance >= params->tolerance whose
+ * mesh has at most `budget` triangles (budget >= 1). Costs about log2(21) + 1 extractions
+ * at worst, the coarse ones being the cheap ones. Returns what iso_extract returns. */
+int iso_extract_budget(const struct iso_tree *tree, const struct iso_extract_params *params,
+                       size_t budget, iso_mesh *mesh, struct iso_extract_stats *stats, iso_budget_result *result,
+                       iso_error *err);
+
+/* The faithful tolerance of a volume: max(requested, value range / 2^ISO_BUDGET_FAITHFUL_SHIFT). */
+double iso_budget_faithful_tolerance(const iso_volume *vol, double requested);
+
+/* The server's policy. Like iso_extract_budget, but the ladder stops at
+ * iso_budget_faithful_tolerance; when no rung up to it fits, the mesh of the requested
+ * tolerance is simplified to `budget` triangles (no error limit, open edges locked) and
+ * result->simplified is set. stats then describe the extraction at the requested
+ * tolerance except triangles and vertices, which are the simplified mesh's; every vertex
+ * kept is one of the extraction's, so stats->error_bound still holds for each. The
+ * simplifier's error is reported in result->simplify in the mesh's units (world mm or
+ * index space, params->space) and in voxels (mm over the volume's smallest spacing).
+ * Returns what iso_extract or iso_simplify return. */
+int iso_extract_budget_faithful(const struct iso_tree *tree,
+                                const struct iso_extract_params *params, size_t budget,
+                                iso_mesh *mesh, struct iso_extract_stats *stats,
+                                iso_budget_result *result, iso_error *err);
+
+#endif

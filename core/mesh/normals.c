@@ -1,0 +1,338 @@
+/* normals.c: B-spline gradient normals (Elber and Malzbender, section 4; see mesh.h).
+ *
+ * Uniform B-spline bases, per axis, at x = i + t (closed forms of the standard tables):
+ *   order 2 (linear, support 2):    i = floor(x):   {1-t, t}
+ *   order 3 (quadratic, support 3): i = round(x):   {(1/2-t)^2/2, 3/4-t^2, (1/2+t)^2/2}
+ *                                   on samples i-1, i, i+1, t in [-1/2, 1/2]
+ *   order 4 (cubic, support 4):     i = floor(x):   {(1-t)^3, 3t^3-6t^2+4, -3t^3+3t^2+3t+1, t^3}/6
+ *                                   on samples i-1 .. i+2
+ * with their derivatives in t. The gradient's component along an axis takes that axis's
+ * derivative weights and the other two axes' weights. */
+#include "mesh.h"
+
+#include "extract/extract.h"
+
+#include <assert.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "base/base.h"
+
+static const char *const order_names[5] = {"none", NULL, "trilinear", "triquadratic", "tricubic"};
+
+int iso_normals_order_from_name(const char *name)
+{
+    for (int o = 0; name && o < 5; o++)
+        if (order_names[o] && !strcmp(name, order_names[o]))
+            return o;
+    return -1;
+}
+
+const char *iso_normals_name(int order)
+{
+    assert(order == 0 || (order >= 2 && order <= 4));
+    return order_names[order];
+}
+
+/* Weights w and derivative weights d of one axis at coordinate x; *first is the sample of
+ * weight 0 (may lie outside 0..n-1: callers clamp). */
+static inline __attribute__((always_inline)) void basis(const int order, double x, size_t n, long *first, double w[4], double d[4])
+{
+    if (order == 2) {
+        double i = floor(x);
+        if (i > (double)n - 2)
+            i = (double)n - 2; /* the last sample plane belongs to the last cell */
+        if (i < 0)
+            i = 0;
+        double t = x - i;
+        *first = (long)i;
+        w[0] = 1 - t, w[1] = t;
+        d[0] = -1, d[1] = 1;
+    } else if (order == 3) {
+        double i = floor(x + 0.5), t = x - i;
+        *first = (long)i - 1;
+        w[0] = 0.5 * (0.5 - t) * (0.5 - t), w[1] = 0.75 - t * t, w[2] = 0.5 * (0.5 + t) * (0.5 + t);
+        d[0] = t - 0.5, d[1] = -2 * t, d[2] = 0.5 + t;
+    } else {
+        double i = floor(x), t = x - i, s = 1 - t;
+        *first = (long)i - 1;
+        w[0] = s * s * s / 6;
+        w[1] = (3 * t * t * t - 6 * t * t + 4) / 6;
+        w[2] = (-3 * t * t * t + 3 * t * t + 3 * t + 1) / 6;
+        w[3] = t * t * t / 6;
+        d[0] = -s * s / 2;
+        d[1] = (3 * t * t - 4 * t) / 2;
+        d[2] = (-3 * t * t + 2 * t + 1) / 2;
+        d[3] = t * t / 2;
+    }
+}
+
+static size_t clamp_index(long i, size_t n)
+{
+    return i < 0 ? 0 : (size_t)i >= n ? n - 1 : (size_t)i;
+}
+
+/* The n[0] x n[1] x n[2] samples of the spline's support from first[] on, x fastest, into
+ * block: border samples repeated, NaN read as the volume's minimum. Row offsets are
+ * computed once per axis, and the voxel type is switched on once per vertex, not per
+ * sample. */
+#define GATHER(T)                                                                   \
+    do {                                                                            \
+        const T *data = (const T *)vol->data;                                       \
+        _Pragma("GCC unroll 4") for (int k = 0; k < n2; k++)                        \
+            _Pragma("GCC unroll 4") for (int j = 0; j < n1; j++) {                  \
+                const T *row = data + z[k] * plane + y[j] * vol->dims[0];           \
+                _Pragma("GCC unroll 4") for (int i = 0; i < n0; i++)                \
+                    *out++ = (double)row[x[i]];                                     \
+            }                                                                       \
+    } while (0)
+
+static inline __attribute__((always_inline)) void gather(const iso_volume *vol, const int n0, const int n1,
+                                                         const int n2, const long first[3], double *block)
+{
+    size_t x[4], y[4], z[4], plane = vol->dims[0] * vol->dims[1];
+    if (first[0] >= 0 && first[1] >= 0 && first[2] >= 0 && (size_t)first[0] + (size_t)n0 <= vol->dims[0] &&
+        (size_t)first[1] + (size_t)n1 <= vol->dims[1] && (size_t)first[2] + (size_t)n2 <= vol->dims[2]) {
+        /* Inside the volume, as nearly every vertex is: no clamping. */
+        for (int a = 0; a < 4; a++) {
+            x[a] = (size_t)first[0] + (size_t)a;
+            y[a] = (size_t)first[1] + (size_t)a;
+            z[a] = (size_t)first[2] + (size_t)a;
+        }
+    } else {
+        for (int a = 0; a < n0; a++)
+            x[a] = clamp_index(first[0] + a, vol->dims[0]);
+        for (int a = 0; a < n1; a++)
+            y[a] = clamp_index(first[1] + a, vol->dims[1]);
+        for (int a = 0; a < n2; a++)
+            z[a] = clamp_index(first[2] + a, vol->dims[2]);
+    }
+    double *out = block;
+    switch (vol->type) {
+    case ISO_U8: GATHER(uint8_t); break;
+    case ISO_I8: GATHER(int8_t); break;
+    case ISO_U16: GATHER(uint16_t); break;
+    case ISO_I16: GATHER(int16_t); break;
+    case ISO_U32: GATHER(uint32_t); break;
+    case ISO_I32: GATHER(int32_t); break;
+    case ISO_F32: GATHER(float); break;
+    case ISO_F64: GATHER(double); break;
+    default: /* a loaded volume has one of the types above */
+        assert(0);
+        memset(block, 0, sizeof(double) * (size_t)(n0 * n1 * n2));
+    }
+    if (vol->has_nan)
+        for (int n = 0; n < n0 * n1 * n2; n++)
+            if (block[n] != block[n])
+                block[n] = vol->value_min;
+}
+
+/* The spline's gradient in index space from its weights, separably: each x row of the
+ * block reduces to its value and x derivative, each y column of those to three partial
+ * sums, then z. About 2 n^3 + 3 n^2 + 6 multiply-adds instead of 3 n^3 products of four.
+ * Inlined with constant tap counts (gradient_2/3/4) so that its loops unroll. */
+static inline __attribute__((always_inline)) void spline_gradient(const iso_volume *vol, const int n0,
+                                                                  const int n1, const int n2,
+                                                                  const long first[3], const double (*w)[4],
+                                                                  const double (*d)[4], double g[3])
+{
+    double block[64];
+    gather(vol, n0, n1, n2, first, block);
+    g[0] = g[1] = g[2] = 0;
+#pragma GCC unroll 4
+    for (int k = 0; k < n2; k++) {
+        double value_xy = 0, dx_y = 0, x_dy = 0; /* f, df/dx, df/dy on this z plane */
+#pragma GCC unroll 4
+        for (int j = 0; j < n1; j++) {
+            const double *row = block + (k * n1 + j) * n0;
+            double value_x = 0, dx = 0;
+#pragma GCC unroll 4
+            for (int i = 0; i < n0; i++) {
+                value_x += w[0][i] * row[i];
+                dx += d[0][i] * row[i];
+            }
+            value_xy += w[1][j] * value_x;
+            x_dy += d[1][j] * value_x;
+            dx_y += w[1][j] * dx;
+        }
+        g[0] += w[2][k] * dx_y;
+        g[1] += w[2][k] * x_dy;
+        g[2] += d[2][k] * value_xy;
+    }
+}
+
+static inline __attribute__((always_inline)) void gradient_of(const iso_volume *vol, const int order,
+                                                              const double p[3], double g[3])
+{
+    double w[3][4], d[3][4];
+    long first[3];
+    for (int a = 0; a < 3; a++)
+        basis(order, p[a], vol->dims[a], &first[a], w[a], d[a]);
+    spline_gradient(vol, order, order, order, first, w, d, g);
+}
+
+static void gradient_2(const iso_volume *vol, const double p[3], double g[3]) { gradient_of(vol, 2, p, g); }
+static void gradient_3(const iso_volume *vol, const double p[3], double g[3]) { gradient_of(vol, 3, p, g); }
+
+/* ---- the tricubic gradient at a grid edge's crossing ----
+ *
+ * Every vertex marching cubes places lies on a grid edge: two of its three coordinates
+ * are sample planes. There the cubic's weights are {1, 4, 1, 0} / 6 and its derivative's
+ * {-1, 0, 1, 0} / 2: one tap of four vanishes on each of those axes, and the support is
+ * 4 x 3 x 3 samples, not 64. World positions come back to index space through floats, so
+ * a plane is recognised within EDGE_SLACK of a sample and its vanishing tap dropped
+ * there: that tap's weights are then below EDGE_SLACK^2 / 2 (5e-9), far under a float
+ * normal's rounding. */
+#define EDGE_SLACK 1e-4
+
+/* Which of coordinate p's four taps vanishes: 1 the last (t^3 / 6, p just above a sample
+ * plane), 2 the first ((1 - t)^3 / 6, just below one), 0 none. */
+static inline __attribute__((always_inline)) int vanishing_tap(double p)
+{
+    double t = p - floor(p);
+    return t < EDGE_SLACK ? 1 : t > 1 - EDGE_SLACK ? 2 : 0;
+}
+
+static void gradient_4(const iso_volume *vol, const double p[3], double g[3])
+{
+    double w[3][4], d[3][4];
+    long first[3];
+    int tap[3];
+    unsigned planes = 0;
+    for (int a = 0; a < 3; a++) {
+        basis(4, p[a], vol->dims[a], &first[a], w[a], d[a]);
+        tap[a] = vanishing_tap(p[a]);
+        planes |= (unsigned)(tap[a] != 0) << a;
+    }
+    if (planes != 3 && planes != 5 && planes != 6) {
+        spline_gradient(vol, 4, 4, 4, first, w, d, g); /* a fan centre, a sample */
+        return;
+    }
+    /* On a grid edge: the two plane axes keep their three taps that do not vanish. */
+    for (int a = 0; a < 3; a++)
+        if (tap[a] == 2) {
+            for (int i = 0; i < 3; i++)
+                w[a][i] = w[a][i + 1], d[a][i] = d[a][i + 1];
+            first[a]++;
+        }
+    if (planes == 6)
+        spline_gradient(vol, 4, 3, 3, first, w, d, g); /* an x edge */
+    else if (planes == 5)
+        spline_gradient(vol, 3, 4, 3, first, w, d, g); /* a y edge */
+    else
+        spline_gradient(vol, 3, 3, 4, first, w, d, g); /* a z edge */
+}
+
+static void gradient(const iso_volume *vol, int order, const double p[3], double g[3])
+{
+    if (order == 2)
+        gradient_2(vol, p, g);
+    else if (order == 3)
+        gradient_3(vol, p, g);
+    else
+        gradient_4(vol, p, g);
+}
+
+/* The linear part A of index-to-world (columns: world steps of i, j, k) and its inverse. */
+static int world_frame(const iso_volume *vol, double a[3][3], double inv[3][3], double origin[3])
+{
+    double affine[3][4];
+    iso_vol_affine(vol, affine);
+    for (int r = 0; r < 3; r++) {
+        for (int c = 0; c < 3; c++)
+            a[r][c] = affine[r][c];
+        origin[r] = affine[r][3];
+    }
+    double det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) -
+                 a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
+                 a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+    if (!(fabs(det) > 1e-300))
+        return -1;
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++) {
+            /* Cofactor of (c, r) over det: the adjugate's transpose. */
+            int r1 = (c + 1) % 3, r2 = (c + 2) % 3, c1 = (r + 1) % 3, c2 = (r + 2) % 3;
+            inv[r][c] = (a[r1][c1] * a[r2][c2] - a[r1][c2] * a[r2][c1]) / det;
+        }
+    return 0;
+}
+
+/* What every thread of one iso_normals_compute call shares. */
+typedef struct normals_job {
+    const iso_volume *vol;
+    iso_mesh *mesh;
+    int order;
+    iso_space space;
+    double inv[3][3], origin[3];
+} normals_job;
+
+static void normal_at(const normals_job *job, size_t v)
+{
+    const float *q = job->mesh->positions + 3 * v;
+    double p[3], g[3], n[3];
+    if (job->space == ISO_SPACE_WORLD)
+        for (int r = 0; r < 3; r++)
+            p[r] = job->inv[r][0] * (q[0] - job->origin[0]) + job->inv[r][1] * (q[1] - job->origin[1]) +
+                   job->inv[r][2] * (q[2] - job->origin[2]);
+    else
+        for (int c = 0; c < 3; c++)
+            p[c] = q[c];
+    gradient(job->vol, job->order, p, g);
+    if (g[0] == 0 && g[1] == 0 && g[2] == 0 && job->order != 2)
+        gradient(job->vol, 2, p, g);
+    /* World gradient = A^-T times the index gradient. */
+    for (int c = 0; c < 3; c++)
+        n[c] = job->space == ISO_SPACE_WORLD
+                   ? -(job->inv[0][c] * g[0] + job->inv[1][c] * g[1] + job->inv[2][c] * g[2])
+                   : -g[c];
+    double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!(len > 0) || !isfinite(len)) {
+        n[0] = n[1] = 0, n[2] = 1, len = 1;
+    }
+    for (int c = 0; c < 3; c++)
+        job->mesh->normals[3 * v + c] = (float)(n[c] / len);
+}
+
+/* Thread t of threads: a contiguous share of the vertices (each normal depends only on
+ * its own position, so the result does not depend on the split). */
+static void normals_share(void *context, int t, int threads)
+{
+    const normals_job *job = context;
+    size_t n = job->mesh->vertex_count;
+    size_t begin = n * (size_t)t / (size_t)threads, end = n * (size_t)(t + 1) / (size_t)threads;
+    for (size_t v = begin; v < end; v++)
+        normal_at(job, v);
+}
+
+/* Below this many vertices one thread does it all: starting threads would cost more. */
+#define NORMALS_PER_THREAD 16384
+
+int iso_normals_compute(const iso_volume *vol, iso_mesh *mesh, int order, iso_space space,
+                        int threads, iso_error *err)
+{
+    assert(vol && mesh);
+    if (order == 0) {
+        free(mesh->normals);
+        mesh->normals = NULL;
+        return 0;
+    }
+    if (order < 2 || order > 4)
+        return iso_error_set(err, ISO_E_ARGUMENT, "normals: order %d is not 2, 3 or 4", order);
+    normals_job job = {.vol = vol, .mesh = mesh, .order = order, .space = space};
+    double a[3][3];
+    if (world_frame(vol, a, job.inv, job.origin))
+        return iso_error_set(err, ISO_E_ARGUMENT, "normals: the volume's index-to-world map is singular");
+    size_t capacity = mesh->vertex_capacity > mesh->vertex_count ? mesh->vertex_capacity : mesh->vertex_count;
+    float *normals = realloc(mesh->normals, (capacity ? capacity : 1) * 3 * sizeof *normals);
+    if (!normals)
+        return iso_error_set(err, ISO_E_NOMEM, "normals: out of memory for %zu vertices", mesh->vertex_count);
+    mesh->normals = normals;
+    threads = iso_parallel_threads(threads);
+    size_t most = mesh->vertex_count / NORMALS_PER_THREAD + 1;
+    if ((size_t)threads > most)
+        threads = (int)most;
+    iso_parallel_run(threads, normals_share, &job);
+    return 0;
+}

@@ -1,0 +1,188 @@
+/* volume.h: a volume in memory (samples, geometry, value statistics), the trilinear
+ * interpolant every bound refers to, the value histogram and box-filter resampling.
+ *
+ * Ownership: iso_vol_* constructors return a volume the caller frees with iso_vol_free;
+ * histograms and resampled volumes are new objects owned by the caller. Errors: ISO_E_*
+ * codes through iso_error (ISO_E_LIMIT for sizes over the configured maximum, ISO_E_NOMEM).
+ * Thread-safety: a volume is read-only once built and may be shared by any number of
+ * threads. Cost: statistics and histograms are one pass over the samples; sample access and
+ * interpolation are O(1). */
+#ifndef ISO_VOLUME_H
+#define ISO_VOLUME_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "base/base.h"
+
+/* A scalar volume, the input of everything else.
+ *
+ * Samples p[i][j][k] sit on a W_x x W_y x W_z grid, stored x fastest, then y, then z, in
+ * their own voxel type and in host byte order (loaders swap on read). Index space has
+ * sample (i,j,k) at point (i,j,k); world millimetres are
+ *     world = origin + direction * (index * spacing)
+ * with direction's columns the unit world directions of the i, j, k axes (identity unless
+ * the file says otherwise; not necessarily orthogonal: a sheared affine from a NIfTI sform
+ * keeps its shear). World space is LPS millimetres (DICOM, ITK, 3D Slicer's model files):
+ * x grows to the patient's left, y to posterior, z to superior; loaders of RAS formats
+ * (NIfTI) negate x and y. */
+
+typedef enum iso_voxel_type {
+    ISO_U8, ISO_I8, ISO_U16, ISO_I16, ISO_U32, ISO_I32, ISO_F32, ISO_F64
+} iso_voxel_type;
+
+typedef struct iso_volume {
+    size_t dims[3];          /* samples per axis, each >= 2 */
+    iso_voxel_type type;
+    void *data;              /* dims[0]*dims[1]*dims[2] samples, host byte order */
+    double spacing[3];       /* mm between samples along i, j, k (> 0) */
+    double origin[3];        /* world mm of sample (0,0,0) */
+    double direction[3][3];  /* direction[r][c]: row r of the matrix, column c is axis c */
+    double value_min, value_max, value_mean; /* over all samples, set by iso_vol_update_stats */
+    int has_nan;             /* float volumes: 1 if any sample is NaN (see iso_vol_update_stats) */
+} iso_volume;
+
+/* Default cap on the bytes of one volume's samples: 8 GiB. */
+#define ISO_VOL_DEFAULT_MAX_BYTES ((uint64_t)8 << 30)
+
+/* Bytes of one sample of `type` (1, 2, 4 or 8). */
+size_t iso_vol_type_size(iso_voxel_type type);
+/* "u8", "i16", "f32", ... Never NULL. */
+const char *iso_vol_type_name(iso_voxel_type type);
+/* Parses the names above; returns 0 and sets *type, or -1 for an unknown name. */
+int iso_vol_type_parse(const char *name, iso_voxel_type *type);
+/* 1 for ISO_F32 and ISO_F64. */
+int iso_vol_type_is_float(iso_voxel_type type);
+
+/* Checks dims (each >= 2) and that the sample bytes fit in max_bytes without overflow;
+ * on success stores the byte count in *bytes. Safe on untrusted sizes. */
+int iso_vol_check_size(const size_t dims[3], iso_voxel_type type, uint64_t max_bytes,
+                       uint64_t *bytes, iso_error *err);
+
+/* Allocates a zero-filled volume with unit spacing, zero origin, identity direction.
+ * Returns NULL (and fills err) if dims are invalid or exceed max_bytes (0 = default). */
+iso_volume *iso_vol_create(const size_t dims[3], iso_voxel_type type, uint64_t max_bytes,
+                           iso_error *err);
+/* Frees the volume and its samples; NULL is allowed. */
+void iso_vol_destroy(iso_volume *vol);
+
+static inline size_t iso_vol_count(const iso_volume *vol)
+{
+    return vol->dims[0] * vol->dims[1] * vol->dims[2];
+}
+static inline size_t iso_vol_index(const iso_volume *vol, size_t i, size_t j, size_t k)
+{
+    return (k * vol->dims[1] + j) * vol->dims[0] + i;
+}
+
+/* Sample at linear index `at` of samples of the given type, unchecked. Called with a
+ * constant type inside a function specialized per type, the switch folds away. */
+static inline double iso_vol_sample_as(const void *data, iso_voxel_type type, size_t at)
+{
+    switch (type) {
+    case ISO_U8: return ((const uint8_t *)data)[at];
+    case ISO_I8: return ((const int8_t *)data)[at];
+    case ISO_U16: return ((const uint16_t *)data)[at];
+    case ISO_I16: return ((const int16_t *)data)[at];
+    case ISO_U32: return ((const uint32_t *)data)[at];
+    case ISO_I32: return ((const int32_t *)data)[at];
+    case ISO_F32: return ((const float *)data)[at];
+    case ISO_F64: return ((const double *)data)[at];
+    }
+    return 0;
+}
+
+/* Sample at linear index `at` (iso_vol_index), unchecked: for loops that know their
+ * bounds. */
+static inline double iso_vol_sample(const iso_volume *vol, size_t at)
+{
+    return iso_vol_sample_as(vol->data, vol->type, at);
+}
+
+/* Sample (i,j,k) as a double. Asserts the indices are inside. O(1), a switch per call:
+ * for bulk access use iso_vol_read_box. */
+double iso_vol_get(const iso_volume *vol, size_t i, size_t j, size_t k);
+/* Stores value (converted to the voxel type, rounded and clamped for integers). */
+void iso_vol_set(iso_volume *vol, size_t i, size_t j, size_t k, double value);
+
+/* Copies the samples of the inclusive box lo..hi into out as doubles, x fastest.
+ * out holds (hi[0]-lo[0]+1)*(hi[1]-lo[1]+1)*(hi[2]-lo[2]+1) doubles. Asserts the box is
+ * inside the volume. */
+void iso_vol_read_box(const iso_volume *vol, const size_t lo[3], const size_t hi[3],
+                      double *out);
+
+/* Recomputes value_min, value_max, value_mean and has_nan. NaN samples are ignored by
+ * min/max/mean; they never count as above any level (see extract.h). O(N). */
+void iso_vol_update_stats(iso_volume *vol);
+
+/* The smallest of the three spacings: mm per voxel where a length in mm must be stated
+ * in voxels without understating it along any axis. */
+double iso_vol_min_spacing(const iso_volume *vol);
+/* Index space (i,j,k may be fractional) to world millimetres. Inline because the brick
+ * kernel places every vertex of a rotated volume through it: a call per vertex was 7% of
+ * its time. */
+static inline void iso_vol_index_to_world(const iso_volume *vol, const double index[3], double world[3])
+{
+    double scaled[3];
+    for (int c = 0; c < 3; c++)
+        scaled[c] = index[c] * vol->spacing[c];
+    for (int r = 0; r < 3; r++)
+        world[r] = vol->origin[r] + vol->direction[r][0] * scaled[0] +
+                   vol->direction[r][1] * scaled[1] + vol->direction[r][2] * scaled[2];
+}
+/* Sets spacing, direction and origin from a 3x4 affine [A | origin] (world = A index +
+ * origin): spacing = the column lengths, direction = the unit columns. Refuses (with
+ * ISO_E_FORMAT, `what` naming the source in the message) a non-finite or singular A.
+ * The volume is unchanged on error. */
+int iso_vol_set_affine(iso_volume *vol, const double affine[3][4], const char *what,
+                       iso_error *err);
+/* The same map as a 3x4 affine matrix [A | origin], world = A * index + origin, read off
+ * iso_vol_index_to_world so that the two always agree. */
+void iso_vol_affine(const iso_volume *vol, double affine[3][4]);
+
+/* A volume's value histogram and the iso-levels it suggests.
+ *
+ * Clients draw the histogram behind their level slider; the suggested levels come from
+ * three-class Otsu thresholding (Otsu 1979, the multi-level form of Liao et al. 2001) on
+ * that histogram: for CT the classes are air / soft tissue / bone, so the two thresholds
+ * land between them (skin and bone surfaces); for MRI, background / grey / white matter. */
+
+/* Counts the samples of vol into `bins` equal bins over [value_min, value_max] (the
+ * volume's stats, see iso_vol_update_stats): bin b covers
+ * [min + b * width, min + (b + 1) * width), the last bin includes value_max. NaN samples
+ * are not counted. counts holds `bins` entries (bins >= 1). A constant volume puts every
+ * sample in bin 0. O(N). */
+void iso_hist_compute(const iso_volume *vol, size_t bins, uint64_t *counts);
+
+/* The two thresholds of three-class Otsu on the histogram, as values (bin boundaries
+ * mapped back through min and max). Writes at most max_levels levels (ascending) and
+ * returns how many: 2 normally, 1 when only two classes exist, 0 for an empty or
+ * single-valued histogram, and for more than 1024 bins. O(bins^2). */
+size_t iso_hist_suggest_levels(const uint64_t *counts, size_t bins, double min, double max,
+                               double *levels, size_t max_levels);
+
+/* A volume filtered to other dimensions (the paper's "filtered down" 3dhead,
+ * and the scaling ladders of the benchmarks). */
+
+/* A new f32 volume of the given dims covering the same world box: each output sample is
+ * the mean of the input samples within half an output spacing of its position (a box
+ * filter, so shrinking averages instead of aliasing; growing interpolates trilinearly).
+ * Spacing grows by the ratio, origin and direction stay. NULL and err on bad dims or
+ * memory. O(input + output * footprint). */
+iso_volume *iso_resample(const iso_volume *vol, const size_t dims[3], iso_error *err);
+
+/* One box's trilinear function, the fit the hierarchy measures nodes against.
+ *
+ * A trilinear T on a box is given by its 8 corner values c[k], corner k at local
+ * coordinates (k & 1, (k >> 1) & 1, (k >> 2) & 1) in [0,1]^3. */
+
+/* T at local coordinates (u, v, w) in [0,1]^3. */
+static inline double iso_tri_eval(const double c[8], double u, double v, double w)
+{
+    double x00 = c[0] + (c[1] - c[0]) * u, x10 = c[2] + (c[3] - c[2]) * u;
+    double x01 = c[4] + (c[5] - c[4]) * u, x11 = c[6] + (c[7] - c[6]) * u;
+    double y0 = x00 + (x10 - x00) * v, y1 = x01 + (x11 - x01) * v;
+    return y0 + (y1 - y0) * w;
+}
+
+#endif
