@@ -17,7 +17,9 @@ typedef enum proto_format {
     PROTO_FORMAT_GLB,
     PROTO_FORMAT_PLY,
     PROTO_FORMAT_STL,
-    PROTO_FORMAT_COUNT
+    PROTO_FORMAT_COUNT,                    /* the formats the API serves end here */
+    PROTO_FORMAT_OBJ = PROTO_FORMAT_COUNT, /* OBJ text: the CLI writes it, the API does not */
+    PROTO_FORMAT_NONE                      /* no encoding (pipeline.h keeps the mesh) */
 } proto_format;
 
 /* One query parameter; value is NULL for a bare key ("?level"). */

@@ -1,4 +1,5 @@
-/* cmd_extract.c: `isoserve extract`: one iso-surface to a file and/or a JSON report. */
+/* cmd_extract.c: `isoserve extract`: one iso-surface to a file and/or a JSON report,
+ * through the request pipeline the server runs (pipeline.h). */
 #include <jansson.h>
 #include <math.h>
 #include <stdio.h>
@@ -8,7 +9,7 @@
 #include "extract/extract.h"
 #include "mesh/mesh.h"
 #include "cli.h"
-#include "encode.h"
+#include "pipeline.h"
 
 static int ends_with(const char *s, const char *suffix)
 {
@@ -16,28 +17,25 @@ static int ends_with(const char *s, const char *suffix)
     return n >= m && !strcmp(s + n - m, suffix);
 }
 
+/* The format an output file's suffix names, or PROTO_FORMAT_NONE for no output; -1 for a
+ * suffix isoserve does not write. */
+static int format_of(const char *path)
+{
+    static const struct { const char *suffix; proto_format format; } formats[] = {
+        {".ply", PROTO_FORMAT_PLY}, {".obj", PROTO_FORMAT_OBJ}, {".drc", PROTO_FORMAT_DRACO},
+        {".glb", PROTO_FORMAT_GLB}, {".stl", PROTO_FORMAT_STL}};
+    if (!path)
+        return PROTO_FORMAT_NONE;
+    for (size_t i = 0; i < sizeof formats / sizeof formats[0]; i++)
+        if (ends_with(path, formats[i].suffix))
+            return (int)formats[i].format;
+    return -1;
+}
+
 /* Writes the encoded mesh to path through a temporary file and rename, so a reader never
  * sees half a mesh. */
-static int write_mesh(const iso_mesh *mesh, const char *path)
+static int write_mesh(const unsigned char *bytes, size_t size, const char *path)
 {
-    unsigned char *bytes = NULL;
-    size_t size = 0;
-    iso_error err;
-    int rc;
-    if (ends_with(path, ".ply"))
-        rc = proto_encode_ply(mesh, &bytes, &size, &err);
-    else if (ends_with(path, ".obj"))
-        rc = proto_encode_obj(mesh, &bytes, &size, &err);
-    else if (ends_with(path, ".drc"))
-        rc = proto_encode_draco(mesh, NULL, &bytes, &size, &err);
-    else if (ends_with(path, ".glb"))
-        rc = proto_encode_glb(mesh, NULL, &bytes, &size, &err);
-    else if (ends_with(path, ".stl"))
-        rc = proto_encode_stl(mesh, &bytes, &size, &err);
-    else
-        return srv_fail("%s: unknown output format (use .ply, .stl, .obj, .drc or .glb)", path);
-    if (rc)
-        return srv_fail("%s: %s", path, err.message);
     size_t len = strlen(path) + 8;
     char *tmp = malloc(len);
     FILE *f = tmp ? (snprintf(tmp, len, "%s.tmp", path), fopen(tmp, "wb")) : NULL;
@@ -47,7 +45,6 @@ static int write_mesh(const iso_mesh *mesh, const char *path)
     if (!ok && tmp)
         remove(tmp);
     free(tmp);
-    free(bytes);
     return ok ? 0 : srv_fail("%s: cannot write the mesh", path);
 }
 
@@ -116,59 +113,57 @@ int srv_cmd_extract(int argc, char **argv)
         return srv_fail("extract: --budget chooses its own simplification; drop --simplify");
     if (no_simplify && !budget)
         return srv_fail("extract: --no-simplify goes with --budget");
+    int format = format_of(out);
+    if (format < 0)
+        return srv_fail("%s: unknown output format (use .ply, .stl, .obj, .drc or .glb)", out);
     opt.want_tree = !full_scan;
     srv_subject s;
     if (srv_open(&opt, &s))
         return 1;
-    iso_mesh mesh;
-    iso_mesh_init(&mesh);
-    iso_extract_stats st;
+    proto_pipeline_request req;
+    proto_pipeline_request_init(&req);
+    req.extract = params;
+    req.full_scan = full_scan;
+    req.budget = (size_t)budget;
+    req.budget_ladder_only = no_simplify;
+    req.simplify = (size_t)simplify;
+    req.normals = normals;
+    req.measure = as_json;
+    req.format = (proto_format)format;
+    req.encode.threads = params.threads;
+    proto_pipeline_result res;
     iso_error err;
-    iso_budget_result chosen = {.tolerance = params.tolerance, .fits = -1};
-    int rc = full_scan ? iso_extract_full_scan(s.vol, params.level, params.space, &mesh, &st, &err)
-             : !budget ? iso_extract(s.tree, &params, &mesh, &st, &err)
-             : no_simplify ? iso_extract_budget(s.tree, &params, (size_t)budget, &mesh, &st, &chosen, &err)
-                           : iso_extract_budget_faithful(s.tree, &params, (size_t)budget, &mesh, &st, &chosen, &err);
-    if (!rc && simplify) {
-        /* An explicit simplification: no error limit, the open edges (on the border) locked. */
-        iso_simplify_params sp = {.target_triangles = (size_t)simplify, .target_error = INFINITY,
-                                  .voxel_size = params.space == ISO_SPACE_INDEX ? 1 : iso_vol_min_spacing(s.vol),
-                                  .lock_border = 1};
-        rc = iso_simplify(&mesh, &sp, &chosen.simplify, &err);
-        chosen.simplified = !rc;
-        st.triangles = mesh.triangle_count;
-        st.vertices = mesh.vertex_count;
-    }
-    if (!rc && normals)
-        rc = iso_normals_compute(s.vol, &mesh, normals, params.space, params.threads, &err);
-    if (rc) {
+    if (proto_pipeline_run(s.tree, s.vol, &req, &res, &err)) {
         srv_close(&s);
         return srv_fail("%s: %s", opt.path, err.message);
     }
-    int status = out ? write_mesh(&mesh, out) : 0;
-    iso_census census;
-    if (as_json && status == 0 && iso_census_compute(s.vol, &mesh, params.space, &census, &err))
-        status = srv_fail("%s: %s", opt.path, err.message);
+    const iso_extract_stats st = res.stats;
+    const iso_budget_result chosen = res.chosen;
+    int status = out ? write_mesh(res.bytes, res.size, out) : 0;
     if (as_json && status == 0) {
         size_t volume_bytes = iso_vol_count(s.vol) * iso_vol_type_size(s.vol->type);
-        double area = iso_mesh_area(&mesh);
+        int world = params.space == ISO_SPACE_WORLD;
         json_t *doc = json_pack(
-            "{s:s, s:f, s:f, s:I, s:I, s:I, s:I, s:I, s:f, s:f, s:f, s:f, s:f, s:I, s:I, s:s, s:s}",
+            "{s:s, s:f, s:f, s:I, s:I, s:I, s:I, s:I, s:f, s:f, s:f, s:f, s:I, s:I, s:s, s:s}",
             "volume", opt.path, "level", params.level, "tolerance", chosen.tolerance,
             "triangles", (json_int_t)st.triangles, "vertices", (json_int_t)st.vertices,
             "cells_visited", (json_int_t)st.cells_visited, "nodes_visited", (json_int_t)st.nodes_visited,
             "nodes_polygonized", (json_int_t)st.nodes_polygonized, "extract_ms", st.extract_ms,
             "build_ms", s.tree ? s.tree->build_ms : 0.0, "error_bound", st.error_bound,
-            "area", area, "area_mm2", area, "hierarchy_bytes", (json_int_t)(s.tree ? iso_tree_memory(s.tree) : 0),
+            "area", res.area, "hierarchy_bytes", (json_int_t)(s.tree ? iso_tree_memory(s.tree) : 0),
             "volume_bytes", (json_int_t)volume_bytes, "space",
-            params.space == ISO_SPACE_INDEX ? "index" : "world_mm", "normals", iso_normals_name(normals));
+            world ? "world_mm" : "index", "normals", iso_normals_name(normals));
+        const iso_census *census = &res.census;
         json_t *watertight = json_pack("{s:I, s:I, s:I, s:I, s:I, s:b}",
-            "open_edges", (json_int_t)census.open_edges,
-            "boundary_edges", (json_int_t)census.boundary_edges,
-            "nonmanifold_edges", (json_int_t)census.nonmanifold_edges,
-            "misoriented_edges", (json_int_t)census.misoriented_edges,
-            "degenerate_triangles", (json_int_t)census.degenerate_triangles,
-            "closed", census.closed);
+            "open_edges", (json_int_t)census->open_edges,
+            "boundary_edges", (json_int_t)census->boundary_edges,
+            "nonmanifold_edges", (json_int_t)census->nonmanifold_edges,
+            "misoriented_edges", (json_int_t)census->misoriented_edges,
+            "degenerate_triangles", (json_int_t)census->degenerate_triangles,
+            "closed", census->closed);
+        /* Index space has no millimetres: area_mm2 is null there, area is in its units. */
+        if (doc)
+            json_object_set_new(doc, "area_mm2", world ? json_real(res.area) : json_null());
         if (doc)
             json_object_set_new(doc, "fit_error", json_real(st.fit_error));
         if (doc && budget)
@@ -188,12 +183,12 @@ int srv_cmd_extract(int argc, char **argv)
         /* Only a closed surface encloses anything; index space has no millimetres. */
         if (doc)
             json_object_set_new(doc, "enclosed_volume_mm3",
-                                census.closed && params.space == ISO_SPACE_WORLD
-                                    ? json_real(fabs(iso_mesh_enclosed_volume(&mesh)))
-                                    : json_null());
+                                census->closed && world ? json_real(res.enclosed_volume) : json_null());
         char *text = doc ? json_dumps(doc, JSON_COMPACT | JSON_REAL_PRECISION(10)) : NULL;
         if (text)
             puts(text);
+        else
+            status = srv_fail("%s: out of memory writing the report", opt.path);
         free(text);
         json_decref(doc);
     } else if (status == 0) {
@@ -207,7 +202,7 @@ int srv_cmd_extract(int argc, char **argv)
                    chosen.simplify.triangles_in, chosen.simplify.ms, chosen.simplify.error,
                    chosen.simplify.error_voxels);
     }
-    iso_mesh_free(&mesh);
+    proto_pipeline_result_free(&res);
     srv_close(&s);
     return status;
 }

@@ -1,7 +1,8 @@
-/* test_oom.c: allocation failures along one mesh request's path (issue 7). The steps of
- * server/mesh_job.c (extraction, exact or through the hierarchy or under a triangle budget,
- * simplified by meshoptimizer when the faithful ladder cannot meet it;
- * normals; the edge census; the Draco, glb, PLY and STL encoders) and the Draco decoder are
+/* test_oom.c: allocation failures along one mesh request's path. The steps of the request
+ * pipeline (proto/pipeline.c, which the server and the CLI run: extraction, exact or
+ * through the hierarchy or under a triangle budget, simplified by meshoptimizer when the
+ * faithful ladder cannot meet it; normals; the edge census; the Draco, glb, PLY and STL
+ * encoders) and the Draco decoder are
  * run once to count their allocations, then once per allocation with exactly that one
  * failing: each run must either succeed with the same mesh (the failure was absorbed, e.g.
  * a helper thread that could not start) or return ISO_E_NOMEM with a message that says
@@ -20,6 +21,7 @@
 #include "mesh/mesh.h"
 #include "check.h"
 #include "encode.h"
+#include "pipeline.h"
 #include "extract/extract.h"
 #include "io/io.h"
 #include "hierarchy/tree.h"
@@ -111,55 +113,35 @@ static long disarm(void)
     return atomic_load(&calls);
 }
 
-/* ---- one request's steps, as server/mesh_job.c runs them ---- */
-
-typedef enum { FMT_DRACO, FMT_GLB, FMT_PLY, FMT_STL } format;
+/* ---- one request through the pipeline the server and the CLI run ---- */
 
 typedef struct request {
     const char *name;
     double level, tolerance;
     size_t budget;     /* 0: none */
     int normals;       /* 0, 2, 3 or 4 */
-    format fmt;
+    proto_format format;
 } request;
 
-static int encode(format fmt, const iso_mesh *mesh, unsigned char **out, size_t *size,
-                  iso_error *err)
-{
-    switch (fmt) {
-    case FMT_GLB: return proto_encode_glb(mesh, NULL, out, size, err);
-    case FMT_PLY: return proto_encode_ply(mesh, out, size, err);
-    case FMT_STL: return proto_encode_stl(mesh, out, size, err);
-    default: return proto_encode_draco(mesh, NULL, out, size, err);
-    }
-}
-
-/* Extracts, adds normals, counts edges and encodes; frees everything before returning.
- * *triangles and *bytes say what came out (on success). */
+/* One request as server/mesh_job.c makes it (measures included); frees everything before
+ * returning. *triangles and *bytes say what came out (on success). */
 static int run_request(const iso_tree *tree, const request *r, size_t *triangles, size_t *bytes,
                        iso_error *err)
 {
-    iso_mesh mesh;
-    iso_mesh_init(&mesh);
-    iso_extract_params params = {.level = r->level, .tolerance = r->tolerance,
-                                 .space = ISO_SPACE_WORLD, .threads = 1};
-    iso_extract_stats stats;
-    iso_budget_result chosen;
-    int rc = r->budget ? iso_extract_budget_faithful(tree, &params, r->budget, &mesh, &stats, &chosen, err)
-                       : iso_extract(tree, &params, &mesh, &stats, err);
-    if (!rc && r->normals)
-        rc = iso_normals_compute(tree->vol, &mesh, r->normals, ISO_SPACE_WORLD, 0, err);
-    iso_census census;
-    if (!rc)
-        rc = iso_census_compute(tree->vol, &mesh, ISO_SPACE_WORLD, &census, err);
-    unsigned char *data = NULL;
-    size_t size = 0;
-    if (!rc)
-        rc = encode(r->fmt, &mesh, &data, &size, err);
-    *triangles = mesh.triangle_count;
-    *bytes = size;
-    free(data);
-    iso_mesh_free(&mesh);
+    proto_pipeline_request req;
+    proto_pipeline_request_init(&req);
+    req.extract.level = r->level;
+    req.extract.tolerance = r->tolerance;
+    req.extract.threads = 1;
+    req.budget = r->budget;
+    req.normals = r->normals;
+    req.measure = 1;
+    req.format = r->format;
+    proto_pipeline_result res;
+    int rc = proto_pipeline_run(tree, tree->vol, &req, &res, err);
+    *triangles = rc ? 0 : res.mesh.triangle_count;
+    *bytes = rc ? 0 : res.size;
+    proto_pipeline_result_free(&res);
     return rc;
 }
 
@@ -256,10 +238,10 @@ static void test_request_path_allocation_failures(void)
     /* Level 1.5 cuts the sphere inside the grid; each request takes another route through
      * the steps, between them every encoder and normals order. */
     static const request requests[] = {
-        {"exact, tricubic normals, draco", 1.5, 0, 0, 4, FMT_DRACO},
-        {"hierarchy, trilinear normals, glb", 1.5, 0.3, 0, 2, FMT_GLB},
-        {"budget 60, triquadratic normals, ply", 1.5, 0, 60, 3, FMT_PLY},
-        {"hierarchy, no normals, stl", 1.5, 0.3, 0, 0, FMT_STL},
+        {"exact, tricubic normals, draco", 1.5, 0, 0, 4, PROTO_FORMAT_DRACO},
+        {"hierarchy, trilinear normals, glb", 1.5, 0.3, 0, 2, PROTO_FORMAT_GLB},
+        {"budget 60, triquadratic normals, ply", 1.5, 0, 60, 3, PROTO_FORMAT_PLY},
+        {"hierarchy, no normals, stl", 1.5, 0.3, 0, 0, PROTO_FORMAT_STL},
     };
     for (size_t i = 0; tree && i < sizeof requests / sizeof requests[0] && !check_failed(); i++) {
         struct { const iso_tree *tree; const request *r; } context = {tree, &requests[i]};

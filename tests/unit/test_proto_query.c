@@ -153,7 +153,20 @@ static void test_query_key_normalises(void)
     proto_param h[] = {P("level", "700"), P("speed", "3")};
     proto_param i[] = {P("level", "700"), P("speed", "3"), P("format", "ply")};
     proto_param j[] = {P("level", "700"), P("format", "ply")};
+    /* Nor do the quantization bits. */
+    proto_param k[] = {P("level", "700"), P("qp", "11"), P("qn", "8"), P("format", "ply")};
+    proto_param l[] = {P("level", "700"), P("qp", "11"), P("format", "stl")};
+    proto_param m[] = {P("level", "700"), P("format", "stl")};
+    proto_param q[] = {P("level", "700"), P("qp", "11")};
     char ka[256], kb[256], kc[256], kd[256], ke[256], kf[256], kg[256], kh[256], ki[256], kj[256];
+    char kk[256], kl[256], km[256], kq[256];
+    key_of(k, COUNT(k), kk, sizeof kk);
+    key_of(l, COUNT(l), kl, sizeof kl);
+    key_of(m, COUNT(m), km, sizeof km);
+    key_of(q, COUNT(q), kq, sizeof kq);
+    CHECKF(!strcmp(kk, kj), "qp and qn do not change PLY: %s | %s", kk, kj);
+    CHECKF(!strcmp(kl, km), "qp does not change STL: %s | %s", kl, km);
+    CHECKF(strcmp(kq, "level=700&tolerance=0&normals=tricubic&format=draco&qp=11&qn=10&speed=auto&budget=0&cap=false") == 0, "%s", kq);
     key_of(a, COUNT(a), ka, sizeof ka);
     key_of(b, COUNT(b), kb, sizeof kb);
     key_of(c, COUNT(c), kc, sizeof kc);

@@ -1,0 +1,172 @@
+/* pipeline.c: extract, simplify, refuse, normals beside measures, encode (pipeline.h). */
+#include "pipeline.h"
+
+#include <assert.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "base/base.h"
+#include "draco_shim.h"
+
+void proto_pipeline_request_init(proto_pipeline_request *req)
+{
+    *req = (proto_pipeline_request){.extract = {.space = ISO_SPACE_WORLD}, .normals = 4,
+                                    .format = PROTO_FORMAT_DRACO};
+    proto_encode_options_init(&req->encode);
+}
+
+void proto_pipeline_result_free(proto_pipeline_result *res)
+{
+    if (!res)
+        return;
+    iso_mesh_free(&res->mesh);
+    free(res->bytes);
+    res->bytes = NULL;
+    res->size = 0;
+}
+
+/* Step 1: the exact surface, the hierarchy's within the tolerance, or a budget's. */
+static int extract(const iso_tree *tree, const iso_volume *vol,
+                   const proto_pipeline_request *req, proto_pipeline_result *res,
+                   iso_error *err)
+{
+    const iso_extract_params *p = &req->extract;
+    res->chosen = (iso_budget_result){.tolerance = p->tolerance, .fits = -1};
+    if (req->full_scan)
+        return iso_extract_full_scan(vol, p->level, p->space, &res->mesh, &res->stats, err);
+    if (!req->budget)
+        return iso_extract(tree, p, &res->mesh, &res->stats, err);
+    if (req->budget_ladder_only)
+        return iso_extract_budget(tree, p, req->budget, &res->mesh, &res->stats, &res->chosen,
+                                  err);
+    return iso_extract_budget_faithful(tree, p, req->budget, &res->mesh, &res->stats,
+                                       &res->chosen, err);
+}
+
+/* Step 2: an explicit simplification, with no error limit and the open edges (on the
+ * volume's border) locked so that the border still matches the neighbouring volume. */
+static int simplify(const iso_volume *vol, const proto_pipeline_request *req,
+                    proto_pipeline_result *res, iso_error *err)
+{
+    iso_simplify_params sp = {
+        .target_triangles = req->simplify, .target_error = INFINITY, .lock_border = 1,
+        .voxel_size = req->extract.space == ISO_SPACE_INDEX ? 1 : iso_vol_min_spacing(vol)};
+    int rc = iso_simplify(&res->mesh, &sp, &res->chosen.simplify, err);
+    res->chosen.simplified = rc == 0;
+    res->stats.triangles = res->mesh.triangle_count;
+    res->stats.vertices = res->mesh.vertex_count;
+    return rc;
+}
+
+/* Step 4's measures: read-only on positions and indices, so they run on their own thread
+ * beside normals and encoding, which write only the normals and the output. */
+typedef struct measure_job {
+    const iso_volume *vol;
+    const iso_mesh *mesh;
+    iso_space space;
+    iso_census census;
+    double area, enclosed, ms;
+    int rc;
+    iso_error err;
+} measure_job;
+
+static void *measure(void *arg)
+{
+    measure_job *m = arg;
+    double start = iso_clock_ms();
+    m->rc = iso_census_compute(m->vol, m->mesh, m->space, &m->census, &m->err);
+    if (!m->rc) {
+        m->area = iso_mesh_area(m->mesh);
+        m->enclosed = m->census.closed ? fabs(iso_mesh_enclosed_volume(m->mesh)) : 0;
+    }
+    m->ms = iso_clock_ms() - start;
+    return NULL;
+}
+
+/* Step 5. */
+static int encode(const proto_pipeline_request *req, proto_pipeline_result *res,
+                  iso_error *err)
+{
+    proto_draco_info info = {.speed = -1};
+    int rc = 0;
+    switch (req->format) {
+    case PROTO_FORMAT_DRACO:
+        rc = proto_draco_encode_info(&res->mesh, &req->encode, &res->bytes, &res->size, &info, err);
+        break;
+    case PROTO_FORMAT_GLB:
+        rc = proto_glb_encode_info(&res->mesh, &req->encode, &res->bytes, &res->size, &info, err);
+        break;
+    case PROTO_FORMAT_PLY: rc = proto_encode_ply(&res->mesh, &res->bytes, &res->size, err); break;
+    case PROTO_FORMAT_STL: rc = proto_encode_stl(&res->mesh, &res->bytes, &res->size, err); break;
+    case PROTO_FORMAT_OBJ: rc = proto_encode_obj(&res->mesh, &res->bytes, &res->size, err); break;
+    case PROTO_FORMAT_NONE: break;
+    }
+    res->draco_speed = info.speed;
+    return rc;
+}
+
+/* Steps 4 and 5: normals and encoding here, the measures beside them when asked. If no
+ * thread can start, the measures run here first: the result is the same. */
+static int finish(const iso_volume *vol, const proto_pipeline_request *req,
+                  proto_pipeline_result *res, iso_error *err)
+{
+    measure_job m = {.vol = vol, .mesh = &res->mesh, .space = req->extract.space};
+    pthread_t measurer;
+    int beside = req->measure && pthread_create(&measurer, NULL, measure, &m) == 0;
+    if (req->measure && !beside)
+        measure(&m);
+    double t0 = iso_clock_ms();
+    int rc = 0;
+    if (req->normals && res->mesh.vertex_count)
+        rc = iso_normals_compute(vol, &res->mesh, req->normals, req->extract.space,
+                                 req->extract.threads, err);
+    double t1 = iso_clock_ms();
+    if (!rc)
+        rc = encode(req, res, err);
+    double t2 = iso_clock_ms();
+    if (beside)
+        pthread_join(measurer, NULL);
+    if (!rc && req->measure && m.rc) {
+        rc = m.rc;
+        if (err)
+            *err = m.err;
+    }
+    res->normals_ms = t1 - t0;
+    res->encode_ms = t2 - t1;
+    res->measure_ms = m.ms;
+    res->measured = req->measure && !rc;
+    res->census = m.census;
+    res->area = m.area;
+    res->enclosed_volume = m.enclosed;
+    return rc;
+}
+
+int proto_pipeline_run(const iso_tree *tree, const iso_volume *vol,
+                       const proto_pipeline_request *req, proto_pipeline_result *res,
+                       iso_error *err)
+{
+    assert(req && res && (req->full_scan ? vol != NULL : tree != NULL));
+    if (!vol)
+        vol = tree->vol;
+    memset(res, 0, sizeof *res);
+    iso_mesh_init(&res->mesh);
+    res->draco_speed = -1;
+    double t0 = iso_clock_ms();
+    int rc = extract(tree, vol, req, res, err);
+    double t1 = iso_clock_ms();
+    if (!rc && req->simplify)
+        rc = simplify(vol, req, res, err);
+    res->extract_ms = t1 - t0;
+    res->simplify_ms = iso_clock_ms() - t1;
+    if (!rc && req->max_triangles && res->stats.triangles > req->max_triangles)
+        rc = iso_error_set(err, ISO_E_LIMIT, "the mesh has %zu triangles, more than this server's "
+                           "limit of %zu; a larger tolerance gives fewer", res->stats.triangles,
+                           req->max_triangles);
+    if (!rc)
+        rc = finish(vol, req, res, err);
+    if (rc)
+        proto_pipeline_result_free(res);
+    return rc;
+}

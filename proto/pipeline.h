@@ -1,0 +1,68 @@
+/* pipeline.h: one mesh request from the hierarchy to encoded bytes, the one path that
+ * the server's mesh jobs, the CLI's extract and the allocation-failure sweep all run:
+ *
+ *   1. extract: exact, within a value tolerance, or under a triangle budget (the ladder,
+ *      then simplification when the ladder cannot meet it);
+ *   2. simplify: to an explicit triangle count, when asked;
+ *   3. refuse: a mesh over the caller's triangle limit stops here (ISO_E_LIMIT), before
+ *      the steps that cost several times the extraction's memory;
+ *   4. normals, and beside them on a thread of their own the measures (edge census, area,
+ *      enclosed volume), which read only positions and indices;
+ *   5. encode, in the request's format (or not at all, PROTO_FORMAT_NONE).
+ * Each step is timed. Errors are the steps' own ISO_E_* codes; ISO_E_NOMEM always leaves
+ * nothing allocated behind. Thread-safe over a shared tree and volume. */
+#ifndef PROTO_PIPELINE_H
+#define PROTO_PIPELINE_H
+
+#include <stddef.h>
+
+#include "encode.h"
+#include "extract/extract.h"
+#include "hierarchy/tree.h"
+#include "mesh/mesh.h"
+#include "query.h"
+
+typedef struct proto_pipeline_request {
+    iso_extract_params extract; /* level, tolerance, cap, space, threads */
+    int full_scan;              /* 1: marching cubes over every cell, no hierarchy */
+    size_t budget;              /* at most this many triangles; 0: no budget */
+    int budget_ladder_only;     /* 1: the tolerance ladder alone, never simplification */
+    size_t simplify;            /* simplify to this many triangles; 0: no */
+    size_t max_triangles;       /* refuse a larger mesh (ISO_E_LIMIT); 0: no limit */
+    int normals;                /* B-spline order: 0 none, 2, 3 or 4 */
+    int measure;                /* 1: census, area, enclosed volume */
+    proto_format format;        /* PROTO_FORMAT_NONE: keep the mesh, encode nothing */
+    proto_encode_options encode;/* Draco and glb options */
+} proto_pipeline_request;
+
+typedef struct proto_pipeline_result {
+    iso_mesh mesh;              /* the final mesh, normals included when asked */
+    unsigned char *bytes;       /* the encoded mesh (malloc'd), NULL for PROTO_FORMAT_NONE */
+    size_t size;
+    iso_extract_stats stats;    /* triangles and vertices: the final mesh's */
+    iso_budget_result chosen;   /* the tolerance used; for a budget, fits and extractions;
+                                 * `simplified` and `simplify` when the mesh was simplified */
+    int measured;               /* the three measures below were computed */
+    iso_census census;
+    double area;                /* in the mesh's units squared */
+    double enclosed_volume;     /* |signed volume| of a closed mesh, else 0 */
+    int draco_speed;            /* the Draco speed used (auto resolved), -1 for the others */
+    double extract_ms, simplify_ms, normals_ms, measure_ms, encode_ms;
+} proto_pipeline_result;
+
+/* Fills the defaults: world space, all cores, no budget, tricubic normals, no measures,
+ * Draco with proto_encode_options_init's options. */
+void proto_pipeline_request_init(proto_pipeline_request *req);
+
+/* Runs the steps above for tree (or vol alone when req->full_scan). On success *res owns
+ * the mesh and the bytes (proto_pipeline_result_free); on failure nothing is left to free
+ * and the code is the failing step's: ISO_E_ARGUMENT, ISO_E_NOMEM, ISO_E_LIMIT (over
+ * req->max_triangles, the message saying both counts). */
+int proto_pipeline_run(const iso_tree *tree, const iso_volume *vol,
+                       const proto_pipeline_request *req, proto_pipeline_result *res,
+                       iso_error *err);
+
+/* Frees what a successful run left in res; an emptied result may be freed again. */
+void proto_pipeline_result_free(proto_pipeline_result *res);
+
+#endif
