@@ -57,12 +57,11 @@ typedef struct proto_encode_options {
 void proto_encode_options_init(proto_encode_options *opt);
 
 /* The speed PROTO_DRACO_SPEED_AUTO encodes a mesh of `triangles` with: 8 up to
- * PROTO_DRACO_AUTO_SEQUENTIAL triangles, 10 above. Measured on CThead skin (508k triangles,
- * normals, qp 14, qn 10; docs/performance.md): speed 8 is smaller than 5, 6 and 7 and
- * faster to encode and to decode than all three; 0 and 3 save 12% and 6% of the bytes for
- * 2.8x and 2x the encode time and 4.4x and 3x the decode time in the browser; 10 costs
- * 1.95x the bytes and encodes 2-2.6x faster, so only a mesh too large to encode at 8 within
- * an interactive request's budget (200k triangles: about 55 ms on one core) gets it. */
+ * PROTO_DRACO_AUTO_SEQUENTIAL triangles, 10 above. Speed 8 is smaller than 5, 6 and 7 and
+ * faster to encode and decode than all three; the slower speeds save a few percent of the
+ * bytes for several times the time; 10 costs about twice the bytes and encodes 2-2.6x
+ * faster, so only a mesh too large to encode at 8 within an interactive request's budget
+ * gets it (docs/performance.md has the measurements). */
 #define PROTO_DRACO_AUTO_SEQUENTIAL 200000
 int proto_draco_auto_speed(size_t triangles);
 
@@ -97,10 +96,8 @@ int proto_encode_stl(const iso_mesh *mesh, unsigned char **out, size_t *out_size
  * vertices no other triangle uses are dropped, non-manifold vertices may be split, and
  * order changes below speed 10 (see proto_encode_options). A mesh left with no triangles,
  * which Draco's mesh encoders refuse, becomes a tiny stream (22 bytes) that decodes to an
- * empty mesh: a POSITION attribute, no points, no faces (see draco_shim.cc). Cost per
- * triangle on one core, with normals (CThead skin): about 0.27 us at speed 8, 0.1 us at
- * 10, 0.4 us at 5 and 0.9 us at 0; plus page faults on fresh allocations (the server
- * keeps freed memory, see cmd_serve.c). */
+ * empty mesh: a POSITION attribute, no points, no faces (see draco_shim.cc). O(T); the
+ * cost per triangle at each speed is in docs/performance.md. */
 int proto_encode_draco(const iso_mesh *mesh, const proto_encode_options *opt,
                        unsigned char **out, size_t *out_size, iso_error *err);
 

@@ -52,7 +52,7 @@ typedef struct proto_problem {
     char detail[256];      /* one sentence for a person */
 } proto_problem;
 
-/* The default normals order of mesh requests: tricubic (DESIGN.md, issue 9). */
+/* The default normals order of mesh requests: tricubic, the smoothest shading. */
 #define PROTO_NORMALS_DEFAULT 4
 
 /* Parses the parameters of /v1/volumes/{id}/mesh. Returns 0 and fills *out, or -1 and fills

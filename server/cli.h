@@ -31,12 +31,10 @@ int srv_parse_threads(const char *command, const char *text, int *threads);
 
 /* A mesh request allocates and frees tens of MB (the mesh, the fans, the edge census,
  * Draco's corner tables). With glibc's defaults the large blocks are fresh mmaps and
- * freed memory above 128 KiB is handed back, so every request faults its pages in again:
- * 7,600 faults per CThead skin request. Keeping them took Draco speed 5 from 280 to
- * 220 ms of CPU on CThead skin, and CThead skin at tolerance 654 from 59 to 39 ms on two
- * threads (docs/performance.md). Blocks up to 32 MiB (glibc's limit) then come from the
- * heap, and freed memory stays for the next request: the process keeps its peak. `serve`
- * sets this, and `bench`, which measures what the server does. */
+ * freed memory above 128 KiB is handed back, so every request faults its pages in again
+ * (docs/performance.md measures the cost). Blocks up to 32 MiB (glibc's limit) then come
+ * from the heap, and freed memory stays for the next request: the process keeps its peak.
+ * `serve` sets this, and `bench`, which measures what the server does. */
 void srv_keep_freed_memory(void);
 
 /* Returns 0, or prints "isoserve: <what>" on stderr and returns 1. */

@@ -99,8 +99,9 @@ static uint32_t geometry_hash(const iso_volume *vol)
 }
 
 /* The hierarchy from the cache dir if it is there, valid and not older than the volume's
- * file; otherwise built and written back. Returns 0 or 1 (reported on stderr). */
-static int load_tree(srv_volume *v, const srv_preload_options *opt, char *label)
+ * file; otherwise built and written back. Returns 0 or the build's ISO_E_* code, err
+ * saying why (also reported on stderr). */
+static int load_tree(srv_volume *v, const srv_preload_options *opt, char *label, iso_error *failure)
 {
     iso_error err;
     char file[4096] = "";
@@ -116,10 +117,11 @@ static int load_tree(srv_volume *v, const srv_preload_options *opt, char *label)
         if (newer)
             fprintf(stderr, "isoserve: %s: %s; rebuilding\n", v->entry->id, err.message);
     }
-    if (iso_tree_build(v->vol, 0, srv_progress, label, &v->tree, &err)) {
+    int rc = iso_tree_build(v->vol, 0, srv_progress, label, &v->tree, failure);
+    if (rc) {
         fprintf(stderr, "isoserve: %s: building the hierarchy: %s; skipped\n", v->entry->id,
-                err.message);
-        return 1;
+                failure->message);
+        return rc;
     }
     /* A full or read-only disk costs the next start a rebuild, nothing more: the tree in
      * memory is complete, and iso_tree_save leaves no partial file under the real name. */
@@ -157,9 +159,9 @@ static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload
         return 1;
     }
     snprintf(label, sizeof label, "isoserve: [%zu/%zu] %s: hierarchy", index + 1, total, e->id);
-    if (load_tree(v, opt, label)) {
+    if (load_tree(v, opt, label, err)) {
         iso_vol_destroy(v->vol);
-        return iso_error_set(err, ISO_E_FORMAT, "its hierarchy could not be built"), 1;
+        return 1;
     }
     snprintf(v->version, sizeof v->version, "%08x%08x-%d", (unsigned)v->tree->volume_crc,
              (unsigned)geometry_hash(v->vol), SRV_MESH_ALGORITHM_VERSION);

@@ -56,12 +56,30 @@ static void add_cors(const srv_server *s, struct MHD_Connection *c, struct MHD_R
     MHD_add_response_header(r, "Access-Control-Expose-Headers", expose_headers);
 }
 
+/* The answer when the HTTP layer itself cannot allocate (a request's record, a response,
+ * a body): made once at start from a constant body, so sending it allocates nothing of
+ * ours, and answered 503 with Retry-After like the other overload paths instead of
+ * dropping the connection. */
+static char out_of_memory_body[] = /* not const: MHD takes a void * it never writes */
+    "{\"type\":\"urn:isoserve:problem:unavailable\",\"title\":\"Service Unavailable\","
+    "\"status\":503,\"detail\":\"the server is out of memory; retry later\"}";
+
+static enum MHD_Result send_out_of_memory(srv_server *s, struct MHD_Connection *c,
+                                          srv_request *req)
+{
+    if (req)
+        req->status = 503;
+    if (!s->out_of_memory)
+        return MHD_NO;
+    return MHD_queue_response(c, 503, s->out_of_memory);
+}
+
 /* Queues r with status, records what the log and metrics need, destroys r. */
 static enum MHD_Result send_response(srv_server *s, struct MHD_Connection *c, srv_request *req,
                                      int status, struct MHD_Response *r, size_t bytes)
 {
     if (!r)
-        return MHD_NO;
+        return send_out_of_memory(s, c, req);
     add_cors(s, c, r);
     /* Which replica answered, and whether it had the volume preloaded (its shard) or
      * loaded it on demand (a failover): what a deployment behind nginx is checked by. */
@@ -165,7 +183,7 @@ static enum MHD_Result route_catalog(srv_server *s, struct MHD_Connection *c, sr
     const srv_shard_ring *ring = s->config.shard_ring;
     proto_volume_doc *docs = calloc(catalog->count ? catalog->count : 1, sizeof *docs);
     if (!docs)
-        return MHD_NO;
+        return send_out_of_memory(s, c, req);
     for (size_t i = 0; i < catalog->count; i++) {
         const srv_catalog_entry *e = &catalog->entries[i];
         docs[i] = (proto_volume_doc){.id = e->id, .name = e->name, .modality = e->modality,
@@ -184,7 +202,7 @@ static enum MHD_Result route_volumes(srv_server *s, struct MHD_Connection *c, sr
     size_t n = atomic_load(&s->collection->count);
     proto_volume_doc *docs = calloc(n ? n : 1, sizeof *docs);
     if (!docs)
-        return MHD_NO;
+        return send_out_of_memory(s, c, req);
     for (size_t i = 0; i < n; i++)
         docs[i] = doc_of(s, &s->collection->volumes[i]);
     char *text = proto_json_volume_list(docs, n);
@@ -314,7 +332,7 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
         body->size, body->data, release_body, body);
     if (!r) {
         srv_body_release(body);
-        return MHD_NO;
+        return send_out_of_memory(s, c, req);
     }
     MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, body->content_type);
     add_cache_headers(r, etag);
@@ -411,7 +429,7 @@ static enum MHD_Result route_static(srv_server *s, struct MHD_Connection *c, srv
     struct MHD_Response *r = MHD_create_response_from_fd(size, fd);
     if (!r) {
         close(fd);
-        return MHD_NO;
+        return send_out_of_memory(s, c, req);
     }
     MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, type);
     MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
@@ -422,7 +440,7 @@ static enum MHD_Result preflight(srv_server *s, struct MHD_Connection *c, srv_re
 {
     struct MHD_Response *r = MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
     if (!r)
-        return MHD_NO;
+        return send_out_of_memory(s, c, req);
     MHD_add_response_header(r, "Access-Control-Allow-Methods", "GET, HEAD, OPTIONS");
     MHD_add_response_header(r, "Access-Control-Allow-Headers", "If-None-Match, Authorization");
     MHD_add_response_header(r, "Access-Control-Max-Age", "86400");
@@ -585,7 +603,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     if (!req) {
         req = calloc(1, sizeof *req);
         if (!req)
-            return MHD_NO;
+            return send_out_of_memory(s, c, NULL);
         req->start = iso_clock_ms();
         req->route = SRV_ROUTE_OTHER;
         snprintf(req->method, sizeof req->method, "%s", method);
@@ -662,6 +680,17 @@ int srv_http_start(srv_server *s, iso_error *err)
                      MHD_USE_POLL | MHD_USE_ITC | MHD_USE_ERROR_LOG;
     if (addr->ai_family == AF_INET6)
         flags |= MHD_USE_IPv6;
+    s->out_of_memory = MHD_create_response_from_buffer(sizeof out_of_memory_body - 1,
+                                                       out_of_memory_body,
+                                                       MHD_RESPMEM_PERSISTENT);
+    if (!s->out_of_memory) {
+        freeaddrinfo(addr);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory starting the HTTP server");
+    }
+    MHD_add_response_header(s->out_of_memory, MHD_HTTP_HEADER_CONTENT_TYPE,
+                            "application/problem+json");
+    MHD_add_response_header(s->out_of_memory, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");
+    add_retry_after(s, s->out_of_memory);
     s->daemon = MHD_start_daemon(
         flags, (uint16_t)s->config.port, NULL, NULL, on_request, s,
         MHD_OPTION_SOCK_ADDR, addr->ai_addr,
@@ -672,6 +701,10 @@ int srv_http_start(srv_server *s, iso_error *err)
         MHD_OPTION_UNESCAPE_CALLBACK, unescape, NULL,
         MHD_OPTION_END);
     freeaddrinfo(addr);
+    if (!s->daemon) {
+        MHD_destroy_response(s->out_of_memory);
+        s->out_of_memory = NULL;
+    }
     if (!s->daemon)
         return iso_error_set(err, ISO_E_IO, "cannot listen on %s:%u (in use, or not an address of "
                              "this machine)", s->config.host, s->config.port);
@@ -698,6 +731,9 @@ void srv_http_stop(srv_server *s)
 {
     if (s->daemon)
         MHD_stop_daemon(s->daemon);
+    if (s->out_of_memory)
+        MHD_destroy_response(s->out_of_memory);
+    s->out_of_memory = NULL;
     if (s->listen_socket >= 0)
         close(s->listen_socket);
     s->daemon = NULL;

@@ -38,6 +38,7 @@ typedef struct srv_http_config {
 } srv_http_config;
 
 struct MHD_Daemon;
+struct MHD_Response;
 
 typedef struct srv_server {
     srv_http_config config;
@@ -46,6 +47,7 @@ typedef struct srv_server {
     srv_pool *pool;
     srv_metrics metrics;
     struct MHD_Daemon *daemon;
+    struct MHD_Response *out_of_memory; /* the constant 503 of a failed allocation */
     unsigned port;                 /* the port bound */
     _Atomic int in_flight;         /* requests begun and not yet completed */
     int listen_socket;             /* after quiesce, closed by srv_http_stop */

@@ -6,6 +6,7 @@
 
 #include "base/base.h"
 #include "pipeline.h"
+#include "status.h"
 
 void srv_mesh_job_free(void *arg)
 {
@@ -34,20 +35,23 @@ static void pipeline_request(const srv_mesh_job *job, proto_pipeline_request *re
     req->encode.speed = r->speed;
 }
 
-/* The problem body of a failed step. An allocation that failed is this request's
- * trouble, not the server's: its memory is freed by now and the other requests go on, so
- * it answers 503 (with Retry-After) naming the volume and the step that ran out. */
+/* The problem body of a failed step, its status from status.h. An allocation that failed
+ * is this request's trouble, not the server's: its memory is freed by now and the other
+ * requests go on, so it answers 503 (with Retry-After) naming the volume and the step that
+ * ran out. A mesh over --max-triangles answers 422 and is not cached, so a later, larger
+ * limit answers. */
 static srv_body *failed(const srv_mesh_job *job, int rc, const iso_error *err,
                         proto_problem *problem)
 {
     const char *id = job->volume->entry->id, *why = err->message[0] ? err->message : iso_status_name(rc);
-    if (rc == ISO_E_LIMIT) /* over --max-triangles; not cached: a larger limit answers */
-        proto_problem_set(problem, 422, NULL, "%s", why);
-    else if (rc == ISO_E_NOMEM)
-        proto_problem_set(problem, 503, NULL, "%s: %s; a larger tolerance gives a smaller mesh",
+    int status = srv_status_http(rc);
+    if (status == 503)
+        proto_problem_set(problem, status, NULL, "%s: %s; a larger tolerance gives a smaller mesh",
                           id, why);
+    else if (rc == ISO_E_LIMIT)
+        proto_problem_set(problem, status, NULL, "%s", why);
     else
-        proto_problem_set(problem, 500, NULL, "%s: %s", id, why);
+        proto_problem_set(problem, status, NULL, "%s: %s", id, why);
     return NULL;
 }
 

@@ -1,6 +1,6 @@
-/* mesh_job.h: one mesh request's work on a pool thread: extract (under a budget when
- * asked), add normals, measure, encode, and leave the body in the cache. The pipeline of
- * DESIGN.md section 2, from hierarchy to HTTP body, without any HTTP. */
+/* mesh_job.h: one mesh request's work on a pool thread: the request pipeline
+ * (pipeline.h: extract, simplify, normals, measures, encode), then the body and its facts
+ * into the cache, without any HTTP. */
 #ifndef SRV_MESH_JOB_H
 #define SRV_MESH_JOB_H
 

@@ -29,7 +29,9 @@ enum iso_status {
     ISO_E_NOMEM = -6,       /* an allocation failed */
     ISO_E_ARGUMENT = -7,    /* a parameter out of its documented range */
     ISO_E_STALE = -8,       /* a hierarchy file does not belong to this volume */
-    ISO_E_CORRUPT = -9      /* a checksum does not match */
+    ISO_E_CORRUPT = -9,     /* a checksum does not match */
+    ISO_E_INTERNAL = -10    /* a broken invariant of isoserve itself (a bug): never the
+                             * caller's input, never a lack of memory */
 };
 
 typedef struct iso_error {

@@ -29,6 +29,7 @@ const char *iso_status_name(int code)
     case ISO_E_ARGUMENT: return "bad argument";
     case ISO_E_STALE: return "stale file";
     case ISO_E_CORRUPT: return "corrupt file";
+    case ISO_E_INTERNAL: return "internal error";
     }
     return "unknown error";
 }

@@ -438,7 +438,7 @@ static int number_slice(const iso_volume *vol, const fan_slice *s, const iso_mar
         iso_fan_edge_of_key(vol, ref, corner, &axis);
         out[i] = iso_march_vertex(march, corner, axis);
         if (out[i] == UINT32_MAX)
-            return ISO_E_ARGUMENT; /* a loop vertex the kernel did not number: a bug */
+            return ISO_E_INTERNAL; /* a loop vertex the kernel did not number: a bug */
     }
     return 0;
 }
@@ -516,7 +516,8 @@ static int number_fans(const coarse *c, const iso_march *march, int world, iso_m
     size_t vertices = last->first_vertex + last->centre_end - last->centre;
     size_t triangles = last->first_triangle + last->triangle_end - last->triangle;
     assert(vertices <= mesh->vertex_capacity && triangles <= mesh->triangle_capacity);
-    numbering n = {c->vol, march, world, mesh, slices, count, {0}};
+    numbering n = {.vol = c->vol, .march = march, .world = world, .mesh = mesh,
+                   .slices = slices, .count = count};
     int threads = count < (size_t)c->thread_count ? (int)count : c->thread_count;
     iso_parallel_run(threads, number_share, &n);
     free(slices);
@@ -663,11 +664,11 @@ static void coarse_free(coarse *c)
 }
 
 /* Tolerance > 0: PASS 1, then the rest. */
-static int extract_coarse(const iso_tree *tree, const iso_extract_params *params, double fit_share,
+static int extract_coarse(const iso_tree *tree, const iso_extract_params *params,
                           iso_mesh *mesh, iso_extract_stats *stats, double start, iso_error *err)
 {
     coarse c = {.tree = tree, .vol = tree->vol, .level = params->level, .prune = !params->no_minmax};
-    c.fit_limit = fit_share * params->tolerance;
+    c.fit_limit = params->tolerance;
     c.centre_limit = params->tolerance * CENTRE_SHARE;
     c.thread_count = iso_parallel_threads(params->threads);
     c.threads = calloc((size_t)c.thread_count, sizeof *c.threads);
@@ -695,9 +696,6 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
         return iso_error_set(err, ISO_E_ARGUMENT, "level must be a finite number");
     if (!(params->tolerance >= 0) || !isfinite(params->tolerance))
         return iso_error_set(err, ISO_E_ARGUMENT, "tolerance must be a finite number >= 0");
-    double share = params->fit_share == 0 ? 1.0 : params->fit_share;
-    if (!(share > 0 && share <= 1))
-        return iso_error_set(err, ISO_E_ARGUMENT, "fit share must be in (0, 1]");
     /* The root's bounds answer a level outside the data with one node. */
     const iso_tree_node *root = &tree->nodes[0];
     if (!params->no_minmax && !params->cap && !(root->min <= params->level && params->level < root->max)) {
@@ -706,7 +704,7 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
         return finish(tree->vol, params->space, 0, mesh, stats, start, err);
     }
     if (params->tolerance > 0)
-        return extract_coarse(tree, params, share, mesh, stats, start, err);
+        return extract_coarse(tree, params, mesh, stats, start, err);
     stats->nodes_visited = 1;
     return march_and_finish(tree, params, NULL, mesh, stats, start, err);
 }

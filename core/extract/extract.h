@@ -22,8 +22,6 @@
 typedef struct iso_extract_params {
     double level;
     double tolerance;  /* >= 0, in the volume's value units */
-    double fit_share;  /* a node may be fanned when its fit error is within this share of
-                        * the tolerance, (0,1]; 0 = default 1 */
     int no_minmax;     /* 1: do not prune by min/max (the paper's middle time column) */
     int cap;           /* 1: close the surface at the volume's border, as if the volume were
                         * surrounded by values below the level (a closed, printable mesh) */

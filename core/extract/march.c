@@ -954,7 +954,7 @@ static int lay_out_mesh(march_job *job, iso_mesh *mesh, size_t extra_vertices, s
         triangles += job->active[i].triangles;
     }
     if (vertices + extra_vertices > UINT32_MAX)
-        return ISO_E_ARGUMENT;
+        return ISO_E_LIMIT;
     iso_mesh_clear(mesh);
     if (iso_mesh_reserve(mesh, vertices + extra_vertices, triangles + extra_triangles))
         return ISO_E_NOMEM;
@@ -1036,7 +1036,7 @@ int iso_march_begin(const iso_volume *vol, const iso_bricks *bricks, double leve
     if (rc) {
         iso_march_end(job);
         iso_mesh_free(mesh);
-        if (rc == ISO_E_ARGUMENT)
+        if (rc == ISO_E_LIMIT)
             return iso_error_set(err, rc, "the surface needs more than 2^32 - 1 vertices");
         return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
     }

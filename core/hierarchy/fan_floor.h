@@ -3,9 +3,9 @@
  *
  * Below a brick, extraction splits boxes by the tree's rule on the fly and tries to fan
  * those of at least ISO_TREE_FAN_MIN_CELLS cells whose fit error is within the tolerance's
- * fit share (extract.c). The walk reads the brick's samples and scans box after box: at a
- * small tolerance nearly every box fails, and the walk costs as much as marching the brick
- * (CThead skin at 8.18: 142 M instructions against 64 M exact, for the same mesh). Like the
+ * (extract.c). The walk reads the brick's samples and scans box after box: at a small
+ * tolerance nearly every box fails, and the walk costs as much as marching the brick
+ * (docs/performance.md has the counts). Like the
  * fit errors of the stored nodes, the smallest fit error among those boxes depends only on
  * the data, so it is computed once per brick: a brick whose floor exceeds the fit limit has
  * nothing to fan and is marched without its walk. */

@@ -51,7 +51,7 @@ void iso_bricks_count(const iso_volume *vol, uint32_t count[3]);
 void iso_bricks_box(const iso_volume *vol, const uint32_t brick[3], size_t lo[3], size_t hi[3]);
 
 /* tree.h: the a-priori hierarchy of trilinear fits (Elber and Malzbender, Algorithm 2 with
- * Algorithm 1's min/max bounds; DESIGN.md section 1).
+ * Algorithm 1's min/max bounds; docs/algorithm.md).
  *
  * An implicit binary kd-tree over the volume's samples. A node is an inclusive box of
  * samples lo..hi; the root is the whole volume. A node splits its longest side in cells
@@ -76,11 +76,9 @@ void iso_bricks_box(const iso_volume *vol, const uint32_t brick[3], size_t lo[3]
 
 /* The smallest box extraction keeps whole (fans, fan.h). A fan emits about one triangle
  * per loop vertex, marching cubes about two per crossed cell, so a small box spares few
- * triangles, while an attempt (faces marched, loops linked, a centre placed; accepted or
- * not) costs about 1-1.5 us. Counted on CThead at tolerance 654 (docs/performance.md):
- * 2x2x2 boxes spared 6,374 triangles on skin over 12,911 attempts and 14,646 on bone over
- * 21,615, under one per attempt, for a fifth of the extraction time; from 2x2x4 up a fan
- * spares 2 (2x2x4) to 27 (half bricks). */
+ * triangles while an attempt (faces marched, loops linked, a centre placed; accepted or
+ * not) costs as much as marching it: 2x2x2 boxes spared under one triangle per attempt
+ * (counts in docs/performance.md), boxes of 16 cells and up spare several. */
 #define ISO_TREE_FAN_MIN_CELLS 16
 
 typedef struct iso_box {

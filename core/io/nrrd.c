@@ -862,7 +862,7 @@ int iso_nrrd_load_samples(const char *path, const iso_nrrd_header *hdr,
         return iso_error_set(err, ISO_E_IO, "%s: cannot open: %s", name, strerror(errno));
     struct stat st;
     if (fstat(fileno(f), &st) || !S_ISREG(st.st_mode)) {
-        rc = iso_error_set(err, ISO_E_FORMAT, "%s: not a regular file", name);
+        rc = iso_error_set(err, ISO_E_IO, "%s: not a regular file", name);
         goto fail;
     }
     rc = seek_to_samples(f, hdr, name, err);

@@ -63,33 +63,6 @@ int iso_mesh_reserve(iso_mesh *mesh, size_t vertices, size_t triangles)
     return 0;
 }
 
-int iso_mesh_append(iso_mesh *dst, iso_mesh *src)
-{
-    size_t base = dst->vertex_count;
-    if (src->vertex_count == 0 && src->triangle_count == 0)
-        return 0;
-    if (dst->vertex_count == 0 && dst->triangle_count == 0) {
-        iso_mesh_free(dst);
-        *dst = *src;
-        iso_mesh_init(src);
-        return 0;
-    }
-    if (!dst->normals != !src->normals)
-        return ISO_E_ARGUMENT;
-    if (iso_mesh_reserve(dst, base + src->vertex_count, dst->triangle_count + src->triangle_count))
-        return ISO_E_NOMEM;
-    memcpy(dst->positions + 3 * base, src->positions, src->vertex_count * 3 * sizeof(float));
-    if (src->normals)
-        memcpy(dst->normals + 3 * base, src->normals, src->vertex_count * 3 * sizeof(float));
-    uint32_t *out = dst->indices + 3 * dst->triangle_count;
-    for (size_t i = 0; i < 3 * src->triangle_count; i++)
-        out[i] = src->indices[i] + (uint32_t)base;
-    dst->vertex_count += src->vertex_count;
-    dst->triangle_count += src->triangle_count;
-    iso_mesh_free(src);
-    return 0;
-}
-
 /* ---- welding: open addressing on the 96 bits of a position ---- */
 
 static uint64_t hash_position(const float *p)

@@ -51,10 +51,6 @@ void iso_mesh_free(iso_mesh *mesh);
 void iso_mesh_clear(iso_mesh *mesh);
 /* Makes room for at least the given totals. Returns 0 or ISO_E_NOMEM (mesh unchanged). */
 int iso_mesh_reserve(iso_mesh *mesh, size_t vertices, size_t triangles);
-/* Moves everything of `src` onto the end of `dst`, offsetting its indices; src is emptied
- * but keeps no memory. Returns 0 or ISO_E_NOMEM (both unchanged). */
-int iso_mesh_append(iso_mesh *dst, iso_mesh *src);
-
 /* Merges vertices with bit-identical positions and drops triangles that become degenerate
  * (two equal indices). Vertex order: first occurrence. O(V) expected, allocates a
  * temporary hash table of ~2V entries. Returns 0 or ISO_E_NOMEM (mesh unchanged). */
@@ -186,9 +182,9 @@ int iso_normals_compute(const iso_volume *vol, iso_mesh *mesh, int order, iso_sp
  * surface come close (thin bone, skin folds) a collapse can lay a pair of triangles onto
  * each other (a fold: same corners, opposite windings; dropped here, which keeps every
  * balance) or pinch the sheets onto one edge of four triangles, which stays and is counted
- * in result->nonmanifold_edges (on CThead skin at 100k triangles, 70-90 of ~150k edges).
- * Freezing the triangles around such an edge and simplifying again was tried: it
- * converges slowly and drives the error up, so it is not done. */
+ * in result->nonmanifold_edges (a few in 10,000 edges on CT skin; docs/performance.md).
+ * Freezing the triangles around such an edge and simplifying again converges slowly and
+ * drives the error up, so it is not done. */
 
 typedef struct iso_simplify_params {
     size_t target_triangles; /* at most this many triangles (>= 1) */
@@ -233,17 +229,16 @@ int iso_simplify(iso_mesh *mesh, const iso_simplify_params *params,
  * tolerance chosen.
  *
  * The ladder has a limit on CT: a node's fit error stays above any useful tolerance until
- * the node is one cell wide, so even at tolerance = the whole value range CThead's skin
- * keeps 38% of its triangles, and a faithful tolerance keeps 91-100%
- * (docs/performance.md). So iso_extract_budget_faithful, the policy the server uses,
- * climbs the ladder only as far as a faithful tolerance and, when that does not fit,
- * simplifies the mesh of the requested tolerance with meshoptimizer instead (mesh.h).
- * The comparison that chose it is tests/bench/bench_simplify.py: at the same triangle
- * count the simplified mesh is closer to the exact surface than the ladder's coarse one. */
+ * the node is one cell wide, so even large tolerances keep many of the triangles, and
+ * faithful ones nearly all (docs/performance.md). So iso_extract_budget_faithful, the
+ * policy the server uses, climbs the ladder only as far as a faithful tolerance and, when
+ * that does not fit, simplifies the mesh of the requested tolerance with meshoptimizer
+ * instead (iso_simplify): at the same triangle count the simplified mesh is the closer to
+ * the exact surface (tests/bench/bench_simplify.py measures both). */
 
-/* The faithful top of the ladder: value range / 2^5 (3.1% of the range). bench_peer.py
- * measured every tolerance up to 5% of the range within 0.5 voxel of the exact surface at
- * the 99th percentile on all 8 of its cases. */
+/* The faithful top of the ladder: value range / 2^5 (3.1% of the range): tolerances up to
+ * this stay within half a voxel of the exact surface at the 99th percentile on the
+ * benchmark's CT, MR and industrial cases (docs/performance.md). */
 #define ISO_BUDGET_FAITHFUL_SHIFT 5
 
 typedef struct iso_budget_result {

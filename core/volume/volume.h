@@ -119,8 +119,7 @@ void iso_vol_update_stats(iso_volume *vol);
  * in voxels without understating it along any axis. */
 double iso_vol_min_spacing(const iso_volume *vol);
 /* Index space (i,j,k may be fractional) to world millimetres. Inline because the brick
- * kernel places every vertex of a rotated volume through it: a call per vertex was 7% of
- * its time. */
+ * kernel places every vertex of a rotated volume through it. */
 static inline void iso_vol_index_to_world(const iso_volume *vol, const double index[3], double world[3])
 {
     double scaled[3];

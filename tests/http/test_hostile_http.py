@@ -1,4 +1,4 @@
-"""Hostile HTTP clients and faults against real `isoserve serve` daemons on 127.0.0.1 (issue 7).
+"""Hostile HTTP clients and faults against real `isoserve serve` daemons on 127.0.0.1.
 
 Raw sockets where http.client would tidy the request: over-long URIs and headers, thousands
 of query parameters, percent-encoding tricks (%00, %2F, %2e%2e) in ids, NaN/inf/huge

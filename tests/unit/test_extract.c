@@ -1,6 +1,6 @@
 /* test_extract.c: the hierarchy and bounded extraction, on hand-built volumes with exact
- * answers (the paper's D1, D2, D3, a sphere, a torus), brute-force checks of Lemma 1 and
- * Lemma 2, and the guarantee on the paper's own CT head. */
+ * answers (the paper's D1, D2, D3, a sphere, a torus), a brute-force check of Lemma 1 (the
+ * fit error peaks at samples), and the guarantee on the paper's own CT head. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -112,7 +112,7 @@ static void test_mc_random_fields_watertight(void)
     }
 }
 
-/* ---- Lemma 1 and Lemma 2, brute force ---- */
+/* ---- Lemma 1, brute force ---- */
 
 static void test_lemma1_fit_error_brute_force(void)
 {
@@ -153,7 +153,7 @@ static void test_lemma1_fit_error_brute_force(void)
     }
 }
 
-/* ---- tetrahedral polygonization of one node ---- */
+/* ---- the paper's D1, D2 and D3: nodes kept whole ---- */
 
 static void test_d1_constant_is_one_node(void)
 {

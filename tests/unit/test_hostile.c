@@ -1,4 +1,4 @@
-/* test_hostile.c: hostile volume and hierarchy files (issue 7), each refused with the exact
+/* test_hostile.c: hostile volume and hierarchy files, each refused with the exact
  * message a user sees: headers that lie about their sizes, sizes whose product overflows,
  * a header claiming 10^12 voxels (refused under the memory limit before anything is
  * allocated or read), truncated gzip and zlib streams, truncated and corrupt hierarchy

@@ -4,7 +4,7 @@
  * triangles, every interior edge used once in each direction, no zero-area triangle; with
  * cap, no open edge at all. The vertex guarantee still holds. Checked on hand-built fields
  * with exact answers, a seeded property test over hundreds of random and analytic fields,
- * Debian's MNI brain, and the shared CT and MR scans named by issue 9, where the enclosed
+ * Debian's MNI brain, and the shared CT and MR scans, where the enclosed
  * volumes of the cranium's capped skin and bone surfaces are checked against InVesalius'. */
 #include <math.h>
 #include <stdio.h>

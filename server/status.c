@@ -1,0 +1,20 @@
+/* status.c: ISO_E_* codes to HTTP statuses (see status.h). */
+#include "status.h"
+
+#include "base/base.h"
+
+int srv_status_http(int code)
+{
+    switch (code) {
+    case ISO_E_NOMEM: return 503;
+    case ISO_E_LIMIT: return 422;
+    case ISO_E_ARGUMENT: return 400;
+    case ISO_E_IO: return 502;
+    case ISO_E_FORMAT:
+    case ISO_E_TRUNCATED:
+    case ISO_E_UNSUPPORTED:
+    case ISO_E_STALE:
+    case ISO_E_CORRUPT: return 422;
+    default: return 500;
+    }
+}
