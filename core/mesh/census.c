@@ -1,8 +1,6 @@
 /* census.c: the watertightness census of an extracted mesh (mesh.h). */
 #include "mesh.h"
 
-#include "extract/extract.h"
-
 #include <math.h>
 #include <string.h>
 

@@ -10,8 +10,6 @@
  * derivative weights and the other two axes' weights. */
 #include "mesh.h"
 
-#include "extract/extract.h"
-
 #include <assert.h>
 #include <math.h>
 #include <stdint.h>

@@ -1,8 +1,6 @@
 /* budget.c: the finest tolerance that fits a triangle budget, and past a faithful
- * tolerance, simplification (see mesh.h). */
-#include "mesh.h"
-
-#include "extract/extract.h"
+ * tolerance, simplification (see extract.h). */
+#include "extract.h"
 
 #include <assert.h>
 #include <math.h>
