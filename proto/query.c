@@ -204,7 +204,8 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
 size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t size)
 {
     /* PLY and STL are lossless: Draco's options (speed, qp, qn) do not change their bytes,
-     * so they are left out of the key and "format=ply&qp=11" hits "format=ply"'s entry. */
+     * so the key spells them at their defaults (qn as 0) and "format=ply&qp=11" hits
+     * "format=ply"'s entry; the key stays a query that parses back to itself. */
     int draco = req->format == PROTO_FORMAT_DRACO || req->format == PROTO_FORMAT_GLB;
     char speed[8] = "auto";
     if (draco && req->speed != PROTO_DRACO_SPEED_AUTO)
@@ -212,7 +213,7 @@ size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t s
     int n = snprintf(buf, size,
                      "level=%.17g&tolerance=%.17g&normals=%s&format=%s&qp=%d&qn=%d&speed=%s&budget=%u&cap=%s",
                      req->level, req->tolerance, iso_normals_name(req->normals),
-                     format_names[req->format], draco ? req->position_bits : 0,
+                     format_names[req->format], draco ? req->position_bits : PROTO_POSITION_BITS_DEFAULT,
                      draco && req->normals ? req->normal_bits : 0, speed, req->budget,
                      req->cap ? "true" : "false");
     return n < 0 ? 0 : (size_t)n;
