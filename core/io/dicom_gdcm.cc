@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <mutex>
 #include <string>
 
 #include <gdcmImage.h>
@@ -30,12 +31,17 @@ void say(char *why, size_t size, const char *text)
         std::snprintf(why, size, "%s", text);
 }
 
-// GDCM's own warnings go to stderr; our messages say what failed, once.
+// GDCM's own warnings go to stderr; our messages say what failed, once. Its switches are
+// process globals: set once, so that loads on different threads never write them together.
+std::once_flag quiet_once;
+
 void quiet()
 {
-    gdcm::Trace::SetWarning(false);
-    gdcm::Trace::SetError(false);
-    gdcm::Trace::SetDebug(false);
+    std::call_once(quiet_once, [] {
+        gdcm::Trace::SetWarning(false);
+        gdcm::Trace::SetError(false);
+        gdcm::Trace::SetDebug(false);
+    });
 }
 
 // A DICOM Part 10 file starts with 128 bytes of preamble and "DICM": anything else in a

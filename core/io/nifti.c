@@ -3,6 +3,7 @@
 
 #include <math.h>
 #include <nifti2_io.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -97,8 +98,25 @@ static int set_geometry(const char *path, const nifti_image *nim, iso_volume *vo
     return iso_vol_set_affine(vol, affine, what, err);
 }
 
+/* libnifti keeps its options (the debug level, set here, among them) in one global that
+ * nifti_image_read and nifti_image_load read and write: loads of different files on
+ * different threads (collection.c loads on demand without its lock) take turns. */
+static pthread_mutex_t nifti_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static int load_locked(const char *path, const iso_load_options *opt, iso_volume **out,
+                       iso_error *err);
+
 int iso_nifti_load(const char *path, const iso_load_options *opt, iso_volume **out,
                    iso_error *err)
+{
+    pthread_mutex_lock(&nifti_lock);
+    int rc = load_locked(path, opt, out, err);
+    pthread_mutex_unlock(&nifti_lock);
+    return rc;
+}
+
+static int load_locked(const char *path, const iso_load_options *opt, iso_volume **out,
+                       iso_error *err)
 {
     *out = NULL;
     nifti_set_debug_level(0); /* our messages say what failed; the library's would repeat it */
