@@ -5,6 +5,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "base/base.h"
+
 struct srv_cache_item {
     char *key;
     uint64_t hash;
@@ -56,7 +58,7 @@ int srv_cache_init(srv_cache *cache, size_t limit_bytes)
     cache->bucket_count = 4096;
     cache->buckets = calloc(cache->bucket_count, sizeof *cache->buckets);
     if (!cache->buckets)
-        return -1;
+        return ISO_E_NOMEM;
     pthread_mutex_init(&cache->lock, NULL);
     return 0;
 }

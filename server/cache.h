@@ -46,7 +46,7 @@ typedef struct srv_cache {
     _Atomic unsigned long long hits, misses, evictions;
 } srv_cache;
 
-/* limit_bytes 0 disables caching (every get misses, put keeps nothing). */
+/* limit_bytes 0 disables caching (every get misses, put keeps nothing). 0 or ISO_E_NOMEM. */
 int srv_cache_init(srv_cache *cache, size_t limit_bytes);
 void srv_cache_destroy(srv_cache *cache);
 /* The body cached under key, retained for the caller (release it), or NULL. Counts a hit

@@ -89,19 +89,17 @@ static char *resolve(const char *catalog_file, const char *path)
 }
 
 /* An "orthanc" member: {"url", "series"} checked; the URL without trailing slashes into
- * base, the REST URL of the series into rest (the entry's path). 0, or 1 when it is bad
- * (reported). Both buffers hold SRV_REST_MAX bytes. */
+ * base, the REST URL of the series into rest (the entry's path). 0, or ISO_E_FORMAT when it
+ * is bad. Both buffers hold SRV_REST_MAX bytes. */
 #define SRV_REST_MAX 1200
 static int read_orthanc(const char *file, const char *id, json_t *orthanc, char *base,
-                        const char **series, char *rest)
+                        const char **series, char *rest, iso_error *err)
 {
     const char *url = json_string_value(json_object_get(orthanc, "url"));
     *series = json_string_value(json_object_get(orthanc, "series"));
-    if (!url || !*series || !srv_orthanc_url_valid(url) || !srv_orthanc_id_valid(*series)) {
-        fprintf(stderr, "isoserve: %s: volume \"%s\": \"orthanc\" needs \"url\" (http:// or https://) and "
-                "\"series\" (an Orthanc id, [0-9a-f-]); skipped\n", file, id);
-        return 1;
-    }
+    if (!url || !*series || !srv_orthanc_url_valid(url) || !srv_orthanc_id_valid(*series))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: volume \"%s\": \"orthanc\" needs \"url\" "
+                             "(http:// or https://) and \"series\" (an Orthanc id, [0-9a-f-])", file, id);
     size_t n = strlen(url); /* at most 1024: srv_orthanc_url_valid */
     while (n > 0 && url[n - 1] == '/')
         n--;
@@ -121,7 +119,8 @@ static int set_orthanc(srv_catalog *out, const char *url, const char *series, is
     return 0;
 }
 
-/* One entry of a catalog file; 1 = skipped (reported), 0 = added, < 0 = error. */
+/* One entry of a catalog file: 0 = added; ISO_E_FORMAT = the entry is bad (err says why;
+ * the caller skips it); any other code stops the read. */
 static int read_entry(const char *file, size_t index, json_t *item, srv_catalog *out,
                       iso_error *err)
 {
@@ -131,38 +130,32 @@ static int read_entry(const char *file, size_t index, json_t *item, srv_catalog 
     json_t *orthanc = json_object_get(item, "orthanc");
     const char *series = NULL;
     char url[SRV_REST_MAX], rest[SRV_REST_MAX];
-    if (!json_is_object(item) || !id || (!path && !orthanc)) {
-        fprintf(stderr, "isoserve: %s: volume %zu needs string fields \"id\" and \"path\" (or \"orthanc\"); skipped\n",
-                file, index);
-        return 1;
-    }
-    if (orthanc && read_orthanc(file, id, orthanc, url, &series, rest))
-        return 1;
-    if (!srv_catalog_id_valid(id) || has_id(out, id)) {
-        fprintf(stderr, "isoserve: %s: volume %zu: id \"%s\" is %s; skipped\n", file, index, id,
-                has_id(out, id) ? "taken" : "not [A-Za-z0-9._-]{1,64}");
-        return 1;
-    }
+    if (!json_is_object(item) || !id || (!path && !orthanc))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: volume %zu needs string fields \"id\" and "
+                             "\"path\" (or \"orthanc\")", file, index);
+    int rc = orthanc ? read_orthanc(file, id, orthanc, url, &series, rest, err) : 0;
+    if (rc)
+        return rc;
+    if (!srv_catalog_id_valid(id) || has_id(out, id))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: volume %zu: id \"%s\" is %s", file, index, id,
+                             has_id(out, id) ? "taken" : "not [A-Za-z0-9._-]{1,64}");
     double values[SRV_LEVELS_MAX];
     size_t count = 0;
-    if (levels && !json_is_array(levels)) {
-        fprintf(stderr, "isoserve: %s: volume \"%s\": \"levels\" is not an array; skipped\n", file, id);
-        return 1;
-    }
+    if (levels && !json_is_array(levels))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: volume \"%s\": \"levels\" is not an array",
+                             file, id);
     for (size_t i = 0; levels && i < json_array_size(levels) && count < SRV_LEVELS_MAX; i++) {
         json_t *v = json_array_get(levels, i);
-        if (!json_is_number(v)) {
-            fprintf(stderr, "isoserve: %s: volume \"%s\": level %zu is not a number; skipped\n",
-                    file, id, i);
-            return 1;
-        }
+        if (!json_is_number(v))
+            return iso_error_set(err, ISO_E_FORMAT, "%s: volume \"%s\": level %zu is not a number",
+                                 file, id, i);
         values[count++] = json_number_value(v);
     }
     char *full = orthanc ? strdup(rest) : resolve(file, path);
     if (!full)
         return iso_error_set(err, ISO_E_NOMEM, "out of memory reading %s", file);
-    int rc = add(out, id, full, json_string_value(json_object_get(item, "name")),
-                 json_string_value(json_object_get(item, "modality")), values, count, err);
+    rc = add(out, id, full, json_string_value(json_object_get(item, "name")),
+             json_string_value(json_object_get(item, "modality")), values, count, err);
     free(full);
     if (!rc && orthanc)
         rc = set_orthanc(out, url, series, err);
@@ -184,12 +177,20 @@ int srv_catalog_read(const char *file, srv_catalog *out, iso_error *err)
                              "%s: expected {\"volumes\": [...]} or an array of volumes", file);
     }
     int rc = 0;
-    for (size_t i = 0; i < json_array_size(list) && rc >= 0; i++)
-        rc = read_entry(file, i, json_array_get(list, i), out, err);
+    for (size_t i = 0; i < json_array_size(list) && !rc; i++) {
+        iso_error entry_err = {0};
+        rc = read_entry(file, i, json_array_get(list, i), out, &entry_err);
+        if (rc == ISO_E_FORMAT) { /* one bad entry does not hide the others */
+            fprintf(stderr, "isoserve: %s; skipped\n", entry_err.message);
+            rc = 0;
+        } else if (rc && err) {
+            *err = entry_err;
+        }
+    }
     json_decref(root);
-    if (rc < 0)
+    if (rc)
         srv_catalog_free(out);
-    return rc < 0 ? rc : 0;
+    return rc;
 }
 
 /* ---------------------------------------------------------------- directories */

@@ -45,7 +45,7 @@ int srv_parse_number(const char *text, double *out)
     errno = 0;
     double v = strtod(text, &end);
     if (!*text || *end || errno == ERANGE || !isfinite(v))
-        return -1;
+        return ISO_E_ARGUMENT;
     *out = v;
     return 0;
 }
@@ -74,10 +74,10 @@ int srv_parse_dims(const char *text, size_t dims[3])
     }
     for (int d = 0; d < n; d++) {
         if (v[d] < 2 || v[d] > 65536)
-            return -1;
+            return ISO_E_ARGUMENT;
         dims[d] = (size_t)v[d];
     }
-    return n == 3 ? 0 : -1;
+    return n == 3 ? 0 : ISO_E_ARGUMENT;
 }
 
 int srv_open(const srv_open_options *opt, srv_subject *out)

@@ -41,9 +41,9 @@ void srv_keep_freed_memory(void);
 int srv_open(const srv_open_options *opt, srv_subject *out);
 void srv_close(srv_subject *s);
 
-/* "WxHxD" or "N" into dims; 0 or -1. */
+/* "WxHxD" or "N" into dims; 0 or ISO_E_ARGUMENT. */
 int srv_parse_dims(const char *text, size_t dims[3]);
-/* A finite double, whole string; 0 or -1. */
+/* A finite double, whole string; 0 or ISO_E_ARGUMENT. */
 int srv_parse_number(const char *text, double *out);
 /* Prints "isoserve: ..." to stderr; returns 1 (the exit status of a failed command). */
 int srv_fail(const char *fmt, ...)

@@ -33,21 +33,21 @@ static int parse_tolerances(const char *text, double **out, size_t *count)
     if (!v || !copy) {
         free(v);
         free(copy);
-        return -1;
+        return ISO_E_NOMEM;
     }
     size_t i = 0;
     for (char *save = NULL, *tok = strtok_r(copy, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
         if (srv_parse_number(tok, &v[i]) || v[i] < 0) {
             free(v);
             free(copy);
-            return -1;
+            return ISO_E_ARGUMENT;
         }
         i++;
     }
     free(copy);
     *out = v;
     *count = i;
-    return i ? 0 : -1;
+    return i ? 0 : ISO_E_ARGUMENT;
 }
 
 static int run(const iso_tree *tree, double level, double tolerance, int no_minmax, int threads,

@@ -46,7 +46,7 @@ err:
     free(c->upstream);
     free(c->failure);
     memset(c, 0, sizeof *c);
-    return -1;
+    return ISO_E_NOMEM;
 }
 
 void srv_collection_free(srv_collection *c)
@@ -145,7 +145,8 @@ static int load_volume(const srv_catalog_entry *e, const srv_preload_options *op
     return iso_load(e->path, &lopt, vol, err);
 }
 
-/* Loads one entry into v; 0, or 1 when it is skipped (reported, and said in err). */
+/* Loads one entry into v; 0, or the ISO_E_* code of the load or the build when it is
+ * skipped (reported, and said in err). */
 static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload_options *opt,
                     size_t index, size_t total, iso_error *err, int *upstream)
 {
@@ -154,14 +155,16 @@ static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload
     double start = iso_clock_ms();
     char label[160];
     snprintf(label, sizeof label, "isoserve: [%zu/%zu] %s: loading", index + 1, total, e->id);
-    if (load_volume(e, opt, label, &v->vol, err, upstream)) {
+    int rc = load_volume(e, opt, label, &v->vol, err, upstream);
+    if (rc) {
         fprintf(stderr, "isoserve: volume \"%s\": %s; skipped\n", e->id, err->message);
-        return 1;
+        return rc;
     }
     snprintf(label, sizeof label, "isoserve: [%zu/%zu] %s: hierarchy", index + 1, total, e->id);
-    if (load_tree(v, opt, label, err)) {
+    rc = load_tree(v, opt, label, err);
+    if (rc) {
         iso_vol_destroy(v->vol);
-        return 1;
+        return rc;
     }
     snprintf(v->version, sizeof v->version, "%08x%08x-%d", (unsigned)v->tree->volume_crc,
              (unsigned)geometry_hash(v->vol), SRV_MESH_ALGORITHM_VERSION);
@@ -196,7 +199,7 @@ static void load_entry(srv_collection *c, size_t i, int on_demand)
     srv_volume v;
     iso_error err = {0};
     int upstream = 0;
-    int failed = load_one(&v, &c->catalog->entries[i], &c->options, i, c->total, &err, &upstream);
+    int failed = load_one(&v, &c->catalog->entries[i], &c->options, i, c->total, &err, &upstream) != 0;
     v.on_demand = on_demand;
 
     pthread_mutex_lock(&c->lock);
@@ -308,13 +311,13 @@ const char *srv_collection_failure(srv_collection *c, const char *id)
     return failed ? c->failure[i].message : ""; /* never written again once failed */
 }
 
-int srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out)
+srv_volume_state srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out)
 {
     if ((*out = srv_collection_find(c, id)))
-        return 0;
+        return SRV_VOLUME_READY;
     size_t i = entry_index(c, id);
     if (i == c->total)
-        return 404;
+        return SRV_VOLUME_UNKNOWN;
     load_entry(c, i, 1);
     pthread_mutex_lock(&c->lock);
     while (c->state[i] == SRV_ENTRY_LOADING) /* another request's load of the same entry */
@@ -322,5 +325,5 @@ int srv_collection_acquire(srv_collection *c, const char *id, const srv_volume *
     int loaded = c->state[i] == SRV_ENTRY_LOADED, upstream = c->upstream[i];
     pthread_mutex_unlock(&c->lock);
     *out = loaded ? srv_collection_find(c, id) : NULL;
-    return *out ? 0 : upstream ? 502 : 500;
+    return *out ? SRV_VOLUME_READY : upstream ? SRV_VOLUME_UPSTREAM_FAILED : SRV_VOLUME_FAILED;
 }

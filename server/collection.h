@@ -65,7 +65,7 @@ typedef struct srv_collection {
 enum { SRV_ENTRY_IDLE, SRV_ENTRY_LOADING, SRV_ENTRY_LOADED, SRV_ENTRY_FAILED };
 
 /* Prepares an empty collection for the catalog (which must outlive it); options are
- * copied (their strings and skip array must outlive it too). 0 or -1 (no memory). */
+ * copied (their strings and skip array must outlive it too). 0 or ISO_E_NOMEM. */
 int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
                         const srv_preload_options *options);
 /* First removes from the cache dir the temporary hierarchy files of catalog ids that a
@@ -78,13 +78,19 @@ int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
 void srv_collection_preload(srv_collection *c);
 /* The published volume with this id, or NULL. Lock-free. */
 const srv_volume *srv_collection_find(const srv_collection *c, const char *id);
+/* What srv_collection_acquire found; server/status.c maps it to an HTTP status. */
+typedef enum srv_volume_state {
+    SRV_VOLUME_READY,           /* loaded: *out is set */
+    SRV_VOLUME_UNKNOWN,         /* the catalog has no such id */
+    SRV_VOLUME_UPSTREAM_FAILED, /* its source server (Orthanc) was unreachable or answered an error */
+    SRV_VOLUME_FAILED           /* loading or building failed otherwise */
+} srv_volume_state;
+
 /* The volume with this id, loaded now (as preloading would) if the catalog names it and
  * it is not loaded yet; concurrent callers for one id wait for one load. Blocking for as
- * long as the load takes. Returns 0 with *out set, 404 when the catalog has no such id,
- * 502 when its source server (Orthanc) was unreachable or answered an error, 500 when
- * loading it failed otherwise (reported on stderr once; later calls fail at once, and
- * srv_collection_failure says why). */
-int srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out);
+ * long as the load takes. A failure is reported on stderr once; later calls fail at once,
+ * and srv_collection_failure says why. */
+srv_volume_state srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out);
 /* Why the entry with this id failed to load ("" if it did not fail). */
 const char *srv_collection_failure(srv_collection *c, const char *id);
 /* Bytes of all published hierarchies. */

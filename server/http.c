@@ -21,6 +21,7 @@
 #include "mesh_job.h"
 #include "query.h"
 #include "static_files.h"
+#include "status.h"
 
 #define MAX_PARAMS 32
 
@@ -424,7 +425,7 @@ static enum MHD_Result route_static(srv_server *s, struct MHD_Connection *c, srv
     int fd;
     size_t size;
     const char *type;
-    if (!s->config.web_root || srv_static_open(s->config.web_root, path, &fd, &size, &type) != 200)
+    if (!s->config.web_root || srv_static_open(s->config.web_root, path, &fd, &size, &type))
         return fail(s, c, req, path, 404, "nothing at %s", path);
     struct MHD_Response *r = MHD_create_response_from_fd(size, fd);
     if (!r) {
@@ -550,12 +551,12 @@ static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_reques
     if (!srv_catalog_id_valid(id))
         return fail(s, c, req, path, 404, "no volume \"(not a valid id)\"; /v1/volumes lists them");
     const srv_volume *v;
-    int found = srv_collection_acquire(s->collection, id, &v); /* loads another shard's volume */
-    if (found == 404)
+    srv_volume_state state = srv_collection_acquire(s->collection, id, &v); /* loads another shard's volume */
+    if (state == SRV_VOLUME_UNKNOWN)
         return fail(s, c, req, path, 404, "no volume \"%s\"; /v1/volumes lists them", id);
-    if (found)
-        return fail(s, c, req, path, found, "volume \"%s\" could not be loaded: %s", id,
-                    srv_collection_failure(s->collection, id));
+    if (state != SRV_VOLUME_READY)
+        return fail(s, c, req, path, srv_status_volume_http(state), "volume \"%s\" could not be loaded: %s",
+                    id, srv_collection_failure(s->collection, id));
     req->volume = v;
     return kind == 1 ? route_volume(s, c, req, v) : route_mesh(s, c, req, v, path);
 }

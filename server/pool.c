@@ -4,6 +4,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "base/base.h"
+
 struct srv_job {
     char *key;
     srv_job_fn fn;
@@ -74,14 +76,14 @@ int srv_pool_init(srv_pool *pool, size_t threads, size_t queue_capacity)
     pool->queue_capacity = queue_capacity;
     pool->threads = calloc(threads, sizeof *pool->threads);
     if (!pool->threads)
-        return -1;
+        return ISO_E_NOMEM;
     pthread_mutex_init(&pool->lock, NULL);
     pthread_cond_init(&pool->work, NULL);
     pthread_cond_init(&pool->done, NULL);
     for (size_t i = 0; i < threads; i++) {
         if (pthread_create(&pool->threads[i], NULL, worker, pool)) {
-            srv_pool_destroy(pool);
-            return -1;
+            srv_pool_destroy(pool); /* EAGAIN: the system's thread or memory limit */
+            return ISO_E_NOMEM;
         }
         pool->thread_count++;
     }

@@ -34,6 +34,7 @@ typedef struct srv_pool {
     _Atomic unsigned long long submitted, coalesced, rejected, completed;
 } srv_pool;
 
+/* Starts the worker threads. 0, or ISO_E_NOMEM when memory or the system's thread limit ran out. */
 int srv_pool_init(srv_pool *pool, size_t threads, size_t queue_capacity);
 /* Lets queued jobs finish, then stops and joins the workers. */
 void srv_pool_destroy(srv_pool *pool);

@@ -9,6 +9,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "base/base.h"
+
 static const struct {
     const char *suffix, *type;
 } content_types[] = {
@@ -57,24 +59,24 @@ int srv_static_open(const char *root, const char *url_path, int *fd, size_t *siz
     if (!strcmp(url_path, "/"))
         url_path = "/index.html";
     if (!path_allowed(url_path) || strlen(root) + strlen(url_path) >= PATH_MAX)
-        return 404;
+        return ISO_E_IO;
     char joined[PATH_MAX], resolved[PATH_MAX];
     size_t root_len = strlen(root), path_len = strlen(url_path);
     memcpy(joined, root, root_len);
     memcpy(joined + root_len, url_path, path_len + 1);
     if (!realpath(joined, resolved) || strncmp(resolved, root, root_len) ||
         resolved[root_len] != '/')
-        return 404;
+        return ISO_E_IO;
     int f = open(resolved, O_RDONLY | O_CLOEXEC);
     struct stat st;
     if (f < 0)
-        return 404;
+        return ISO_E_IO;
     if (fstat(f, &st) || !S_ISREG(st.st_mode)) {
         close(f);
-        return 404;
+        return ISO_E_IO;
     }
     *fd = f;
     *size = (size_t)st.st_size;
     *content_type = type_of(resolved);
-    return 200;
+    return 0;
 }

@@ -8,9 +8,10 @@
 
 #include <stddef.h>
 
-/* Opens the file for url_path under root (an absolute, resolved directory). Returns 200
+/* Opens the file for url_path under root (an absolute, resolved directory). Returns 0
  * with *fd open (the caller closes it or hands it to the response), its size and
- * Content-Type; 404 when there is no such file or the path is refused. */
+ * Content-Type; ISO_E_IO when there is no such file or the path is refused (the HTTP
+ * layer answers 404 either way, so a refused path looks like a missing one). */
 int srv_static_open(const char *root, const char *url_path, int *fd, size_t *size,
                     const char **content_type);
 

@@ -2,6 +2,7 @@
 #include "status.h"
 
 #include "base/base.h"
+#include "collection.h"
 
 int srv_status_http(int code)
 {
@@ -15,6 +16,16 @@ int srv_status_http(int code)
     case ISO_E_UNSUPPORTED:
     case ISO_E_STALE:
     case ISO_E_CORRUPT: return 422;
+    default: return 500;
+    }
+}
+
+int srv_status_volume_http(int state)
+{
+    switch (state) {
+    case SRV_VOLUME_READY: return 200;
+    case SRV_VOLUME_UNKNOWN: return 404;
+    case SRV_VOLUME_UPSTREAM_FAILED: return 502;
     default: return 500;
     }
 }

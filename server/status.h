@@ -15,4 +15,9 @@
  *   ISO_E_INTERNAL and unknown    500 */
 int srv_status_http(int code);
 
+/* The HTTP status for a volume that is not ready (an srv_volume_state other than READY):
+ * UNKNOWN 404, UPSTREAM_FAILED 502 (its archive failed), FAILED 500 (the server's own
+ * data or hierarchy could not be loaded: not the request's fault). */
+int srv_status_volume_http(int state);
+
 #endif
