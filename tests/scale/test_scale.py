@@ -187,9 +187,17 @@ class Deployment:
         os.mkdir(prefix)
         os.chmod(tmp, 0o755)
         os.chmod(prefix, 0o755)
+        # The web client from a copy in the prefix: a private checkout (0700, as root) is
+        # closed to the workers, as a real image's files never are.
+        web = os.path.join(prefix, "web")
+        shutil.copytree(WEB, web)
+        for d, _, names in os.walk(web):
+            os.chmod(d, 0o755)
+            for n in names:
+                os.chmod(os.path.join(d, n), 0o644)
         with open(CONF) as f:
             self.conf_original = f.read()
-        self.conf = nginx_conf(self.conf_original, self.front, self.peers, WEB)
+        self.conf = nginx_conf(self.conf_original, self.front, self.peers, web)
         conf_path = os.path.join(prefix, "nginx.conf")
         with open(conf_path, "w") as f:
             f.write(self.conf)
