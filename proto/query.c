@@ -92,9 +92,11 @@ const char *proto_format_name(proto_format format) { return format_names[format]
 const char *proto_format_content_type(proto_format format) { return format_types[format]; }
 
 /* The parameters, in the order the key lists them. */
-enum { P_LEVEL, P_TOLERANCE, P_NORMALS, P_FORMAT, P_QP, P_QN, P_SPEED, P_BUDGET, P_CAP, P_COUNT };
+enum { P_LEVEL, P_TOLERANCE, P_NORMALS, P_FORMAT, P_QP, P_QN, P_SPEED, P_BUDGET, P_CAP, P_MEASURES,
+       P_COUNT };
 static const char *const param_names[P_COUNT] = {"level", "tolerance", "normals", "format",
-                                                 "qp", "qn", "speed", "budget", "cap"};
+                                                 "qp", "qn", "speed", "budget", "cap",
+                                                 "measures"};
 
 static int parse_one(int which, const char *value, proto_mesh_request *out, proto_problem *problem)
 {
@@ -133,11 +135,12 @@ static int parse_one(int which, const char *value, proto_mesh_request *out, prot
         return proto_problem_set(problem, 400, key, "format must be draco, glb, ply or stl, not \"%s\"",
                                  shown(value ? value : "", buf, sizeof buf));
     case P_CAP:
+    case P_MEASURES:
         if (value && (!strcmp(value, "true") || !strcmp(value, "false"))) {
-            out->cap = value[0] == 't';
+            *(which == P_CAP ? &out->cap : &out->measures) = value[0] == 't';
             return 0;
         }
-        return proto_problem_set(problem, 400, key, "cap must be true or false, not \"%s\"",
+        return proto_problem_set(problem, 400, key, "%s must be true or false, not \"%s\"", key,
                                  shown(value ? value : "", buf, sizeof buf));
     case P_QP:
         if (parse_count(key, value, PROTO_POSITION_BITS_MIN, PROTO_POSITION_BITS_MAX, &n, problem))
@@ -189,7 +192,7 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
         if (which == P_COUNT)
             return proto_problem_set(problem, 400, NULL,
                                      "unknown parameter \"%s\"; the mesh takes level, tolerance, "
-                                     "normals, format, qp, qn, speed, budget and cap",
+                                     "normals, format, qp, qn, speed, budget, cap and measures",
                                      shown(key, buf, sizeof buf));
         if (seen[which]++)
             return proto_problem_set(problem, 400, key, "%s is given more than once", key);
@@ -211,10 +214,11 @@ size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t s
     if (draco && req->speed != PROTO_DRACO_SPEED_AUTO)
         snprintf(speed, sizeof speed, "%d", req->speed);
     int n = snprintf(buf, size,
-                     "level=%.17g&tolerance=%.17g&normals=%s&format=%s&qp=%d&qn=%d&speed=%s&budget=%u&cap=%s",
+                     "level=%.17g&tolerance=%.17g&normals=%s&format=%s&qp=%d&qn=%d&speed=%s&budget=%u&cap=%s"
+                     "&measures=%s",
                      req->level, req->tolerance, iso_normals_name(req->normals),
                      format_names[req->format], draco ? req->position_bits : PROTO_POSITION_BITS_DEFAULT,
                      draco && req->normals ? req->normal_bits : 0, speed, req->budget,
-                     req->cap ? "true" : "false");
+                     req->cap ? "true" : "false", req->measures ? "true" : "false");
     return n < 0 ? 0 : (size_t)n;
 }

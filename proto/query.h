@@ -43,6 +43,8 @@ typedef struct proto_mesh_request {
     int speed;             /* Draco speed 0..10, or PROTO_DRACO_SPEED_AUTO (-1, default) */
     uint32_t budget;       /* triangles; 0 = no budget */
     int cap;               /* cap=true: closed at the volume's border; default false */
+    int measures;          /* measures=true: area, enclosed volume and the edge census in the
+                            * headers; they cost more than the extraction, so only on request */
 } proto_mesh_request;
 
 /* What went wrong with a request, for an application/problem+json body (RFC 9457). */

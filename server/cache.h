@@ -21,6 +21,7 @@ typedef struct srv_body {
     double extract_ms, normals_ms, measure_ms, encode_ms; /* the job's steps, in order */
     double error_bound, tolerance, area_mm2;
     int draco_speed;                /* the Draco speed used (draco and glb); -1 otherwise */
+    int measured;                   /* the request asked for the measures (area_mm2, closed, volume_mm3) */
     double volume_mm3;              /* enclosed volume; meaningful only when closed */
     int closed;                     /* no open or non-manifold edge */
     int budget_fits;                /* -1: no budget asked; else 0 or 1 */

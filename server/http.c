@@ -345,15 +345,18 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
     add_number(r, "X-Iso-Cells-Visited", "%.0f", (double)body->cells_visited);
     add_number(r, "X-Iso-Extract-Ms", "%.3f", body->extract_ms);
     add_number(r, "X-Iso-Normals-Ms", "%.3f", body->normals_ms);
-    add_number(r, "X-Iso-Measure-Ms", "%.3f", body->measure_ms);
     add_number(r, "X-Iso-Encode-Ms", "%.3f", body->encode_ms);
     if (body->draco_speed >= 0)
         add_number(r, "X-Iso-Draco-Speed", "%.0f", body->draco_speed);
     add_number(r, "X-Iso-Error-Bound", "%.9g", body->error_bound);
     add_number(r, "X-Iso-Tolerance", "%.17g", body->tolerance);
-    add_number(r, "X-Iso-Area-Mm2", "%.6g", body->area_mm2);
-    if (body->closed)
-        add_number(r, "X-Iso-Volume-Mm3", "%.6g", body->volume_mm3);
+    if (body->measured) {
+        add_number(r, "X-Iso-Measure-Ms", "%.3f", body->measure_ms);
+        add_number(r, "X-Iso-Area-Mm2", "%.6g", body->area_mm2);
+        MHD_add_response_header(r, "X-Iso-Closed", body->closed ? "true" : "false");
+        if (body->closed)
+            add_number(r, "X-Iso-Volume-Mm3", "%.6g", body->volume_mm3);
+    }
     if (body->budget_fits >= 0) {
         MHD_add_response_header(r, "X-Iso-Budget-Fits", body->budget_fits ? "true" : "false");
         MHD_add_response_header(r, "X-Iso-Simplified", body->simplified ? "true" : "false");

@@ -16,8 +16,8 @@ void srv_mesh_job_free(void *arg)
     free(job);
 }
 
-/* The pipeline's request for this job: the API's parameters, the measures the headers
- * report, the server's triangle limit. */
+/* The pipeline's request for this job: the API's parameters (the measures only when asked),
+ * the server's triangle limit. */
 static void pipeline_request(const srv_mesh_job *job, proto_pipeline_request *req)
 {
     const proto_mesh_request *r = &job->request;
@@ -28,7 +28,7 @@ static void pipeline_request(const srv_mesh_job *job, proto_pipeline_request *re
     req->budget = r->budget;
     req->max_triangles = job->max_triangles;
     req->normals = r->normals;
-    req->measure = 1;
+    req->measure = r->measures;
     req->format = r->format;
     req->encode.position_bits = r->position_bits;
     req->encode.normal_bits = r->normal_bits;
@@ -87,6 +87,7 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     body->simplified = res.chosen.simplified;
     body->simplify_error_mm = res.chosen.simplify.error;
     body->simplify_error_voxels = res.chosen.simplify.error_voxels;
+    body->measured = res.measured;
     body->area_mm2 = res.area;
     body->closed = res.census.closed;
     body->volume_mm3 = res.enclosed_volume;

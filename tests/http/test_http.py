@@ -212,13 +212,16 @@ def main_tests(s, tmp, blob):
         pos = np.frombuffer(payload[:nv * 12], "<f4").reshape(nv, 3).astype(np.float64)
         bound = float(r.getheader("X-Iso-Error-Bound"))
         assert 0 <= bound <= tol and float(r.getheader("X-Iso-Tolerance")) == tol
-        for h in ("X-Iso-Cells-Visited", "X-Iso-Extract-Ms", "X-Iso-Encode-Ms", "X-Iso-Area-Mm2"):
+        for h in ("X-Iso-Cells-Visited", "X-Iso-Extract-Ms", "X-Iso-Encode-Ms"):
             assert float(r.getheader(h)) >= 0, h
+        for h in ("X-Iso-Measure-Ms", "X-Iso-Area-Mm2", "X-Iso-Closed", "X-Iso-Volume-Mm3"):
+            assert r.getheader(h) is None, f"{h} without measures=true"
         index = pos / np.array([0.75, 1.0, 1.25])  # origin 0, identity directions
         err = np.abs(trilinear(blob.astype(np.float64), index) - level)
         assert err.max() <= bound + 1e-3, f"max |f - L| {err.max()} > bound {bound}"
         state["pos"], state["bound"], state["nt"] = pos, bound, nt
     check("mesh_ply_bound_holds", mesh_ply)
+
 
     def mesh_draco():
         r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&normals=none&qp=12")
@@ -276,7 +279,7 @@ draco3d.createDecoderModule({}).then(m => {
         for asked, used in (("", "8"), ("&speed=auto", "8"), ("&speed=0", "0"), ("&speed=10", "10")):
             r = s.get(base + asked)
             assert r.status == 200 and r.getheader("X-Iso-Draco-Speed") == used, (asked, r.getheader("X-Iso-Draco-Speed"))
-            for h in ("X-Iso-Extract-Ms", "X-Iso-Normals-Ms", "X-Iso-Measure-Ms", "X-Iso-Encode-Ms"):
+            for h in ("X-Iso-Extract-Ms", "X-Iso-Normals-Ms", "X-Iso-Encode-Ms"):
                 assert float(r.getheader(h)) >= 0, h
             dec, nt = draco_decode(r.body, tmp, "speed" + used)
             assert nt == state["nt"] and len(dec) == len(state["pos"]), (asked, nt, len(dec))
@@ -378,9 +381,9 @@ draco3d.createDecoderModule({}).then(m => {
     check("budget_faithful_tolerance", budget_faithful)
 
     def budget_simplified():
-        exact = s.get(f"/v1/volumes/blob/mesh?level={level}&format=ply&normals=none")
+        exact = s.get(f"/v1/volumes/blob/mesh?level={level}&format=ply&normals=none&measures=true")
         assert int(exact.getheader("X-Iso-Triangles")) == 3004
-        r = s.get(f"/v1/volumes/blob/mesh?level={level}&budget=400&format=ply&normals=none")
+        r = s.get(f"/v1/volumes/blob/mesh?level={level}&budget=400&format=ply&normals=none&measures=true")
         nt = int(r.getheader("X-Iso-Triangles"))
         assert r.status == 200 and 360 < nt <= 400, nt
         assert r.getheader("X-Iso-Budget-Fits") == "true" and r.getheader("X-Iso-Simplified") == "true"
@@ -407,10 +410,29 @@ draco3d.createDecoderModule({}).then(m => {
         assert abs(v - v0) <= 0.04 * v0, (v, v0)
     check("budget_simplified_with_error", budget_simplified)
 
+    # measures=true: the same bytes, another cache entry, and the area and closedness of
+    # exactly those triangles in the headers.
+    def measures_on_request():
+        plain = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=ply&normals=none")
+        r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=ply&normals=none&measures=true")
+        assert r.status == 200 and r.body == plain.body and r.getheader("ETag") != plain.getheader("ETag")
+        assert r.getheader("X-Iso-Cache") == "miss" and float(r.getheader("X-Iso-Measure-Ms")) >= 0
+        pos, faces = ply_mesh(r)
+        p = pos.astype(np.float64)[faces]
+        area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
+        header = float(r.getheader("X-Iso-Area-Mm2"))
+        assert abs(area - header) <= 1e-5 * area, (area, header)
+        assert r.getheader("X-Iso-Closed") == "true"
+        enclosed = abs(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6)
+        assert abs(enclosed - float(r.getheader("X-Iso-Volume-Mm3"))) <= 1e-4 * enclosed
+        bad = s.get(f"/v1/volumes/blob/mesh?level={level}&measures=yes")
+        assert bad.status == 400 and b"measures" in bad.body, bad.status
+    check("mesh_measures_on_request", measures_on_request)
+
     # cap=true&format=stl: a printable file. Its triangles weld into a closed surface (every
     # edge twice, in opposite directions) whose enclosed volume is the header's.
     def capped_stl():
-        r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&cap=true&format=stl&normals=none")
+        r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&cap=true&format=stl&normals=none&measures=true")
         assert r.status == 200 and r.getheader("Content-Type") == "model/stl", r.status
         assert not r.body.startswith(b"solid")
         nt = struct.unpack_from("<I", r.body, 80)[0]

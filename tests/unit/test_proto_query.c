@@ -57,7 +57,10 @@ static void test_query_defaults_and_values(void)
     CHECK(!strcmp(proto_format_content_type(r.format), "model/stl"));
     proto_param open_again[] = {P("level", "1"), P("cap", "false")};
     CHECK_EQ(parse(open_again, COUNT(open_again), &r, &pr), 0);
-    CHECK(r.cap == 0);
+    CHECK(r.cap == 0 && r.measures == 0);
+    proto_param measured[] = {P("level", "1"), P("measures", "true")};
+    CHECK_EQ(parse(measured, COUNT(measured), &r, &pr), 0);
+    CHECK(r.measures == 1 && r.cap == 0);
 }
 
 /* Each bad request names the parameter and says why. */
@@ -86,6 +89,7 @@ static void test_query_rejections(void)
         {{{"level", "1"}, {"format", "obj"}}, 2, "format", "draco, glb, ply or stl"},
         {{{"level", "1"}, {"cap", "yes"}}, 2, "cap", "true or false"},
         {{{"level", "1"}, {"cap", NULL}}, 2, "cap", "true or false"},
+        {{{"level", "1"}, {"measures", "1"}}, 2, "measures", "true or false"},
         {{{"level", "1"}, {"qp", "7"}}, 2, "qp", "from 8 to 24"},
         {{{"level", "1"}, {"qp", "25"}}, 2, "qp", "from 8 to 24"},
         {{{"level", "1"}, {"qp", "12.5"}}, 2, "qp", "whole number"},
@@ -158,6 +162,13 @@ static void test_query_key_normalises(void)
     proto_param l[] = {P("level", "700"), P("qp", "11"), P("format", "stl")};
     proto_param m[] = {P("level", "700"), P("format", "stl")};
     proto_param q[] = {P("level", "700"), P("qp", "11")};
+    /* The measures change the headers, not the bytes; a separate entry keeps them. */
+    proto_param ms[] = {P("level", "700"), P("measures", "true")};
+    proto_param mf[] = {P("level", "700"), P("measures", "false")};
+    char kms[256], kmf[256];
+    key_of(ms, COUNT(ms), kms, sizeof kms);
+    key_of(mf, COUNT(mf), kmf, sizeof kmf);
+    CHECKF(strstr(kms, "&measures=true") && strcmp(kms, kmf), "%s | %s", kms, kmf);
     char ka[256], kb[256], kc[256], kd[256], ke[256], kf[256], kg[256], kh[256], ki[256], kj[256];
     char kk[256], kl[256], km[256], kq[256];
     key_of(k, COUNT(k), kk, sizeof kk);
@@ -177,13 +188,14 @@ static void test_query_key_normalises(void)
     CHECKF(!strcmp(ka, kb) && !strcmp(ka, kc), "%s | %s | %s", ka, kb, kc);
     CHECK(strcmp(ka, kd) != 0);
     CHECKF(!strcmp(ke, kf), "normal bits do not matter without normals: %s | %s", ke, kf);
-    CHECK(!strcmp(ka, "level=700&tolerance=0&normals=tricubic&format=draco&qp=14&qn=10&speed=auto&budget=0&cap=false"));
+    CHECK(!strcmp(ka, "level=700&tolerance=0&normals=tricubic&format=draco&qp=14&qn=10&speed=auto&budget=0&cap=false&measures=false"));
     CHECK(strcmp(ka, kg) != 0);
+    CHECKF(!strcmp(ka, kmf), "measures=false is the default: %s | %s", ka, kmf);
     CHECKF(strstr(kh, "&speed=3&") && strcmp(ka, kh), "%s", kh);
     CHECKF(!strcmp(ki, kj), "%s | %s", ki, kj);
     CHECKF(!strcmp(kk, kj), "qp and qn do not change PLY: %s | %s", kk, kj);
     CHECKF(!strcmp(kl, km), "qp does not change STL: %s | %s", kl, km);
-    CHECKF(strcmp(kq, "level=700&tolerance=0&normals=tricubic&format=draco&qp=11&qn=10&speed=auto&budget=0&cap=false") == 0, "%s", kq);
+    CHECKF(strcmp(kq, "level=700&tolerance=0&normals=tricubic&format=draco&qp=11&qn=10&speed=auto&budget=0&cap=false&measures=false") == 0, "%s", kq);
     proto_mesh_request r;
     proto_problem pr;
     CHECK_EQ(parse(f, COUNT(f), &r, &pr), 0);
