@@ -52,6 +52,7 @@ static int simplify(const iso_volume *vol, const proto_pipeline_request *req,
 {
     iso_simplify_params sp = {
         .target_triangles = req->simplify, .target_error = INFINITY, .lock_border = 1,
+        .measure = req->measure, .threads = req->extract.threads,
         .voxel_size = req->extract.space == ISO_SPACE_INDEX ? 1 : iso_vol_min_spacing(vol)};
     int rc = iso_simplify(&res->mesh, &sp, &res->chosen.simplify, err);
     res->chosen.simplified = rc == 0;

@@ -48,6 +48,17 @@ static int write_mesh(const unsigned char *bytes, size_t size, const char *path)
     return ok ? 0 : srv_fail("%s: cannot write the mesh", path);
 }
 
+/* The measured distance between the exact and the simplified surface (mesh.h), in the
+ * mesh's units: "from_exact" samples the exact surface, "to_exact" the simplified one. */
+static json_t *distance_json(const iso_mesh_distance *d)
+{
+    return json_pack("{s:f, s:f, s:f, s:f, s:f, s:f, s:I, s:I, s:f}", "p99", d->p99, "max", d->max,
+                     "p99_from_exact", d->p99_ab, "max_from_exact", d->max_ab,
+                     "p99_to_exact", d->p99_ba, "max_to_exact", d->max_ba,
+                     "samples_exact", (json_int_t)d->samples_a,
+                     "samples_simplified", (json_int_t)d->samples_b, "ms", d->ms);
+}
+
 int srv_cmd_extract(int argc, char **argv)
 {
     srv_open_options opt = {.want_tree = 1};
@@ -177,6 +188,9 @@ int srv_cmd_extract(int argc, char **argv)
                 "folds_dropped", (json_int_t)chosen.simplify.folds_dropped,
                 "nonmanifold_edges", (json_int_t)chosen.simplify.nonmanifold_edges,
                 "unpaired_edges", (json_int_t)chosen.simplify.unpaired_edges));
+        if (doc && chosen.simplified && chosen.simplify.measured)
+            json_object_set_new(json_object_get(doc, "simplify"), "distance",
+                                distance_json(&chosen.simplify.distance));
         if (doc && watertight)
             json_object_update(doc, watertight);
         json_decref(watertight);

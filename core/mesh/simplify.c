@@ -112,6 +112,7 @@ int iso_simplify(iso_mesh *mesh, const iso_simplify_params *params,
                                .vertices_in = mesh->vertex_count};
     describe(mesh, r);
     if (mesh->triangle_count <= params->target_triangles) {
+        r->measured = params->measure; /* untouched: at distance 0 */
         r->ms = iso_clock_ms() - start;
         return 0;
     }
@@ -145,6 +146,16 @@ int iso_simplify(iso_mesh *mesh, const iso_simplify_params *params,
     view.triangle_count = triangles;
     if (iso_mesh_visit_edges(&view, count_edge, r))
         goto nomem;
+    /* PASS 4b: the result's distance from the input, both share the positions yet. */
+    if (params->measure) {
+        double spacing = params->voxel_size > 0 ? params->voxel_size : 1;
+        if ((rc = iso_mesh_distance_compute(mesh, &view, spacing, params->threads, &r->distance, err))) {
+            free(indices);
+            free(remap);
+            return rc;
+        }
+        r->measured = 1;
+    }
     memcpy(mesh->indices, indices, 3 * triangles * sizeof *indices);
     free(indices);
     mesh->triangle_count = triangles;

@@ -1,0 +1,306 @@
+/* test_distance.c: the measured distance between two surfaces (iso_mesh_distance_compute).
+ *
+ * Hand-built meshes with exact answers (two parallel squares a quarter apart; a square
+ * against its left half; a point against each feature of one triangle), and a simplified
+ * sphere against its exact surface, where every sample's distance is found again here by
+ * brute force with a point-to-triangle distance of another construction (projection onto
+ * the plane, else the nearest of the three sides) and the weighted percentile by a full
+ * sort: the maxima and the 99th percentiles must agree to float rounding. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "io/io.h"
+#include "mesh/mesh.h"
+#include "extract/extract.h"
+#include "surface.h"
+
+/* A w x h rectangle at height z as two triangles, corners (x0, 0), (x0 + w, h). */
+static void rectangle(iso_mesh *m, double x0, double w, double h, double z)
+{
+    iso_mesh_init(m);
+    CHECK(iso_mesh_reserve(m, 4, 2) == 0);
+    float p[12] = {(float)x0, 0, (float)z, (float)(x0 + w), 0, (float)z,
+                   (float)(x0 + w), (float)h, (float)z, (float)x0, (float)h, (float)z};
+    uint32_t t[6] = {0, 1, 2, 0, 2, 3};
+    memcpy(m->positions, p, sizeof p);
+    memcpy(m->indices, t, sizeof t);
+    m->vertex_count = 4;
+    m->triangle_count = 2;
+}
+
+static void test_parallel_squares_are_a_quarter_apart(void)
+{
+    iso_mesh a, b;
+    rectangle(&a, 0, 1, 1, 0);
+    rectangle(&b, 0, 1, 1, 0.25);
+    iso_mesh_distance d;
+    iso_error err;
+    CHECK_OK(iso_mesh_distance_compute(&a, &b, 0.1, 0, &d, &err), &err);
+    CHECK_NEAR(d.p99_ab, 0.25, 1e-7);
+    CHECK_NEAR(d.p99_ba, 0.25, 1e-7);
+    CHECK_NEAR(d.max_ab, 0.25, 1e-7);
+    CHECK_NEAR(d.max, 0.25, 1e-7);
+    /* The diagonal, sqrt 2, makes 15 x 15 sub-triangles per triangle; and 4 vertices. */
+    CHECK_EQ(d.samples_a, 2 * 15 * 15 + 4);
+    CHECK_EQ(d.samples_b, 2 * 15 * 15 + 4);
+    CHECK_EQ(iso_mesh_distance_compute(&a, &b, 0, 0, &d, &err), ISO_E_ARGUMENT);
+    iso_mesh_free(&a);
+    iso_mesh_free(&b);
+}
+
+/* The unit square against its left half: from the half, 0 everywhere; from the square,
+ * max(0, x - 1/2), whose 99th percentile by area is 0.49 (to the sampling's spacing) and
+ * whose maximum is 1/2, at the right-hand corners. */
+static void test_square_against_its_half(void)
+{
+    iso_mesh a, b;
+    rectangle(&a, 0, 1, 1, 0);
+    rectangle(&b, 0, 0.5, 1, 0);
+    iso_mesh_distance d;
+    iso_error err;
+    double spacing = 1.0 / 64;
+    CHECK_OK(iso_mesh_distance_compute(&a, &b, spacing, 0, &d, &err), &err);
+    CHECK_NEAR(d.max_ab, 0.5, 1e-7);
+    CHECK_NEAR(d.p99_ab, 0.49, spacing);
+    CHECK_EQ(d.max_ba, 0);
+    CHECK_EQ(d.p99_ba, 0);
+    CHECK_NEAR(d.p99, d.p99_ab, 0);
+    iso_mesh empty;
+    iso_mesh_init(&empty);
+    CHECK_OK(iso_mesh_distance_compute(&empty, &a, spacing, 0, &d, &err), &err);
+    CHECK(d.max_ab == 0 && isinf(d.max_ba));
+    iso_mesh_free(&a);
+    iso_mesh_free(&b);
+}
+
+static void test_point_against_each_feature(void)
+{
+    iso_mesh m;
+    iso_mesh_init(&m);
+    CHECK(iso_mesh_reserve(&m, 3, 1) == 0);
+    float p[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    uint32_t t[3] = {0, 1, 2};
+    memcpy(m.positions, p, sizeof p);
+    memcpy(m.indices, t, sizeof t);
+    m.vertex_count = 3, m.triangle_count = 1;
+    struct { double p[3], d; } cases[] = {
+        {{0.25, 0.25, 2}, 2},           /* the face */
+        {{-1, -1, 0}, sqrt(2)},         /* corner a */
+        {{2, 0, 0}, 1},                 /* corner b */
+        {{0, 3, 0}, 2},                 /* corner c */
+        {{0.5, -1, 0}, 1},              /* side ab */
+        {{-3, 0.5, 4}, 5},              /* side ac */
+        {{1, 1, 0}, sqrt(0.5)},         /* side bc */
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
+        CHECK_NEAR(iso_mesh_point_distance(&m, cases[i].p), cases[i].d, 1e-12);
+    iso_mesh_free(&m);
+}
+
+/* ---- brute force, built otherwise ---- */
+
+static void sub(const double a[3], const double b[3], double out[3])
+{
+    for (int k = 0; k < 3; k++)
+        out[k] = a[k] - b[k];
+}
+
+static double dot3(const double a[3], const double b[3])
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+static void cross(const double a[3], const double b[3], double out[3])
+{
+    out[0] = a[1] * b[2] - a[2] * b[1];
+    out[1] = a[2] * b[0] - a[0] * b[2];
+    out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+static double point_segment(const double p[3], const double a[3], const double b[3])
+{
+    double ab[3], ap[3];
+    sub(b, a, ab), sub(p, a, ap);
+    double len = dot3(ab, ab), t = len > 0 ? dot3(ap, ab) / len : 0;
+    t = t < 0 ? 0 : t > 1 ? 1 : t;
+    double q[3];
+    for (int k = 0; k < 3; k++)
+        q[k] = p[k] - (a[k] + t * ab[k]);
+    return sqrt(dot3(q, q));
+}
+
+/* The plane's foot if it falls inside (same side of all three sides), else the nearest
+ * side. */
+static double brute_point_triangle(const double p[3], const double c[3][3])
+{
+    double u[3], v[3], n[3];
+    sub(c[1], c[0], u), sub(c[2], c[0], v), cross(u, v, n);
+    double nn = dot3(n, n);
+    if (nn > 0) {
+        double w[3], foot[3];
+        sub(p, c[0], w);
+        double h = dot3(w, n) / nn;
+        for (int k = 0; k < 3; k++)
+            foot[k] = p[k] - h * n[k];
+        int inside = 1;
+        for (int e = 0; e < 3; e++) {
+            double side[3], to[3], x[3];
+            sub(c[(e + 1) % 3], c[e], side), sub(foot, c[e], to), cross(side, to, x);
+            inside &= dot3(x, n) >= 0;
+        }
+        if (inside)
+            return fabs(h) * sqrt(nn);
+    }
+    double best = INFINITY;
+    for (int e = 0; e < 3; e++)
+        best = fmin(best, point_segment(p, c[e], c[(e + 1) % 3]));
+    return best;
+}
+
+static void corners(const iso_mesh *m, size_t t, double c[3][3])
+{
+    for (int k = 0; k < 3; k++)
+        for (int a = 0; a < 3; a++)
+            c[k][a] = m->positions[3 * (size_t)m->indices[3 * t + k] + a];
+}
+
+static double brute_point_mesh(const iso_mesh *m, const double p[3])
+{
+    double best = INFINITY;
+    for (size_t t = 0; t < m->triangle_count; t++) {
+        double c[3][3];
+        corners(m, t, c);
+        best = fmin(best, brute_point_triangle(p, c));
+    }
+    return best;
+}
+
+typedef struct sample { double d, w; } sample;
+
+static int by_distance(const void *pa, const void *pb)
+{
+    double a = ((const sample *)pa)->d, b = ((const sample *)pb)->d;
+    return (a > b) - (a < b);
+}
+
+/* Every sample mesh.h promises (sub-triangle centroids weighing their area, used vertices
+ * weighing 0), measured by brute force; the weighted 99th percentile by a full sort. */
+static void brute_one_way(const iso_mesh *src, const iso_mesh *dst, double spacing,
+                          double *p99, double *max, size_t *count)
+{
+    size_t cap = 1024, n = 0;
+    sample *s = malloc(cap * sizeof *s);
+    char *used = calloc(src->vertex_count, 1);
+    for (size_t t = 0; t < src->triangle_count; t++) {
+        double c[3][3], u[3], v[3], x[3], longest = 0;
+        corners(src, t, c);
+        for (int e = 0; e < 3; e++) {
+            double side[3];
+            sub(c[(e + 1) % 3], c[e], side);
+            longest = fmax(longest, sqrt(dot3(side, side)));
+        }
+        int k = (int)ceil(longest / spacing);
+        k = k < 1 ? 1 : k;
+        sub(c[1], c[0], u), sub(c[2], c[0], v), cross(u, v, x);
+        double w = 0.5 * sqrt(dot3(x, x)) / (k * k);
+        for (int i = 0; i < k; i++)
+            for (int j = 0; j < k; j++) {
+                /* Sub-triangle (i, j) of the parallelogram grid: two centroids when inside. */
+                for (int down = 0; down < 2; down++) {
+                    if (i + j + down >= k)
+                        continue;
+                    double a = (i + (down ? 2.0 : 1.0) / 3) / k, b = (j + (down ? 2.0 : 1.0) / 3) / k;
+                    double p[3];
+                    for (int q = 0; q < 3; q++)
+                        p[q] = c[0][q] + a * u[q] + b * v[q];
+                    if (n == cap)
+                        s = realloc(s, (cap *= 2) * sizeof *s);
+                    s[n++] = (sample){brute_point_mesh(dst, p), w};
+                }
+            }
+        for (int q = 0; q < 3; q++)
+            used[src->indices[3 * t + q]] = 1;
+    }
+    for (size_t v = 0; v < src->vertex_count; v++)
+        if (used[v]) {
+            double p[3] = {src->positions[3 * v], src->positions[3 * v + 1], src->positions[3 * v + 2]};
+            if (n == cap)
+                s = realloc(s, (cap *= 2) * sizeof *s);
+            s[n++] = (sample){brute_point_mesh(dst, p), 0};
+        }
+    qsort(s, n, sizeof *s, by_distance);
+    double total = 0, below = 0;
+    for (size_t i = 0; i < n; i++)
+        total += s[i].w;
+    *max = n ? s[n - 1].d : 0;
+    *p99 = 0;
+    for (size_t i = 0; i < n; i++) {
+        below += s[i].w;
+        if (below >= 0.99 * total) {
+            *p99 = s[i].d;
+            break;
+        }
+    }
+    *count = n;
+    free(s);
+    free(used);
+}
+
+static void test_simplified_sphere_matches_brute_force(void)
+{
+    iso_volume *vol = NULL;
+    iso_error err;
+    CHECK_OK(iso_field_load("field:sphere:24", NULL, &vol, &err), &err);
+    if (!vol)
+        return;
+    iso_vol_update_stats(vol);
+    iso_tree *tree = surface_build(vol);
+    iso_mesh exact, simple;
+    iso_mesh_init(&exact);
+    iso_mesh_init(&simple);
+    iso_extract_stats st;
+    iso_extract_params xp = {.level = 3.0, .space = ISO_SPACE_INDEX};
+    CHECK_OK(iso_extract(tree, &xp, &exact, &st, &err), &err);
+    CHECK(iso_mesh_reserve(&simple, exact.vertex_count, exact.triangle_count) == 0);
+    memcpy(simple.positions, exact.positions, 3 * exact.vertex_count * sizeof(float));
+    memcpy(simple.indices, exact.indices, 3 * exact.triangle_count * sizeof(uint32_t));
+    simple.vertex_count = exact.vertex_count, simple.triangle_count = exact.triangle_count;
+    iso_simplify_params sp = {.target_triangles = exact.triangle_count / 10, .target_error = INFINITY,
+                              .voxel_size = 1, .measure = 1};
+    iso_simplify_result r;
+    CHECK_OK(iso_simplify(&simple, &sp, &r, &err), &err);
+    CHECK(r.measured && r.distance.max > 0);
+    iso_mesh_distance one, all;
+    CHECK_OK(iso_mesh_distance_compute(&exact, &simple, 1, 1, &one, &err), &err);
+    CHECK_OK(iso_mesh_distance_compute(&exact, &simple, 1, 0, &all, &err), &err);
+    /* Threads change nothing, and simplify's own measure is the same one. */
+    CHECK(one.p99 == all.p99 && one.max == all.max && one.max_ba == all.max_ba);
+    CHECK(r.distance.p99 == all.p99 && r.distance.max == all.max);
+    double p99, max;
+    size_t n;
+    brute_one_way(&exact, &simple, 1, &p99, &max, &n);
+    CHECK_EQ(n, all.samples_a);
+    CHECK_NEAR(all.max_ab, max, 1e-5);
+    CHECK_NEAR(all.p99_ab, p99, 1e-5);
+    brute_one_way(&simple, &exact, 1, &p99, &max, &n);
+    CHECK_EQ(n, all.samples_b);
+    CHECK_NEAR(all.max_ba, max, 1e-5);
+    CHECK_NEAR(all.p99_ba, p99, 1e-5);
+    /* Not the trivial answer: the surfaces differ, by less than a voxel. */
+    CHECKF(all.p99 > 0.01 && all.max < 1, "p99 %g, max %g", all.p99, all.max);
+    iso_mesh_free(&exact);
+    iso_mesh_free(&simple);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+int main(void)
+{
+    CHECK_RUN(test_parallel_squares_are_a_quarter_apart);
+    CHECK_RUN(test_square_against_its_half);
+    CHECK_RUN(test_point_against_each_feature);
+    CHECK_RUN(test_simplified_sphere_matches_brute_force);
+    return check_finish();
+}
