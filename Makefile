@@ -27,6 +27,8 @@ PROTO_CXX  := $(sort $(wildcard proto/*.cc))
 SERVER_SRC := $(sort $(wildcard server/*.c))
 TEST_SRC   := $(sort $(wildcard tests/unit/test_*.c))
 TEST_SUPPORT := $(sort $(wildcard tests/support/*.c))
+# The failing allocator replaces malloc: only the allocation-failure sweeps link it.
+ALLOC_FAIL_OBJ = $(BUILD)/tests/support/alloc/alloc_fail.o
 
 LIB_OBJ    = $(CORE_SRC:%.c=$(BUILD)/%.o) $(CORE_CXX:%.cc=$(BUILD)/%.o) $(PROTO_SRC:%.c=$(BUILD)/%.o) $(PROTO_CXX:%.cc=$(BUILD)/%.o)
 SERVER_OBJ = $(SERVER_SRC:%.c=$(BUILD)/%.o)
@@ -57,6 +59,16 @@ $(BUILD)/isoserve: $(SERVER_OBJ) $(BUILD)/libisoserve.a
 $(BUILD)/tests/%: tests/unit/%.c $(SUPPORT_OBJ) $(BUILD)/libisoserve.a
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -Itests/support -MMD -MP $< $(SUPPORT_OBJ) $(BUILD)/libisoserve.a $(LIBS) -o $@
+
+# The allocation-failure sweeps: the failing allocator, and for the HTTP layer's sweep the
+# server's objects (all but main).
+$(BUILD)/tests/test_oom: tests/unit/test_oom.c $(SUPPORT_OBJ) $(ALLOC_FAIL_OBJ) $(BUILD)/libisoserve.a
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) -Itests/support -Itests/support/alloc -MMD -MP $< $(SUPPORT_OBJ) $(ALLOC_FAIL_OBJ) $(BUILD)/libisoserve.a $(LIBS) -o $@
+
+$(BUILD)/tests/test_http_oom: tests/unit/test_http_oom.c $(SUPPORT_OBJ) $(ALLOC_FAIL_OBJ) $(filter-out $(BUILD)/server/main.o,$(SERVER_OBJ)) $(BUILD)/libisoserve.a
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) -Itests/support -Itests/support/alloc -Iserver -MMD -MP $< $(SUPPORT_OBJ) $(ALLOC_FAIL_OBJ) $(filter-out $(BUILD)/server/main.o,$(SERVER_OBJ)) $(BUILD)/libisoserve.a $(LIBS) -o $@
 
 # test_march again over the kernel built without SSE2 (as on a machine without it): the
 # row-by-row paths then classify every brick, full ones included.

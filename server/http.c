@@ -43,18 +43,31 @@ static const char expose_headers[] =
 
 /* ---------------------------------------------------------------- responses */
 
+/* Set when adding a header to the response being built on this thread failed
+ * (libmicrohttpd allocates every header). A response missing a header is not the answer
+ * (a mesh without its error bound, a body without its type), so send_response answers
+ * 503 instead. Each connection has a thread of its own (MHD_USE_THREAD_PER_CONNECTION),
+ * which builds and queues its responses; on_request clears the flag for each request. */
+static _Thread_local int header_failed;
+
+static void add_header(struct MHD_Response *r, const char *name, const char *value)
+{
+    if (MHD_add_response_header(r, name, value) != MHD_YES)
+        header_failed = 1;
+}
+
 static void add_cors(const srv_server *s, struct MHD_Connection *c, struct MHD_Response *r)
 {
     const char *origin = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Origin");
     if (s->config.cors_origin_count == 0) {
-        MHD_add_response_header(r, "Access-Control-Allow-Origin", "*");
+        add_header(r, "Access-Control-Allow-Origin", "*");
     } else {
-        MHD_add_response_header(r, "Vary", "Origin");
+        add_header(r, "Vary", "Origin");
         for (size_t i = 0; origin && i < s->config.cors_origin_count; i++)
             if (!strcmp(origin, s->config.cors_origins[i]))
-                MHD_add_response_header(r, "Access-Control-Allow-Origin", origin);
+                add_header(r, "Access-Control-Allow-Origin", origin);
     }
-    MHD_add_response_header(r, "Access-Control-Expose-Headers", expose_headers);
+    add_header(r, "Access-Control-Expose-Headers", expose_headers);
 }
 
 /* The answer when the HTTP layer itself cannot allocate (a request's record, a response,
@@ -79,15 +92,22 @@ static enum MHD_Result send_out_of_memory(srv_server *s, struct MHD_Connection *
 static enum MHD_Result send_response(srv_server *s, struct MHD_Connection *c, srv_request *req,
                                      int status, struct MHD_Response *r, size_t bytes)
 {
-    if (!r)
+    if (!r) {
+        header_failed = 0;
         return send_out_of_memory(s, c, req);
+    }
     add_cors(s, c, r);
     /* Which replica answered, and whether it had the volume preloaded (its shard) or
      * loaded it on demand (a failover): what a deployment behind nginx is checked by. */
     if (s->config.replica_name)
-        MHD_add_response_header(r, "X-Iso-Replica", s->config.replica_name);
+        add_header(r, "X-Iso-Replica", s->config.replica_name);
     if (req->volume)
-        MHD_add_response_header(r, "X-Iso-Load", req->volume->on_demand ? "on-demand" : "preloaded");
+        add_header(r, "X-Iso-Load", req->volume->on_demand ? "on-demand" : "preloaded");
+    if (header_failed) {
+        header_failed = 0;
+        MHD_destroy_response(r);
+        return send_out_of_memory(s, c, req);
+    }
     req->status = status;
     req->bytes = bytes;
     enum MHD_Result ok = MHD_queue_response(c, (unsigned)status, r);
@@ -107,8 +127,8 @@ static struct MHD_Response *text_response(char *text, const char *content_type,
         free(text);
         return NULL;
     }
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, content_type);
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, cache_control);
+    add_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, content_type);
+    add_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, cache_control);
     return r;
 }
 
@@ -116,7 +136,7 @@ static void add_retry_after(const srv_server *s, struct MHD_Response *r)
 {
     char retry[16];
     snprintf(retry, sizeof retry, "%u", s->config.retry_after_s);
-    MHD_add_response_header(r, MHD_HTTP_HEADER_RETRY_AFTER, retry);
+    add_header(r, MHD_HTTP_HEADER_RETRY_AFTER, retry);
 }
 
 static enum MHD_Result send_text(srv_server *s, struct MHD_Connection *c, srv_request *req,
@@ -137,9 +157,9 @@ static enum MHD_Result send_problem(srv_server *s, struct MHD_Connection *c, srv
     size_t size = 0;
     struct MHD_Response *r = text_response(body, "application/problem+json", "no-store", &size);
     if (r && problem->status == 405)
-        MHD_add_response_header(r, MHD_HTTP_HEADER_ALLOW, "GET, HEAD, OPTIONS");
+        add_header(r, MHD_HTTP_HEADER_ALLOW, "GET, HEAD, OPTIONS");
     if (r && problem->status == 401)
-        MHD_add_response_header(r, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"isoserve\"");
+        add_header(r, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"isoserve\"");
     if (r && problem->status == 503)
         add_retry_after(s, r);
     return send_response(s, c, req, problem->status, r, size);
@@ -310,7 +330,7 @@ static void add_number(struct MHD_Response *r, const char *name, const char *fmt
 {
     char text[48];
     snprintf(text, sizeof text, fmt, value);
-    MHD_add_response_header(r, name, text);
+    add_header(r, name, text);
 }
 
 static void release_body(void *cls)
@@ -320,8 +340,8 @@ static void release_body(void *cls)
 
 static void add_cache_headers(struct MHD_Response *r, const char *etag)
 {
-    MHD_add_response_header(r, MHD_HTTP_HEADER_ETAG, etag);
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "public, max-age=31536000, immutable");
+    add_header(r, MHD_HTTP_HEADER_ETAG, etag);
+    add_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "public, max-age=31536000, immutable");
 }
 
 /* Sends a body; takes over the caller's reference. */
@@ -335,11 +355,11 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
         srv_body_release(body);
         return send_out_of_memory(s, c, req);
     }
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, body->content_type);
+    add_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, body->content_type);
     add_cache_headers(r, etag);
     char disposition[160];
     snprintf(disposition, sizeof disposition, "inline; filename=\"%s\"", file_name);
-    MHD_add_response_header(r, "Content-Disposition", disposition);
+    add_header(r, "Content-Disposition", disposition);
     add_number(r, "X-Iso-Triangles", "%.0f", (double)body->triangles);
     add_number(r, "X-Iso-Vertices", "%.0f", (double)body->vertices);
     add_number(r, "X-Iso-Cells-Visited", "%.0f", (double)body->cells_visited);
@@ -358,14 +378,14 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
             add_number(r, "X-Iso-Volume-Mm3", "%.6g", body->volume_mm3);
     }
     if (body->budget_fits >= 0) {
-        MHD_add_response_header(r, "X-Iso-Budget-Fits", body->budget_fits ? "true" : "false");
-        MHD_add_response_header(r, "X-Iso-Simplified", body->simplified ? "true" : "false");
+        add_header(r, "X-Iso-Budget-Fits", body->budget_fits ? "true" : "false");
+        add_header(r, "X-Iso-Simplified", body->simplified ? "true" : "false");
     }
     if (body->simplified) {
         add_number(r, "X-Iso-Simplify-Error-Mm", "%.6g", body->simplify_error_mm);
         add_number(r, "X-Iso-Simplify-Error-Voxels", "%.6g", body->simplify_error_voxels);
     }
-    MHD_add_response_header(r, "X-Iso-Cache", hit ? "hit" : "miss");
+    add_header(r, "X-Iso-Cache", hit ? "hit" : "miss");
     return send_response(s, c, req, 200, r, body->size);
 }
 
@@ -435,8 +455,8 @@ static enum MHD_Result route_static(srv_server *s, struct MHD_Connection *c, srv
         close(fd);
         return send_out_of_memory(s, c, req);
     }
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, type);
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
+    add_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, type);
+    add_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
     return send_response(s, c, req, 200, r, size);
 }
 
@@ -445,10 +465,10 @@ static enum MHD_Result preflight(srv_server *s, struct MHD_Connection *c, srv_re
     struct MHD_Response *r = MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
     if (!r)
         return send_out_of_memory(s, c, req);
-    MHD_add_response_header(r, "Access-Control-Allow-Methods", "GET, HEAD, OPTIONS");
-    MHD_add_response_header(r, "Access-Control-Allow-Headers", "If-None-Match, Authorization");
-    MHD_add_response_header(r, "Access-Control-Max-Age", "86400");
-    MHD_add_response_header(r, MHD_HTTP_HEADER_ALLOW, "GET, HEAD, OPTIONS");
+    add_header(r, "Access-Control-Allow-Methods", "GET, HEAD, OPTIONS");
+    add_header(r, "Access-Control-Allow-Headers", "If-None-Match, Authorization");
+    add_header(r, "Access-Control-Max-Age", "86400");
+    add_header(r, MHD_HTTP_HEADER_ALLOW, "GET, HEAD, OPTIONS");
     return send_response(s, c, req, 204, r, 0);
 }
 
@@ -620,6 +640,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
         *upload_size = 0;
         return MHD_YES;
     }
+    header_failed = 0;
     return route(s, c, req, url, method);
 }
 
@@ -691,10 +712,17 @@ int srv_http_start(srv_server *s, iso_error *err)
         freeaddrinfo(addr);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory starting the HTTP server");
     }
-    MHD_add_response_header(s->out_of_memory, MHD_HTTP_HEADER_CONTENT_TYPE,
-                            "application/problem+json");
-    MHD_add_response_header(s->out_of_memory, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");
+    header_failed = 0;
+    add_header(s->out_of_memory, MHD_HTTP_HEADER_CONTENT_TYPE, "application/problem+json");
+    add_header(s->out_of_memory, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");
     add_retry_after(s, s->out_of_memory);
+    if (header_failed) {
+        header_failed = 0;
+        MHD_destroy_response(s->out_of_memory);
+        s->out_of_memory = NULL;
+        freeaddrinfo(addr);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory starting the HTTP server");
+    }
     s->daemon = MHD_start_daemon(
         flags, (uint16_t)s->config.port, NULL, NULL, on_request, s,
         MHD_OPTION_SOCK_ADDR, addr->ai_addr,

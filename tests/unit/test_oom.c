@@ -8,17 +8,15 @@
  * a helper thread that could not start) or return ISO_E_NOMEM with a message that says
  * memory ran out; never another code, never a crash, and never a block left behind.
  *
- * The failures come from malloc, calloc and realloc defined here over glibc's own
- * (__libc_malloc ...), which every library of the process calls, libstdc++'s operator new
- * and so libdraco included: a failing operator new throws std::bad_alloc inside libdraco,
- * which the extern "C" shim must turn into ISO_E_NOMEM. The sanitizer build's allocator
- * is ASan's, which replaces these same symbols: there the test says SKIP. */
-#include <stdatomic.h>
+ * The failures come from tests/support/alloc (every library of the process, libdraco's
+ * operator new included: a failing operator new throws std::bad_alloc inside libdraco,
+ * which the extern "C" shim must turn into ISO_E_NOMEM). Under ASan the test says SKIP. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "mesh/mesh.h"
+#include "alloc_fail.h"
 #include "check.h"
 #include "encode.h"
 #include "pipeline.h"
@@ -26,93 +24,7 @@
 #include "io/io.h"
 #include "hierarchy/tree.h"
 
-#if defined(__SANITIZE_ADDRESS__)
-#define OOM_INJECTION 0
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define OOM_INJECTION 0
-#endif
-#endif
-#ifndef OOM_INJECTION
-#define OOM_INJECTION 1
-#endif
-
-#if OOM_INJECTION
-/* ---- the failing allocator ---- */
-
-void *__libc_malloc(size_t size);
-void *__libc_calloc(size_t count, size_t size);
-void *__libc_realloc(void *p, size_t size);
-void __libc_free(void *p);
-
-static atomic_int armed;        /* 1: count allocations and frees */
-static atomic_long calls;       /* allocations asked for since armed */
-static atomic_long fail_at;     /* the one (0-based) that returns NULL; -1: none */
-static atomic_long live;        /* blocks allocated minus blocks freed since armed */
-
-/* 1 when this allocation must fail; counts it. */
-static int fails(void)
-{
-    if (!atomic_load(&armed))
-        return 0;
-    return atomic_fetch_add(&calls, 1) == atomic_load(&fail_at);
-}
-
-static void *counted(void *p)
-{
-    if (p && atomic_load(&armed))
-        atomic_fetch_add(&live, 1);
-    return p;
-}
-
-void *malloc(size_t size)
-{
-    return fails() ? NULL : counted(__libc_malloc(size));
-}
-
-void *calloc(size_t count, size_t size)
-{
-    return fails() ? NULL : counted(__libc_calloc(count, size));
-}
-
-/* realloc(NULL, n) is an allocation; realloc(p, n) moves a block (no count change) or
- * fails leaving p alone; glibc's realloc(p, 0) frees p. */
-void *realloc(void *p, size_t size)
-{
-    if (fails())
-        return NULL;
-    void *q = __libc_realloc(p, size);
-    if (atomic_load(&armed)) {
-        if (!p && q)
-            atomic_fetch_add(&live, 1);
-        else if (p && size == 0)
-            atomic_fetch_sub(&live, 1);
-    }
-    return q;
-}
-
-void free(void *p)
-{
-    if (p && atomic_load(&armed))
-        atomic_fetch_sub(&live, 1);
-    __libc_free(p);
-}
-
-static void arm(long which)
-{
-    atomic_store(&calls, 0);
-    atomic_store(&live, 0);
-    atomic_store(&fail_at, which);
-    atomic_store(&armed, 1);
-}
-
-/* Stops counting; returns the allocations asked for since arm. */
-static long disarm(void)
-{
-    atomic_store(&armed, 0);
-    return atomic_load(&calls);
-}
-
+#if ALLOC_FAIL_AVAILABLE
 /* ---- one request through the pipeline the server and the CLI run ---- */
 
 typedef struct request {
@@ -200,9 +112,9 @@ static void sweep(const char *name, run_fn fn, const void *context)
     outcome want = {0}, got = {0};
     /* Unarmed first: whatever a library allocates once and keeps is allocated now. */
     CHECK_OK(fn(context, &want, &err), &err);
-    arm(-1);
+    alloc_fail_arm(-1);
     int rc = fn(context, &got, &err);
-    long leaked = atomic_load(&live), total = disarm();
+    long leaked = alloc_fail_live(), total = alloc_fail_disarm();
     CHECKF(rc == 0 && leaked == 0 && got.triangles == want.triangles && total > 0,
            "%s: clean run: rc %d, %ld blocks left, %zu triangles, %ld allocations", name, rc,
            leaked, got.triangles, total);
@@ -210,10 +122,10 @@ static void sweep(const char *name, run_fn fn, const void *context)
     for (long n = 0; n < total && !check_failed(); n++) {
         memset(&err, 0, sizeof err);
         got = (outcome){0};
-        arm(n);
+        alloc_fail_arm(n);
         rc = fn(context, &got, &err);
-        leaked = atomic_load(&live);
-        disarm();
+        leaked = alloc_fail_live();
+        alloc_fail_disarm();
         if (rc == 0)
             CHECKF(got.triangles == want.triangles && got.bytes == want.bytes,
                    "%s, allocation %ld failing: succeeded with %zu triangles, %zu bytes; want %zu, %zu",
