@@ -373,7 +373,7 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
     if (body->measured) {
         add_number(r, "X-Iso-Measure-Ms", "%.3f", body->measure_ms);
         add_number(r, "X-Iso-Area-Mm2", "%.6g", body->area_mm2);
-        MHD_add_response_header(r, "X-Iso-Closed", body->closed ? "true" : "false");
+        add_header(r, "X-Iso-Closed", body->closed ? "true" : "false");
         if (body->closed)
             add_number(r, "X-Iso-Volume-Mm3", "%.6g", body->volume_mm3);
     }

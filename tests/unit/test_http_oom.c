@@ -194,7 +194,7 @@ static void test_http_allocation_failures(void)
     if (!check_failed()) {
         sweep("/v1/volumes", 200);
         sweep("/v1/volumes/sphere", 200);
-        sweep("/v1/volumes/sphere/mesh?level=5&format=ply", 200);
+        sweep("/v1/volumes/sphere/mesh?level=5&format=ply&measures=true", 200);
         sweep("/v1/volumes/sphere/mesh?level=5&tolerance=2&format=glb&normals=triquadratic", 200);
         sweep("/v1/volumes/nothing", 404);
         sweep("/metrics", 200);
