@@ -108,6 +108,23 @@ int proto_encode_draco(const iso_mesh *mesh, const proto_encode_options *opt,
 int proto_encode_glb(const iso_mesh *mesh, const proto_encode_options *opt,
                      unsigned char **out, size_t *out_size, iso_error *err);
 
+/* glTF 2.0 binary for a fast decode: one scene, one node, one triangle primitive whose
+ * buffer views are compressed with meshoptimizer's codecs (EXT_meshopt_compression,
+ * required) over quantized attributes (KHR_mesh_quantization, required): positions as
+ * uint16 on the bounding cube's qp-bit grid (like Draco's, the node's translation and
+ * scale give world units back; float positions above 16 bits), normals as normalized
+ * int8 (qn <= 8) or int16 rounded to qn bits; indices uint16 when the vertices allow,
+ * else uint32. Vertex order and counts are kept, triangles too, each perhaps starting at
+ * another corner (the index codec rotates them; the winding stays). A mesh with no triangles
+ * gives the same empty glb as proto_encode_glb. O(V + T), single pass per stream. */
+int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *opt,
+                             unsigned char **out, size_t *out_size, iso_error *err);
+
+/* One gzip member (RFC 1952) holding `in`, at zlib's fastest level, for HTTP's
+ * Content-Encoding: gzip. Returns 0 or ISO_E_NOMEM / ISO_E_LIMIT (over 4 GiB). */
+int proto_gzip(const unsigned char *in, size_t size, unsigned char **out, size_t *out_size,
+               iso_error *err);
+
 /* Decodes a Draco mesh bitstream into `out`, which is initialised by the call: on success it
  * owns the positions, the normals when the stream has a 3-component NORMAL attribute, and
  * the triangles (free with iso_mesh_free); on error it is left empty. Safe on untrusted

@@ -1,8 +1,10 @@
-/* glb.c: the glTF 2.0 binary encoder: one triangle primitive whose data is a Draco stream
- * (KHR_draco_mesh_compression), as three.js's GLTFLoader + DRACOLoader read it. */
+/* glb.c: the glTF 2.0 binary container (glb_container.h) and the encoder of one triangle
+ * primitive whose data is a Draco stream (KHR_draco_mesh_compression), as three.js's
+ * GLTFLoader + DRACOLoader read it. */
 #include "encode.h"
 #include "bytes.h"
 #include "draco_shim.h"
+#include "glb_container.h"
 
 #include <assert.h>
 #include <stdarg.h>
@@ -15,25 +17,10 @@ enum {
     GLB_MAGIC = 0x46546C67,      /* "glTF" */
     GLB_VERSION = 2,
     GLB_CHUNK_JSON = 0x4E4F534A, /* "JSON" */
-    GLB_CHUNK_BIN = 0x004E4942,  /* "BIN\0" */
-    GLTF_FLOAT = 5126,
-    GLTF_UNSIGNED_INT = 5125,
-    GLTF_TRIANGLES = 4
+    GLB_CHUNK_BIN = 0x004E4942   /* "BIN\0" */
 };
 
-/* The JSON is a fixed skeleton plus a few dozen numbers: a fixed buffer is ample. */
-typedef struct glb_json {
-    char text[4096];
-    size_t len;
-} glb_json;
-
-static void json_add(glb_json *j, const char *fmt, ...)
-#if defined(__GNUC__)
-    __attribute__((format(printf, 2, 3)))
-#endif
-    ;
-
-static void json_add(glb_json *j, const char *fmt, ...)
+void proto_glb_json_add(proto_glb_json *j, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
@@ -46,53 +33,47 @@ static void json_add(glb_json *j, const char *fmt, ...)
 
 /* "%.9g" round-trips a float and never prints nan/inf here (positions are checked finite),
  * so every number is valid JSON. Assumes the C locale's decimal point. */
-static void json_vec3(glb_json *j, const char *key, const float v[3])
+void proto_glb_json_vec3(proto_glb_json *j, const char *key, const float v[3])
 {
-    json_add(j, ",\"%s\":[%.9g,%.9g,%.9g]", key, v[0], v[1], v[2]);
+    proto_glb_json_add(j, ",\"%s\":[%.9g,%.9g,%.9g]", key, v[0], v[1], v[2]);
 }
 
-static void json_mesh(glb_json *j, const proto_draco_info *info, size_t draco_size)
+void proto_glb_json_empty(proto_glb_json *j)
+{
+    proto_glb_json_add(j, "{\"asset\":{\"version\":\"2.0\",\"generator\":\"isoserve\"},"
+                          "\"scene\":0,\"scenes\":[{}]}");
+}
+
+static void json_mesh(proto_glb_json *j, const proto_draco_info *info, size_t draco_size)
 {
     const int normals = info->normal_id >= 0;
     const int indices_accessor = normals ? 2 : 1;
-    json_add(j, "{\"asset\":{\"version\":\"2.0\",\"generator\":\"isoserve\"},"
+    proto_glb_json_add(j, "{\"asset\":{\"version\":\"2.0\",\"generator\":\"isoserve\"},"
                 "\"extensionsUsed\":[\"KHR_draco_mesh_compression\"],"
                 "\"extensionsRequired\":[\"KHR_draco_mesh_compression\"],"
                 "\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],");
     /* The primitive's accessors have no bufferView: the extension supplies their data. */
-    json_add(j, "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0%s},"
+    proto_glb_json_add(j, "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0%s},"
                 "\"indices\":%d,\"mode\":%d,",
-             normals ? ",\"NORMAL\":1" : "", indices_accessor, GLTF_TRIANGLES);
-    json_add(j, "\"extensions\":{\"KHR_draco_mesh_compression\":{\"bufferView\":0,"
+             normals ? ",\"NORMAL\":1" : "", indices_accessor, PROTO_GLTF_TRIANGLES);
+    proto_glb_json_add(j, "\"extensions\":{\"KHR_draco_mesh_compression\":{\"bufferView\":0,"
                 "\"attributes\":{\"POSITION\":%d", info->position_id);
     if (normals)
-        json_add(j, ",\"NORMAL\":%d", info->normal_id);
-    json_add(j, "}}}}]}],");
-    json_add(j, "\"accessors\":[{\"componentType\":%d,\"count\":%zu,\"type\":\"VEC3\"",
-             GLTF_FLOAT, info->points);
-    json_vec3(j, "min", info->min);
-    json_vec3(j, "max", info->max);
-    json_add(j, "}");
+        proto_glb_json_add(j, ",\"NORMAL\":%d", info->normal_id);
+    proto_glb_json_add(j, "}}}}]}],");
+    proto_glb_json_add(j, "\"accessors\":[{\"componentType\":%d,\"count\":%zu,\"type\":\"VEC3\"",
+             PROTO_GLTF_FLOAT, info->points);
+    proto_glb_json_vec3(j, "min", info->min);
+    proto_glb_json_vec3(j, "max", info->max);
+    proto_glb_json_add(j, "}");
     if (normals)
-        json_add(j, ",{\"componentType\":%d,\"count\":%zu,\"type\":\"VEC3\"}", GLTF_FLOAT,
+        proto_glb_json_add(j, ",{\"componentType\":%d,\"count\":%zu,\"type\":\"VEC3\"}", PROTO_GLTF_FLOAT,
                  info->points);
-    json_add(j, ",{\"componentType\":%d,\"count\":%zu,\"type\":\"SCALAR\"}],",
-             GLTF_UNSIGNED_INT, 3 * info->faces);
-    json_add(j, "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":%zu}],"
+    proto_glb_json_add(j, ",{\"componentType\":%d,\"count\":%zu,\"type\":\"SCALAR\"}],",
+             PROTO_GLTF_UNSIGNED_INT, 3 * info->faces);
+    proto_glb_json_add(j, "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":%zu}],"
                 "\"buffers\":[{\"byteLength\":%zu}]}",
              draco_size, draco_size);
-}
-
-/* glTF forbids accessors of count 0, so a mesh without triangles is a scene with no nodes. */
-static void json_empty(glb_json *j)
-{
-    json_add(j, "{\"asset\":{\"version\":\"2.0\",\"generator\":\"isoserve\"},"
-                "\"scene\":0,\"scenes\":[{}]}");
-}
-
-static size_t pad4(size_t n)
-{
-    return (n + 3) & ~(size_t)3;
 }
 
 int proto_encode_glb(const iso_mesh *mesh, const proto_encode_options *opt,
@@ -117,47 +98,50 @@ int proto_glb_encode_info(const iso_mesh *mesh, const proto_encode_options *opt,
     if (embedded)
         *embedded = info;
 
-    glb_json json;
+    proto_glb_json json;
     json.len = 0;
     if (info.faces == 0) {
-        json_empty(&json);
+        proto_glb_json_empty(&json);
         draco_size = 0; /* no BIN chunk at all */
     } else {
         json_mesh(&json, &info, draco_size);
     }
+    rc = proto_glb_write(&json, draco, draco_size, out, out_size, err);
+    free(draco);
+    return rc;
+}
 
-    /* Layout: header (12), JSON chunk (8 + text padded with spaces), BIN chunk (8 + Draco
-     * bytes padded with zeros) when there is one. Lengths are uint32 in the container. */
-    const size_t json_padded = pad4(json.len), bin_padded = pad4(draco_size);
-    const size_t size = 12 + 8 + json_padded + (draco_size ? 8 + bin_padded : 0);
-    if (draco_size > UINT32_MAX - 64 || size > UINT32_MAX) {
-        free(draco);
+int proto_glb_write(const proto_glb_json *json, const unsigned char *bin, size_t bin_size,
+                    unsigned char **out, size_t *out_size, iso_error *err)
+{
+    /* Layout: header (12), JSON chunk (8 + text padded with spaces), BIN chunk (8 + bytes
+     * padded with zeros) when there is one. Lengths are uint32 in the container. */
+    *out = NULL;
+    *out_size = 0;
+    const size_t json_padded = proto_glb_pad4(json->len), bin_padded = proto_glb_pad4(bin_size);
+    const size_t size = 12 + 8 + json_padded + (bin_size ? 8 + bin_padded : 0);
+    if (bin_size > UINT32_MAX - 64 || size > UINT32_MAX)
         return iso_error_set(err, ISO_E_LIMIT, "glb of %zu bytes exceeds glTF's 4 GiB", size);
-    }
     unsigned char *buf = malloc(size);
-    if (!buf) {
-        free(draco);
+    if (!buf)
         return iso_error_set(err, ISO_E_NOMEM, "no memory for a glb of %zu bytes", size);
-    }
-
     unsigned char *p = buf;
     p = proto_put_u32(p, GLB_MAGIC);
     p = proto_put_u32(p, GLB_VERSION);
     p = proto_put_u32(p, (uint32_t)size);
     p = proto_put_u32(p, (uint32_t)json_padded);
     p = proto_put_u32(p, GLB_CHUNK_JSON);
-    memcpy(p, json.text, json.len);
-    memset(p + json.len, ' ', json_padded - json.len);
+    memcpy(p, json->text, json->len);
+    memset(p + json->len, ' ', json_padded - json->len);
     p += json_padded;
-    if (draco_size) {
+    if (bin_size) {
         p = proto_put_u32(p, (uint32_t)bin_padded);
         p = proto_put_u32(p, GLB_CHUNK_BIN);
-        memcpy(p, draco, draco_size);
-        memset(p + draco_size, 0, bin_padded - draco_size);
+        memcpy(p, bin, bin_size);
+        memset(p + bin_size, 0, bin_padded - bin_size);
         p += bin_padded;
     }
     assert((size_t)(p - buf) == size);
-    free(draco);
     *out = buf;
     *out_size = size;
     return 0;

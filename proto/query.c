@@ -84,12 +84,17 @@ static int parse_count(const char *key, const char *value, unsigned long min, un
     return 0;
 }
 
-static const char *const format_names[PROTO_FORMAT_COUNT] = {"draco", "glb", "ply", "stl"};
+static const char *const format_names[PROTO_FORMAT_COUNT] = {"draco", "glb", "ply", "stl",
+                                                             "glb-meshopt"};
 static const char *const format_types[PROTO_FORMAT_COUNT] = {
-    "application/x-draco", "model/gltf-binary", "application/x-ply", "model/stl"};
+    "application/x-draco", "model/gltf-binary", "application/x-ply", "model/stl",
+    "model/gltf-binary"};
+static const char *const format_extensions[PROTO_FORMAT_COUNT] = {"drc", "glb", "ply", "stl",
+                                                                  "glb"};
 
 const char *proto_format_name(proto_format format) { return format_names[format]; }
 const char *proto_format_content_type(proto_format format) { return format_types[format]; }
+const char *proto_format_extension(proto_format format) { return format_extensions[format]; }
 
 /* The parameters, in the order the key lists them. */
 enum { P_LEVEL, P_TOLERANCE, P_NORMALS, P_FORMAT, P_QP, P_QN, P_SPEED, P_BUDGET, P_CAP, P_MEASURES,
@@ -132,7 +137,7 @@ static int parse_one(int which, const char *value, proto_mesh_request *out, prot
                 out->format = (proto_format)f;
                 return 0;
             }
-        return proto_problem_set(problem, 400, key, "format must be draco, glb, ply or stl, not \"%s\"",
+        return proto_problem_set(problem, 400, key, "format must be draco, glb, glb-meshopt, ply or stl, not \"%s\"",
                                  shown(value ? value : "", buf, sizeof buf));
     case P_CAP:
     case P_MEASURES:
@@ -208,8 +213,10 @@ size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t s
 {
     /* PLY and STL are lossless: Draco's options (speed, qp, qn) do not change their bytes,
      * so the key spells them at their defaults (qn as 0) and "format=ply&qp=11" hits
-     * "format=ply"'s entry; the key stays a query that parses back to itself. */
+     * "format=ply"'s entry; meshopt takes qp and qn but no speed. The key stays a query
+     * that parses back to itself. */
     int draco = req->format == PROTO_FORMAT_DRACO || req->format == PROTO_FORMAT_GLB;
+    int quantized = draco || req->format == PROTO_FORMAT_GLB_MESHOPT;
     char speed[8] = "auto";
     if (draco && req->speed != PROTO_DRACO_SPEED_AUTO)
         snprintf(speed, sizeof speed, "%d", req->speed);
@@ -217,8 +224,8 @@ size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t s
                      "level=%.17g&tolerance=%.17g&normals=%s&format=%s&qp=%d&qn=%d&speed=%s&budget=%u&cap=%s"
                      "&measures=%s",
                      req->level, req->tolerance, iso_normals_name(req->normals),
-                     format_names[req->format], draco ? req->position_bits : PROTO_POSITION_BITS_DEFAULT,
-                     draco && req->normals ? req->normal_bits : 0, speed, req->budget,
+                     format_names[req->format], quantized ? req->position_bits : PROTO_POSITION_BITS_DEFAULT,
+                     quantized && req->normals ? req->normal_bits : 0, speed, req->budget,
                      req->cap ? "true" : "false", req->measures ? "true" : "false");
     return n < 0 ? 0 : (size_t)n;
 }

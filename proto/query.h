@@ -17,6 +17,7 @@ typedef enum proto_format {
     PROTO_FORMAT_GLB,
     PROTO_FORMAT_PLY,
     PROTO_FORMAT_STL,
+    PROTO_FORMAT_GLB_MESHOPT,              /* glb, EXT_meshopt_compression (encode.h) */
     PROTO_FORMAT_COUNT,                    /* the formats the API serves end here */
     PROTO_FORMAT_OBJ = PROTO_FORMAT_COUNT, /* OBJ text: the CLI writes it, the API does not */
     PROTO_FORMAT_NONE                      /* no encoding (pipeline.h keeps the mesh) */
@@ -68,9 +69,11 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
  * (NUL included) and returns the length it needs, like snprintf. */
 size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t size);
 
-/* "draco", "glb", "ply"; the Content-Type and file extension of each. */
+/* "draco", "glb", "ply", "stl", "glb-meshopt"; the Content-Type and the file name
+ * extension ("drc", "glb", ...) of each. */
 const char *proto_format_name(proto_format format);
 const char *proto_format_content_type(proto_format format);
+const char *proto_format_extension(proto_format format);
 
 /* Fills a problem (status, parameter may be NULL, printf-style detail); returns -1. */
 int proto_problem_set(proto_problem *problem, int status, const char *parameter,

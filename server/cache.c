@@ -35,10 +35,16 @@ void srv_body_retain(srv_body *body)
     atomic_fetch_add(&body->refs, 1);
 }
 
+size_t srv_body_bytes(const srv_body *body)
+{
+    return body->size + body->gzip_size;
+}
+
 void srv_body_release(srv_body *body)
 {
     if (body && atomic_fetch_sub(&body->refs, 1) == 1) {
         free(body->data);
+        free(body->gzip_data);
         free(body);
     }
 }
@@ -78,7 +84,7 @@ static void unlink_item(srv_cache *cache, srv_cache_item *item)
         item->older->newer = item->newer;
     else
         cache->oldest = item->newer;
-    cache->bytes -= item->body->size;
+    cache->bytes -= srv_body_bytes(item->body);
     cache->items--;
 }
 
@@ -149,7 +155,7 @@ srv_body *srv_cache_get(srv_cache *cache, const char *key)
 
 void srv_cache_put(srv_cache *cache, const char *key, srv_body *body)
 {
-    if (body->size > cache->limit)
+    if (srv_body_bytes(body) > cache->limit)
         return;
     srv_cache_item *item = calloc(1, sizeof *item);
     char *copy = strdup(key);
@@ -170,7 +176,7 @@ void srv_cache_put(srv_cache *cache, const char *key, srv_body *body)
         old->chain = evicted;
         evicted = old;
     }
-    while (cache->oldest && cache->bytes + body->size > cache->limit) {
+    while (cache->oldest && cache->bytes + srv_body_bytes(body) > cache->limit) {
         srv_cache_item *victim = cache->oldest;
         unlink_item(cache, victim);
         victim->chain = evicted;
@@ -181,7 +187,7 @@ void srv_cache_put(srv_cache *cache, const char *key, srv_body *body)
     item->chain = *slot;
     *slot = item;
     push_newest(cache, item);
-    cache->bytes += body->size;
+    cache->bytes += srv_body_bytes(body);
     cache->items++;
     pthread_mutex_unlock(&cache->lock);
     while (evicted) { /* freed outside the lock */

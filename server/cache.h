@@ -16,9 +16,11 @@ typedef struct srv_body {
     _Atomic int refs;
     unsigned char *data;
     size_t size;
+    unsigned char *gzip_data;       /* the same bytes gzipped (malloc'd), or NULL */
+    size_t gzip_size;
     const char *content_type;       /* static string */
     size_t triangles, vertices, cells_visited;
-    double extract_ms, normals_ms, measure_ms, encode_ms; /* the job's steps, in order */
+    double extract_ms, normals_ms, measure_ms, encode_ms, gzip_ms; /* the job's steps, in order */
     double error_bound, tolerance, area_mm2;
     int draco_speed;                /* the Draco speed used (draco and glb); -1 otherwise */
     int measured;                   /* the request asked for the measures (area_mm2, closed, volume_mm3) */
@@ -33,6 +35,8 @@ typedef struct srv_body {
  * is freed then). */
 srv_body *srv_body_create(unsigned char *data, size_t size);
 void srv_body_retain(srv_body *body);
+/* The bytes the cache counts for it: both encodings. */
+size_t srv_body_bytes(const srv_body *body);
 /* Drops a reference; frees at zero. NULL is allowed. */
 void srv_body_release(srv_body *body);
 

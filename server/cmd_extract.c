@@ -23,7 +23,8 @@ static int format_of(const char *path)
 {
     static const struct { const char *suffix; proto_format format; } formats[] = {
         {".ply", PROTO_FORMAT_PLY}, {".obj", PROTO_FORMAT_OBJ}, {".drc", PROTO_FORMAT_DRACO},
-        {".glb", PROTO_FORMAT_GLB}, {".stl", PROTO_FORMAT_STL}};
+        {".meshopt.glb", PROTO_FORMAT_GLB_MESHOPT}, {".glb", PROTO_FORMAT_GLB},
+        {".stl", PROTO_FORMAT_STL}};
     if (!path)
         return PROTO_FORMAT_NONE;
     for (size_t i = 0; i < sizeof formats / sizeof formats[0]; i++)
@@ -117,7 +118,7 @@ int srv_cmd_extract(int argc, char **argv)
     if (!opt.path || !have_level)
         return srv_fail("extract: usage: isoserve extract VOLUME --level L [--tolerance T] [--cap] [--threads N] "
                         "[--budget N [--no-simplify]] [--simplify N] "
-                        "[--normals none|trilinear|triquadratic|tricubic] [-o OUT.ply|.stl|.obj|.drc|.glb] [--json]");
+                        "[--normals none|trilinear|triquadratic|tricubic] [-o OUT.ply|.stl|.obj|.drc|.glb|.meshopt.glb] [--json]");
     if (full_scan && (params.cap || budget))
         return srv_fail("extract: %s needs the hierarchy; drop --full-scan", params.cap ? "--cap" : "--budget");
     if (budget && simplify)
@@ -126,7 +127,7 @@ int srv_cmd_extract(int argc, char **argv)
         return srv_fail("extract: --no-simplify goes with --budget");
     int format = format_of(out);
     if (format < 0)
-        return srv_fail("%s: unknown output format (use .ply, .stl, .obj, .drc or .glb)", out);
+        return srv_fail("%s: unknown output format (use .ply, .stl, .obj, .drc, .glb or .meshopt.glb)", out);
     opt.want_tree = !full_scan;
     srv_subject s;
     if (srv_open(&opt, &s))

@@ -344,19 +344,60 @@ static void add_cache_headers(struct MHD_Response *r, const char *etag)
     add_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "public, max-age=31536000, immutable");
 }
 
-/* Sends a body; takes over the caller's reference. */
+/* The request's Accept-Encoding names gzip with a weight above 0 (RFC 9110 12.5.3). */
+static int accepts_gzip(struct MHD_Connection *c)
+{
+    const char *h = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_ACCEPT_ENCODING);
+    for (const char *p = h; p && *p;) {
+        p += strspn(p, " \t,");
+        size_t n = strcspn(p, ",;");
+        while (n && (p[n - 1] == ' ' || p[n - 1] == '\t'))
+            n--;
+        int gzip = n == 4 && !strncasecmp(p, "gzip", 4);
+        p += strcspn(p, ",;");
+        int zero = 0;
+        if (*p == ';') {
+            const char *q = strstr(p, "q=");
+            const char *end = p + strcspn(p, ",");
+            zero = q && q < end && strtod(q + 2, NULL) == 0;
+            p = end;
+        }
+        if (gzip)
+            return !zero;
+    }
+    return 0;
+}
+
+/* The gzip representation's ETag: the identity one's with "-gz" before the closing quote. */
+static void gzip_etag(const char *etag, char *out, size_t size)
+{
+    snprintf(out, size, "%.*s-gz\"", (int)strlen(etag) - 1, etag);
+}
+
+/* Sends a body, gzipped when the body has a gzip form and the client accepts it; takes
+ * over the caller's reference. */
 static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_request *req,
                                  srv_body *body, const char *etag, const char *file_name,
                                  int hit)
 {
+    int gzip = body->gzip_data && accepts_gzip(c);
+    char gz_etag[112];
+    if (gzip) {
+        gzip_etag(etag, gz_etag, sizeof gz_etag);
+        etag = gz_etag;
+    }
     struct MHD_Response *r = MHD_create_response_from_buffer_with_free_callback_cls(
-        body->size, body->data, release_body, body);
+        gzip ? body->gzip_size : body->size, gzip ? body->gzip_data : body->data, release_body, body);
     if (!r) {
         srv_body_release(body);
         return send_out_of_memory(s, c, req);
     }
     add_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, body->content_type);
     add_cache_headers(r, etag);
+    if (body->gzip_data)
+        add_header(r, MHD_HTTP_HEADER_VARY, "Accept-Encoding");
+    if (gzip)
+        add_header(r, MHD_HTTP_HEADER_CONTENT_ENCODING, "gzip");
     char disposition[160];
     snprintf(disposition, sizeof disposition, "inline; filename=\"%s\"", file_name);
     add_header(r, "Content-Disposition", disposition);
@@ -385,8 +426,10 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
         add_number(r, "X-Iso-Simplify-Error-Mm", "%.6g", body->simplify_error_mm);
         add_number(r, "X-Iso-Simplify-Error-Voxels", "%.6g", body->simplify_error_voxels);
     }
+    if (body->gzip_data)
+        add_number(r, "X-Iso-Gzip-Ms", "%.3f", body->gzip_ms);
     add_header(r, "X-Iso-Cache", hit ? "hit" : "miss");
-    return send_response(s, c, req, 200, r, body->size);
+    return send_response(s, c, req, 200, r, gzip ? body->gzip_size : body->size);
 }
 
 static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_request *req,
@@ -401,14 +444,17 @@ static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_r
     if (proto_mesh_request_parse(params.items, params.count, &mr, &problem))
         return send_problem(s, c, req, &problem, path);
 
-    char normalised[256], key[512], etag[96], file_name[128];
+    char normalised[256], key[512], etag[96], gz_etag[112], file_name[128];
     proto_mesh_request_key(&mr, normalised, sizeof normalised);
     snprintf(key, sizeof key, "%s/%s?%s", v->entry->id, v->version, normalised);
     mesh_etag(v, normalised, etag, sizeof etag);
     snprintf(file_name, sizeof file_name, "%s-%g.%s", v->entry->id, mr.level,
-             mr.format == PROTO_FORMAT_DRACO ? "drc" : proto_format_name(mr.format));
+             proto_format_extension(mr.format));
 
-    if (etag_matches(MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_IF_NONE_MATCH), etag)) {
+    /* Either representation the client holds is current. */
+    const char *if_none_match = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_IF_NONE_MATCH);
+    gzip_etag(etag, gz_etag, sizeof gz_etag);
+    if (etag_matches(if_none_match, etag) || etag_matches(if_none_match, gz_etag)) {
         struct MHD_Response *r = MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
         if (r)
             add_cache_headers(r, etag);

@@ -12,7 +12,7 @@ static const struct {
     {"info", srv_cmd_info, "info VOLUME [--json] [--resample WxHxD]"},
     {"build", srv_cmd_build, "build VOLUME -o FILE [--resample WxHxD] [--threads N]"},
     {"extract", srv_cmd_extract,
-     "extract VOLUME --level L [--tolerance T] [-o OUT.ply|.obj|.drc|.glb] [--json] [--hierarchy FILE]\n"
+     "extract VOLUME --level L [--tolerance T] [-o OUT.ply|.obj|.drc|.glb|.meshopt.glb] [--json] [--hierarchy FILE]\n"
      "                 [--normals none|trilinear|triquadratic|tricubic] [--resample WxHxD]\n"
      "                 [--index-space] [--full-scan] [--cap] [--threads N]\n"
      "                 (--threads: build and exact extraction; default all cores)"},

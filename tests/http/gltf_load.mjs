@@ -1,5 +1,7 @@
 // gltf_load.mjs: loads a glb with three.js's own GLTFLoader in node and prints
-// "<triangles> <vertices> <has normals>". DRACOLoader decodes in Web Workers, which node
+// "<triangles> <vertices> <has normals>", then the world bounding box's min and max (the node
+// transforms applied: KHR_mesh_quantization's dequantization). EXT_meshopt_compression is
+// decoded by three's own MeshoptDecoder (WebAssembly, no worker). DRACOLoader decodes in Web Workers, which node
 // lacks, so the KHR_draco_mesh_compression extension is handed a decoder with the same
 // decodeDracoFile contract built on npm's draco3d: everything else (the container, the
 // JSON, accessors, the extension's attribute mapping) is GLTFLoader's own code.
@@ -11,6 +13,7 @@ import { pathToFileURL } from 'node:url';
 const modules = process.argv[3] + '/node_modules/';
 const THREE = await import(pathToFileURL(modules + 'three/build/three.module.js'));
 const { GLTFLoader } = await import(pathToFileURL(modules + 'three/examples/jsm/loaders/GLTFLoader.js'));
+const { MeshoptDecoder } = await import(pathToFileURL(modules + 'three/examples/jsm/libs/meshopt_decoder.module.js'));
 const require = createRequire(modules);
 const draco3d = require('draco3d');
 const module = await draco3d.createDecoderModule({});
@@ -50,7 +53,7 @@ const dracoInNode = {
 };
 
 const data = readFileSync(process.argv[2]);
-const loader = new GLTFLoader().setDRACOLoader(dracoInNode);
+const loader = new GLTFLoader().setDRACOLoader(dracoInNode).setMeshoptDecoder(MeshoptDecoder);
 const buffer = data.buffer.slice(data.byteOffset, data.byteOffset + data.byteLength);
 loader.parse(buffer, '', (gltf) => {
   let triangles = 0, vertices = 0, normals = true;
@@ -60,5 +63,6 @@ loader.parse(buffer, '', (gltf) => {
     vertices += o.geometry.attributes.position.count;
     normals = normals && !!o.geometry.attributes.normal;
   });
-  console.log(`${triangles} ${vertices} ${normals}`);
+  const box = new THREE.Box3().setFromObject(gltf.scene);
+  console.log(`${triangles} ${vertices} ${normals} ${box.min.toArray().join(' ')} ${box.max.toArray().join(' ')}`);
 }, (error) => { console.error(String(error)); process.exit(1); });

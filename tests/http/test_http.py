@@ -7,6 +7,7 @@ the server prints), stopped by its PID. Prints PASS/FAIL/SKIP lines; exit status
 Uses Debian's python3 with numpy only."""
 
 import http.client
+import gzip
 import json
 import os
 import re
@@ -323,10 +324,50 @@ draco3d.createDecoderModule({}).then(m => {
         out = subprocess.run(["node", "tests/http/gltf_load.mjs", state["glb"], os.path.abspath("web")],
                              capture_output=True, text=True, timeout=60)
         assert out.returncode == 0, out.stdout + out.stderr
-        tri, ver, normals = out.stdout.split()
+        tri, ver, normals, *_ = out.stdout.split()
         assert (int(tri), int(ver)) == state["glb_counts"], (out.stdout, state["glb_counts"])
         assert normals == "true", out.stdout
     check("mesh_glb_loads_in_three_gltfloader", glb_three)
+
+    # format=glb-meshopt: three's GLTFLoader with its MeshoptDecoder gets exactly the
+    # mesh's triangles and vertices, and the PLY's bounding box within half a qp step.
+    # Its gzip form goes to a client that accepts gzip: the same bytes inflated, its own
+    # ETag, and either ETag answers 304.
+    def glb_meshopt():
+        if not os.path.isdir("web/node_modules/three"):
+            raise Skip("web/node_modules/three not installed (make node-deps)")
+        url = f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=glb-meshopt"
+        r = s.get(url)
+        assert r.status == 200 and r.getheader("Content-Type") == "model/gltf-binary", r.status
+        assert r.getheader("Content-Encoding") is None
+        assert r.getheader("X-Iso-Draco-Speed") is None
+        assert 'filename="blob-' in r.getheader("Content-Disposition") and ".glb\"" in r.getheader("Content-Disposition")
+        path = os.path.join(tmp, "blob.meshopt.glb")
+        open(path, "wb").write(r.body)
+        out = subprocess.run(["node", "tests/http/gltf_load.mjs", path, os.path.abspath("web")],
+                             capture_output=True, text=True, timeout=60)
+        assert out.returncode == 0, out.stdout + out.stderr
+        tri, ver, normals, *box = out.stdout.split()
+        assert (int(tri), int(ver)) == (int(r.getheader("X-Iso-Triangles")), int(r.getheader("X-Iso-Vertices")))
+        assert (int(tri), int(ver)) == (state["nt"], len(state["pos"])), (tri, ver)
+        assert normals == "true"
+        box = np.array([float(x) for x in box]).reshape(2, 3)
+        want = np.array([state["pos"].min(0), state["pos"].max(0)])
+        half = (want[1] - want[0]).max() / (2 ** 14 - 1) / 2
+        assert np.abs(box - want).max() <= half * 1.01 + 1e-5, (box, want)
+        g = s.get(url, {"Accept-Encoding": "br, gzip;q=0.8"})
+        assert g.status == 200 and g.getheader("Content-Encoding") == "gzip", g.getheader("Content-Encoding")
+        assert g.getheader("Vary") == "Accept-Encoding" and g.getheader("X-Iso-Cache") == "hit"
+        assert gzip.decompress(g.body) == r.body and len(g.body) <= 0.95 * len(r.body), (len(g.body), len(r.body))
+        assert g.getheader("ETag") != r.getheader("ETag") and float(g.getheader("X-Iso-Gzip-Ms")) >= 0
+        refused = s.get(url, {"Accept-Encoding": "gzip;q=0, identity"})
+        assert refused.getheader("Content-Encoding") is None and refused.body == r.body
+        for etag in (r.getheader("ETag"), g.getheader("ETag")):
+            assert s.get(url, {"If-None-Match": etag}).status == 304, etag
+        # Draco is entropy coded already: never gzipped.
+        d = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=glb", {"Accept-Encoding": "gzip"})
+        assert d.getheader("Content-Encoding") is None and d.getheader("Vary") is None
+    check("mesh_glb_meshopt_gzip", glb_meshopt)
 
     def etag_and_cache():
         t = f"/v1/volumes/blob/mesh?level={level}&tolerance=3"

@@ -1,7 +1,7 @@
 /* test_oom.c: allocation failures along one mesh request's path. The steps of the request
  * pipeline (proto/pipeline.c, which the server and the CLI run: extraction, exact or
  * through the hierarchy or under a triangle budget, simplified by meshoptimizer when the
- * faithful ladder cannot meet it; normals; the edge census; the Draco, glb, PLY and STL
+ * faithful ladder cannot meet it; normals; the edge census; the Draco, glb, meshopt glb, PLY and STL
  * encoders) and the Draco decoder are
  * run once to count their allocations, then once per allocation with exactly that one
  * failing: each run must either succeed with the same mesh (the failure was absorbed, e.g.
@@ -154,6 +154,7 @@ static void test_request_path_allocation_failures(void)
         {"hierarchy, trilinear normals, glb", 1.5, 0.3, 0, 2, PROTO_FORMAT_GLB},
         {"budget 60, triquadratic normals, ply", 1.5, 0, 60, 3, PROTO_FORMAT_PLY},
         {"hierarchy, no normals, stl", 1.5, 0.3, 0, 0, PROTO_FORMAT_STL},
+        {"exact, tricubic normals, meshopt glb", 1.5, 0, 0, 4, PROTO_FORMAT_GLB_MESHOPT},
     };
     for (size_t i = 0; tree && i < sizeof requests / sizeof requests[0] && !check_failed(); i++) {
         struct { const iso_tree *tree; const request *r; } context = {tree, &requests[i]};

@@ -1,7 +1,8 @@
-/* test_proto_encode.c: the mesh encoders (PLY, OBJ, STL, Draco, glb) on hand-built meshes with
+/* test_proto_encode.c: the mesh encoders (PLY, OBJ, STL, Draco, glb, meshopt glb) on hand-built meshes with
  * exact expected bytes, Draco round trips through our decoder and Debian's draco_decoder,
  * the glb container read back, garbage and truncated Draco input, and empty meshes. */
 #include <math.h>
+#include <meshoptimizer.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -1173,6 +1174,180 @@ static void test_glb_container(void)
     iso_mesh_free(&m);
 }
 
+/* ---- glb with EXT_meshopt_compression ---- */
+
+/* The three numbers of "key":[a,b,c] in json. */
+static int json_vec3_of(const char *json, const char *key, double v[3])
+{
+    const char *p = strstr(json, key);
+    if (!p)
+        return -1;
+    p += strlen(key);
+    for (int c = 0; c < 3; c++) {
+        char *e;
+        v[c] = strtod(p, &e);
+        p = e + 1;
+    }
+    return 0;
+}
+
+/* The view of an EXT_meshopt_compression object, decoded with meshoptimizer's own decoders
+ * into out (count * stride bytes). */
+static void *meshopt_view(const char *ext, const unsigned char *bin, size_t bin_size,
+                          size_t *count, size_t *stride)
+{
+    double off = json_number(ext, ext, "\"byteOffset\":"), len = json_number(ext, ext, "\"byteLength\":");
+    *stride = (size_t)json_number(ext, ext, "\"byteStride\":");
+    *count = (size_t)json_number(ext, ext, "\"count\":");
+    CHECK(off >= 0 && len > 0 && off + len <= (double)bin_size && (size_t)off % 4 == 0);
+    if (check_failed())
+        return NULL;
+    void *out = malloc(*count * *stride);
+    CHECK(out != NULL);
+    int triangles = strncmp(strstr(ext, "\"mode\":\"") + 8, "TRIANGLES", 9) == 0;
+    int rc = triangles ? meshopt_decodeIndexBuffer(out, *count, *stride, bin + (size_t)off, (size_t)len)
+                       : meshopt_decodeVertexBuffer(out, *count, *stride, bin + (size_t)off, (size_t)len);
+    CHECKF(rc == 0, "meshopt decode: %d", rc);
+    return out;
+}
+
+/* Encodes m, reads every view back with meshoptimizer's decoders, and checks the counts
+ * exactly, indices exactly, positions within half a quantization step (exactly above 16
+ * bits) and normals within their quantization. */
+static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
+{
+    iso_error err;
+    proto_encode_options opt;
+    proto_encode_options_init(&opt);
+    opt.position_bits = qp, opt.normal_bits = qn;
+    unsigned char *buf;
+    size_t size, bin_size;
+    const unsigned char *bin;
+    CHECK_OK(proto_encode_glb_meshopt(m, &opt, &buf, &size, &err), &err);
+    if (!buf)
+        return;
+    char *json = glb_parse(buf, size, &bin, &bin_size);
+    CHECK(json && bin);
+    if (!json || !bin)
+        goto done;
+    CHECK(strstr(json, "\"extensionsRequired\":[\"EXT_meshopt_compression\",\"KHR_mesh_quantization\"]"));
+    CHECK(strstr(json, "{\"EXT_meshopt_compression\":{\"fallback\":true}}"));
+    const char *ext[3] = {NULL, NULL, NULL};
+    const char *from = json;
+    for (int v = 0; v < 3; v++) {
+        ext[v] = strstr(from, "\"EXT_meshopt_compression\":{\"buffer\":0");
+        from = ext[v] ? ext[v] + 1 : from;
+    }
+    const int normals = m->normals != NULL;
+    CHECK(ext[0] && ext[1] && (ext[2] != NULL) == normals);
+    if (check_failed())
+        goto done;
+    size_t nv, ps, nn = 0, ns = 0, ni, is;
+    void *pos = meshopt_view(ext[0], bin, bin_size, &nv, &ps);
+    void *nrm = normals ? meshopt_view(ext[1], bin, bin_size, &nn, &ns) : NULL;
+    void *idx = meshopt_view(ext[normals ? 2 : 1], bin, bin_size, &ni, &is);
+    CHECK_EQ(nv, m->vertex_count);
+    CHECK_EQ(ni, 3 * m->triangle_count);
+    CHECK_EQ(is, m->vertex_count <= 65535 ? 2 : 4);
+    CHECK_EQ(ps, qp > 16 ? 12 : 8);
+    if (check_failed() || !pos || !idx || (normals && !nrm))
+        goto decoded;
+    /* The index codec may start a triangle at another corner; the winding stays. */
+    for (size_t t = 0; t < ni / 3; t++) {
+        uint32_t k[3], *want = m->indices + 3 * t;
+        for (int c = 0; c < 3; c++)
+            k[c] = is == 2 ? ((uint16_t *)idx)[3 * t + c] : ((uint32_t *)idx)[3 * t + c];
+        int r = 0;
+        while (r < 3 && (k[r] != want[0] || k[(r + 1) % 3] != want[1] || k[(r + 2) % 3] != want[2]))
+            r++;
+        if (r == 3) {
+            CHECKF(0, "triangle %zu: %u %u %u, not a rotation of %u %u %u", t, k[0], k[1], k[2],
+                   want[0], want[1], want[2]);
+            break;
+        }
+    }
+    double origin[3] = {0, 0, 0}, scale[3] = {1, 1, 1};
+    if (qp <= 16) {
+        CHECK(json_vec3_of(json, "\"translation\":[", origin) == 0);
+        CHECK(json_vec3_of(json, "\"scale\":[", scale) == 0);
+    }
+    double worst = 0, lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+    for (size_t v = 0; v < nv; v++)
+        for (int a = 0; a < 3; a++) {
+            double q = qp > 16 ? ((float *)pos)[3 * v + a] : ((uint16_t *)pos)[4 * v + a];
+            lo[a] = fmin(lo[a], q), hi[a] = fmax(hi[a], q);
+            worst = fmax(worst, fabs(origin[a] + scale[a] * q - m->positions[3 * v + a]));
+        }
+    CHECKF(qp > 16 ? worst == 0 : worst <= scale[0] * 0.5001 + 1e-5, "qp %d: position off by %g, step %g",
+           qp, worst, scale[0]);
+    double amin[3], amax[3];
+    CHECK(json_vec3_of(json, "\"min\":[", amin) == 0 && json_vec3_of(json, "\"max\":[", amax) == 0);
+    for (int a = 0; a < 3; a++)
+        CHECKF((float)amin[a] == (float)lo[a] && (float)amax[a] == (float)hi[a], "axis %d: accessor %g..%g, data %g..%g", a,
+               amin[a], amax[a], lo[a], hi[a]);
+    if (normals) {
+        CHECK_EQ(ns, qn > 8 ? 8 : 4);
+        double step = qn > 8 ? ldexp(1, 16 - qn) / 32767 : 1.0 / 127, off = 0;
+        for (size_t v = 0; v < nn; v++)
+            for (int a = 0; a < 3; a++) {
+                double x = qn > 8 ? ((int16_t *)nrm)[4 * v + a] / 32767.0 : ((int8_t *)nrm)[4 * v + a] / 127.0;
+                off = fmax(off, fabs(x - m->normals[3 * v + a]));
+            }
+        CHECKF(off <= step * 0.5001 + 1e-6, "qn %d: normal off by %g, step %g", qn, off, step);
+    }
+decoded:
+    free(pos);
+    free(nrm);
+    free(idx);
+done:
+    free(json);
+    free(buf);
+}
+
+static void test_glb_meshopt_round_trip(void)
+{
+    iso_mesh m;
+    make_mesh(&m, tri_pos, NULL, 3, tri_idx, 1);
+    check_glb_meshopt(&m, 14, 10);
+    iso_mesh_free(&m);
+    make_mesh(&m, oct_pos, oct_pos, 6, oct_idx, 8);
+    check_glb_meshopt(&m, 14, 8);
+    iso_mesh_free(&m);
+    /* 70,000 vertices: 32-bit indices. */
+    make_torus(&m, 350, 200, 1);
+    for (int qp = 12; qp <= 20 && !check_failed(); qp += 4)
+        for (int qn = 8; qn <= 12; qn += 2)
+            check_glb_meshopt(&m, qp, qn);
+    iso_mesh_free(&m);
+    make_torus(&m, 100, 60, 0);
+    check_glb_meshopt(&m, 14, 10);
+    iso_mesh_free(&m);
+}
+
+static void test_glb_meshopt_refuses_and_empties(void)
+{
+    iso_error err;
+    unsigned char *buf;
+    size_t size, bin_size;
+    const unsigned char *bin;
+    iso_mesh m;
+    make_mesh(&m, oct_pos, oct_pos, 6, oct_idx, 8);
+    proto_encode_options opt;
+    proto_encode_options_init(&opt);
+    opt.position_bits = 25;
+    CHECK_EQ(proto_encode_glb_meshopt(&m, &opt, &buf, &size, &err), ISO_E_ARGUMENT);
+    CHECK(buf == NULL && size == 0);
+    m.indices[0] = 6;
+    CHECK_EQ(proto_encode_glb_meshopt(&m, NULL, &buf, &size, &err), ISO_E_ARGUMENT);
+    m.triangle_count = 0;
+    CHECK_OK(proto_encode_glb_meshopt(&m, NULL, &buf, &size, &err), &err);
+    char *json = buf ? glb_parse(buf, size, &bin, &bin_size) : NULL;
+    CHECK(json && !bin && strstr(json, "\"scenes\":[{}]"));
+    free(json);
+    free(buf);
+    iso_mesh_free(&m);
+}
+
 /* ---- empty meshes ---- */
 
 static void test_empty_mesh_gives_valid_files(void)
@@ -1263,6 +1438,8 @@ int main(void)
     CHECK_RUN(test_draco_decoder_refuses_garbage);
     CHECK_RUN(test_draco_decoder_survives_corruption);
     CHECK_RUN(test_glb_container);
+    CHECK_RUN(test_glb_meshopt_round_trip);
+    CHECK_RUN(test_glb_meshopt_refuses_and_empties);
     CHECK_RUN(test_empty_mesh_gives_valid_files);
     return check_finish();
 }
