@@ -13,7 +13,7 @@
 void proto_pipeline_request_init(proto_pipeline_request *req)
 {
     *req = (proto_pipeline_request){.extract = {.space = ISO_SPACE_WORLD}, .normals = 4,
-                                    .format = PROTO_FORMAT_DRACO};
+                                    .distance = -1, .format = PROTO_FORMAT_DRACO};
     proto_encode_options_init(&req->encode);
 }
 
@@ -22,9 +22,86 @@ void proto_pipeline_result_free(proto_pipeline_result *res)
     if (!res)
         return;
     iso_mesh_free(&res->mesh);
+    iso_mesh_chain_destroy(res->chain_built);
+    res->chain_built = NULL;
     free(res->bytes);
     res->bytes = NULL;
     res->size = 0;
+}
+
+static double voxel_size(const iso_volume *vol, const proto_pipeline_request *req)
+{
+    return req->extract.space == ISO_SPACE_INDEX ? 1 : iso_vol_min_spacing(vol);
+}
+
+/* Does a budget need the chain: the mesh at the faithful tolerance (core/extract) is over
+ * it? Else the ladder answers it without simplification. */
+static int budget_needs_chain(const iso_tree *tree, const proto_pipeline_request *req,
+                              proto_pipeline_result *res, int *needs, iso_error *err)
+{
+    res->faithful_triangles = req->faithful_triangles;
+    if (!req->faithful_triangles) {
+        iso_extract_params p = req->extract;
+        p.tolerance = iso_budget_faithful_tolerance(tree->vol, p.tolerance);
+        int rc = iso_extract(tree, &p, &res->mesh, &res->stats, err);
+        if (rc)
+            return rc;
+        res->faithful_triangles = res->stats.triangles;
+    }
+    *needs = res->faithful_triangles > req->budget;
+    return 0;
+}
+
+/* Step 2 from the chain: the level that answers, copied out; built first when the caller
+ * has none. A budget below the coarsest level simplifies that level further. */
+static int from_chain(const iso_tree *tree, const iso_volume *vol,
+                      const proto_pipeline_request *req, proto_pipeline_result *res, iso_error *err)
+{
+    const iso_mesh_chain *chain = req->chain;
+    int rc = 0;
+    if (!chain) {
+        if ((rc = iso_extract(tree, &req->extract, &res->mesh, &res->stats, err)) ||
+            (rc = iso_mesh_chain_build(&res->mesh, voxel_size(vol, req), req->extract.threads,
+                                       &res->chain_built, err)))
+            return rc;
+        chain = res->chain_built;
+    }
+    int k = req->budget ? iso_mesh_chain_pick_budget(chain, req->budget)
+                        : iso_mesh_chain_pick_distance(chain, req->distance);
+    if ((rc = iso_mesh_chain_mesh(chain, k, &res->mesh, err)))
+        return rc;
+    res->chain_level = k;
+    res->chain_levels = (size_t)chain->levels;
+    res->exact_triangles = chain->level[0].triangle_count;
+    res->distance = chain->level[k].distance;
+    res->distance_measured = 1;
+    /* A level past 0 was simplified by meshoptimizer: its estimate, the largest of the
+     * steps', stands beside the measured distance. */
+    double estimate = 0;
+    for (int j = 1; j <= k; j++)
+        estimate = fmax(estimate, chain->level[j].estimate);
+    res->chosen = (iso_budget_result){
+        .tolerance = req->extract.tolerance, .fits = 1, .simplified = k > 0,
+        .simplify = {.triangles_in = chain->level[0].triangle_count,
+                     .vertices_in = chain->level[0].vertex_count, .error = estimate,
+                     .error_voxels = estimate / chain->voxel_size, .scale = 1}};
+    if (req->budget && res->mesh.triangle_count > req->budget) {
+        iso_mesh exact = {.positions = chain->positions, .vertex_count = chain->vertex_count,
+                          .indices = chain->level[0].indices,
+                          .triangle_count = chain->level[0].triangle_count};
+        iso_simplify_params sp = {.target_triangles = req->budget, .target_error = INFINITY,
+                                  .lock_border = 1, .voxel_size = voxel_size(vol, req),
+                                  .threads = req->extract.threads};
+        if ((rc = iso_simplify(&res->mesh, &sp, &res->chosen.simplify, err)) ||
+            (rc = iso_mesh_distance_compute(&exact, &res->mesh, ISO_CHAIN_SPACING_VOXELS * sp.voxel_size,
+                                            req->extract.threads, &res->distance, err)))
+            return rc;
+        res->chosen.simplified = 1;
+        res->chosen.fits = res->mesh.triangle_count <= req->budget;
+    }
+    res->stats.triangles = res->mesh.triangle_count;
+    res->stats.vertices = res->mesh.vertex_count;
+    return 0;
 }
 
 /* Step 1: the exact surface, the hierarchy's within the tolerance, or a budget's. */
@@ -56,6 +133,8 @@ static int simplify(const iso_volume *vol, const proto_pipeline_request *req,
         .voxel_size = req->extract.space == ISO_SPACE_INDEX ? 1 : iso_vol_min_spacing(vol)};
     int rc = iso_simplify(&res->mesh, &sp, &res->chosen.simplify, err);
     res->chosen.simplified = rc == 0;
+    res->distance = res->chosen.simplify.distance;
+    res->distance_measured = res->chosen.simplify.measured;
     res->stats.triangles = res->mesh.triangle_count;
     res->stats.vertices = res->mesh.vertex_count;
     return rc;
@@ -158,9 +237,17 @@ int proto_pipeline_run(const iso_tree *tree, const iso_volume *vol,
     iso_mesh_init(&res->mesh);
     res->draco_speed = -1;
     double t0 = iso_clock_ms();
-    int rc = extract(tree, vol, req, res, err);
+    res->chain_level = -1;
+    int rc = 0, chained = !req->full_scan && req->distance >= 0;
+    if (!req->full_scan && req->budget && req->budget_chain && !req->budget_ladder_only &&
+        !(rc = budget_needs_chain(tree, req, res, &chained, err)) && !chained)
+        iso_mesh_clear(&res->mesh);
+    if (!rc && !chained)
+        rc = extract(tree, vol, req, res, err);
     double t1 = iso_clock_ms();
-    if (!rc && req->simplify)
+    if (!rc && chained)
+        rc = from_chain(tree, vol, req, res, err);
+    else if (!rc && req->simplify)
         rc = simplify(vol, req, res, err);
     res->extract_ms = t1 - t0;
     res->simplify_ms = iso_clock_ms() - t1;

@@ -3,7 +3,9 @@
  *
  *   1. extract: exact, within a value tolerance, or under a triangle budget (the ladder,
  *      then simplification when the ladder cannot meet it);
- *   2. simplify: to an explicit triangle count, when asked;
+ *   2. simplify: to an explicit triangle count, when asked; or answer from the surface's
+ *      simplification chain (mesh.h) for a geometric tolerance (distance) or for a budget
+ *      the faithful tolerances cannot meet;
  *   3. refuse: a mesh over the caller's triangle limit stops here (ISO_E_LIMIT), before
  *      the steps that cost several times the extraction's memory;
  *   4. normals, and beside them on a thread of their own the measures (edge census, area,
@@ -28,6 +30,15 @@ typedef struct proto_pipeline_request {
     size_t budget;              /* at most this many triangles; 0: no budget */
     int budget_ladder_only;     /* 1: the tolerance ladder alone, never simplification */
     size_t simplify;            /* simplify to this many triangles; 0: no */
+    double distance;            /* >= 0: the smallest chain level within this measured p99
+                                 * distance, in position units; < 0 (the default): none */
+    int budget_chain;           /* 1: a budget the faithful ladder cannot meet is answered
+                                 * from the chain instead of a fresh simplification */
+    const iso_mesh_chain *chain;/* the chain of (level, tolerance, cap, space) when the
+                                 * caller has one; NULL: built here when needed */
+    size_t faithful_triangles;  /* the mesh at the faithful tolerance has this many
+                                 * triangles, when the caller knows (a budget then needs no
+                                 * extraction to choose); 0: unknown */
     size_t max_triangles;       /* refuse a larger mesh (ISO_E_LIMIT); 0: no limit */
     int normals;                /* B-spline order: 0 none, 2, 3 or 4 */
     int measure;                /* 1: census, area, enclosed volume */
@@ -47,6 +58,15 @@ typedef struct proto_pipeline_result {
     double area;                /* in the mesh's units squared */
     double enclosed_volume;     /* |signed volume| of a closed mesh, else 0 */
     int draco_speed;            /* the Draco speed used (auto resolved), -1 for the others */
+    int chain_level;            /* the chain level answered (0: exact), -1: not from a chain */
+    size_t chain_levels;        /* how many levels that chain has */
+    size_t exact_triangles;     /* that chain's level 0 */
+    size_t faithful_triangles;  /* as in the request, found here when a budget needed it */
+    int distance_measured;      /* `distance` below holds the final mesh's measured distance
+                                 * from the surface of req->extract (a = that surface) */
+    iso_mesh_distance distance;
+    iso_mesh_chain *chain_built;/* a chain built by this run (owned; the caller may take it
+                                 * and set this to NULL, else result_free destroys it) */
     double extract_ms, simplify_ms, normals_ms, measure_ms, encode_ms;
 } proto_pipeline_result;
 

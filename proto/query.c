@@ -98,10 +98,10 @@ const char *proto_format_extension(proto_format format) { return format_extensio
 
 /* The parameters, in the order the key lists them. */
 enum { P_LEVEL, P_TOLERANCE, P_NORMALS, P_FORMAT, P_QP, P_QN, P_SPEED, P_BUDGET, P_CAP, P_MEASURES,
-       P_COUNT };
+       P_DISTANCE, P_COUNT };
 static const char *const param_names[P_COUNT] = {"level", "tolerance", "normals", "format",
                                                  "qp", "qn", "speed", "budget", "cap",
-                                                 "measures"};
+                                                 "measures", "distance"};
 
 static int parse_one(int which, const char *value, proto_mesh_request *out, proto_problem *problem)
 {
@@ -117,13 +117,16 @@ static int parse_one(int which, const char *value, proto_mesh_request *out, prot
         out->level += 0.0;
         return 0;
     case P_TOLERANCE:
-        if (parse_decimal(key, value, &out->tolerance, problem))
+    case P_DISTANCE: {
+        double *v = which == P_TOLERANCE ? &out->tolerance : &out->distance;
+        if (parse_decimal(key, value, v, problem))
             return -1;
-        if (!(out->tolerance >= 0) || out->tolerance > PROTO_TOLERANCE_MAX)
-            return proto_problem_set(problem, 400, key, "tolerance must be from 0 to %g, not %s",
+        if (!(*v >= 0) || *v > PROTO_TOLERANCE_MAX)
+            return proto_problem_set(problem, 400, key, "%s must be from 0 to %g, not %s", key,
                                      PROTO_TOLERANCE_MAX, shown(value, buf, sizeof buf));
-        out->tolerance += 0.0; /* -0 and 0 are one request */
+        *v += 0.0; /* -0 and 0 are one request */
         return 0;
+    }
     case P_NORMALS:
         out->normals = value ? iso_normals_order_from_name(value) : -1;
         if (out->normals < 0)
@@ -188,7 +191,7 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
                                 .format = PROTO_FORMAT_DRACO,
                                 .position_bits = PROTO_POSITION_BITS_DEFAULT,
                                 .normal_bits = PROTO_NORMAL_BITS_DEFAULT,
-                                .speed = PROTO_DRACO_SPEED_DEFAULT};
+                                .speed = PROTO_DRACO_SPEED_DEFAULT, .distance = -1};
     for (size_t i = 0; i < count; i++) {
         const char *key = params[i].key ? params[i].key : "";
         int which = 0;
@@ -197,7 +200,7 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
         if (which == P_COUNT)
             return proto_problem_set(problem, 400, NULL,
                                      "unknown parameter \"%s\"; the mesh takes level, tolerance, "
-                                     "normals, format, qp, qn, speed, budget, cap and measures",
+                                     "normals, format, qp, qn, speed, budget, cap, measures and distance",
                                      shown(key, buf, sizeof buf));
         if (seen[which]++)
             return proto_problem_set(problem, 400, key, "%s is given more than once", key);
@@ -206,6 +209,9 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
     }
     if (!seen[P_LEVEL])
         return proto_problem_set(problem, 400, "level", "level is required, e.g. ?level=700");
+    if (seen[P_DISTANCE] && seen[P_BUDGET])
+        return proto_problem_set(problem, 400, "distance", "distance and budget each choose the "
+                                 "mesh; give one of them");
     return 0;
 }
 
@@ -227,5 +233,11 @@ size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t s
                      format_names[req->format], quantized ? req->position_bits : PROTO_POSITION_BITS_DEFAULT,
                      quantized && req->normals ? req->normal_bits : 0, speed, req->budget,
                      req->cap ? "true" : "false", req->measures ? "true" : "false");
+    /* distance is spelt only when asked: keys of requests without it stay as they were. */
+    if (n >= 0 && req->distance >= 0) {
+        size_t used = (size_t)n < size ? (size_t)n : size;
+        int more = snprintf(buf ? buf + used : NULL, size - used, "&distance=%.17g", req->distance);
+        n = more < 0 ? more : n + more;
+    }
     return n < 0 ? 0 : (size_t)n;
 }

@@ -43,6 +43,7 @@ typedef struct proto_mesh_request {
     int normal_bits;       /* qn, default 10 */
     int speed;             /* Draco speed 0..10, or PROTO_DRACO_SPEED_AUTO (-1, default) */
     uint32_t budget;       /* triangles; 0 = no budget */
+    double distance;       /* geometric tolerance, mm (measured p99 both ways); -1 = none */
     int cap;               /* cap=true: closed at the volume's border; default false */
     int measures;          /* measures=true: area, enclosed volume and the edge census in the
                             * headers; they cost more than the extraction, so only on request */

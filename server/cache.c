@@ -5,6 +5,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "mesh/mesh.h"
+
 #include "base/base.h"
 
 struct srv_cache_item {
@@ -27,6 +29,7 @@ srv_body *srv_body_create(unsigned char *data, size_t size)
     body->size = size;
     body->budget_fits = -1;
     body->draco_speed = -1;
+    body->chain_level = -1;
     return body;
 }
 
@@ -43,6 +46,7 @@ size_t srv_body_bytes(const srv_body *body)
 void srv_body_release(srv_body *body)
 {
     if (body && atomic_fetch_sub(&body->refs, 1) == 1) {
+        iso_mesh_chain_destroy(body->chain);
         free(body->data);
         free(body->gzip_data);
         free(body);

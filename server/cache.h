@@ -29,6 +29,14 @@ typedef struct srv_body {
     int budget_fits;                /* -1: no budget asked; else 0 or 1 */
     int simplified;                 /* the budget was met by meshoptimizer (mesh/mesh.h) */
     double simplify_error_mm, simplify_error_voxels; /* its error estimate, when simplified */
+    int distance_measured;          /* the four below were measured (mesh.h) */
+    double distance_mm, distance_max_mm; /* p99 both ways, and max, from the exact surface */
+    double distance_voxels;         /* distance_mm in voxels (the smallest spacing) */
+    int chain_level;                /* the chain level answered (0: exact), -1: none */
+    size_t exact_triangles;         /* the exact surface's triangles, when from a chain */
+    struct iso_mesh_chain *chain;   /* a cached simplification chain (owned), no data;
+                                     * triangles then counts the faithful tolerance's mesh
+                                     * (pipeline.h), 0 if unknown */
 } srv_body;
 
 /* A body owning data (malloc'd, taken over), with one reference. NULL on no memory (data

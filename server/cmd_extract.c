@@ -60,6 +60,23 @@ static json_t *distance_json(const iso_mesh_distance *d)
                      "samples_simplified", (json_int_t)d->samples_b, "ms", d->ms);
 }
 
+/* Which level of the simplification chain answered, and the whole chain as measured. */
+static json_t *chain_json(const proto_pipeline_result *res)
+{
+    const iso_mesh_chain *c = res->chain_built;
+    json_t *levels = json_array();
+    for (int k = 0; c && levels && k < c->levels; k++)
+        json_array_append_new(levels, json_pack(
+            "{s:I, s:f, s:f, s:f, s:I, s:f, s:f}", "triangles", (json_int_t)c->level[k].triangle_count,
+            "p99", c->level[k].distance.p99, "max", c->level[k].distance.max,
+            "estimate", c->level[k].estimate, "nonmanifold_edges", (json_int_t)c->level[k].nonmanifold_edges,
+            "simplify_ms", c->level[k].simplify_ms, "measure_ms", c->level[k].measure_ms));
+    return json_pack("{s:i, s:I, s:I, s:f, s:o}", "level", res->chain_level,
+                     "levels", (json_int_t)res->chain_levels, "exact_triangles",
+                     (json_int_t)res->exact_triangles, "build_ms", c ? c->build_ms : 0.0,
+                     "built", levels ? levels : json_null());
+}
+
 int srv_cmd_extract(int argc, char **argv)
 {
     srv_open_options opt = {.want_tree = 1};
@@ -68,6 +85,7 @@ int srv_cmd_extract(int argc, char **argv)
     int as_json = 0, have_level = 0, full_scan = 0, normals = 4; /* tricubic by default */
     int no_simplify = 0;
     double budget = 0, simplify = 0; /* triangles; 0: none */
+    double distance = -1;            /* position units; < 0: none */
     for (int i = 0; i < argc; i++) {
         const char *a = argv[i], *value = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--json"))
@@ -86,7 +104,11 @@ int srv_cmd_extract(int argc, char **argv)
                 return srv_fail("extract: %s '%s' must be a whole number of triangles from 1", a, value);
             i++;
         }
-        else if (!strcmp(a, "--threads") && value) {
+        else if (!strcmp(a, "--distance") && value) {
+            if (srv_parse_number(value, &distance) || distance < 0)
+                return srv_fail("extract: --distance '%s' must be a finite number >= 0", value);
+            i++;
+        } else if (!strcmp(a, "--threads") && value) {
             if (srv_parse_threads("extract", argv[++i], &params.threads))
                 return 1;
             opt.threads = params.threads;
@@ -117,12 +139,15 @@ int srv_cmd_extract(int argc, char **argv)
     }
     if (!opt.path || !have_level)
         return srv_fail("extract: usage: isoserve extract VOLUME --level L [--tolerance T] [--cap] [--threads N] "
-                        "[--budget N [--no-simplify]] [--simplify N] "
+                        "[--budget N [--no-simplify]] [--simplify N] [--distance D] "
                         "[--normals none|trilinear|triquadratic|tricubic] [-o OUT.ply|.stl|.obj|.drc|.glb|.meshopt.glb] [--json]");
     if (full_scan && (params.cap || budget))
         return srv_fail("extract: %s needs the hierarchy; drop --full-scan", params.cap ? "--cap" : "--budget");
     if (budget && simplify)
         return srv_fail("extract: --budget chooses its own simplification; drop --simplify");
+    if (distance >= 0 && (budget || simplify || full_scan))
+        return srv_fail("extract: --distance chooses the mesh itself; drop %s",
+                        budget ? "--budget" : simplify ? "--simplify" : "--full-scan");
     if (no_simplify && !budget)
         return srv_fail("extract: --no-simplify goes with --budget");
     int format = format_of(out);
@@ -139,6 +164,8 @@ int srv_cmd_extract(int argc, char **argv)
     req.budget = (size_t)budget;
     req.budget_ladder_only = no_simplify;
     req.simplify = (size_t)simplify;
+    req.distance = distance;
+    req.budget_chain = !no_simplify;
     req.normals = normals;
     req.measure = as_json;
     req.format = (proto_format)format;
@@ -192,6 +219,10 @@ int srv_cmd_extract(int argc, char **argv)
         if (doc && chosen.simplified && chosen.simplify.measured)
             json_object_set_new(json_object_get(doc, "simplify"), "distance",
                                 distance_json(&chosen.simplify.distance));
+        if (doc && res.distance_measured)
+            json_object_set_new(doc, "distance", distance_json(&res.distance));
+        if (doc && res.chain_level >= 0)
+            json_object_set_new(doc, "chain", chain_json(&res));
         if (doc && watertight)
             json_object_update(doc, watertight);
         json_decref(watertight);

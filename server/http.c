@@ -39,7 +39,9 @@ static const char expose_headers[] =
     "ETag, X-Iso-Triangles, X-Iso-Vertices, X-Iso-Cells-Visited, X-Iso-Extract-Ms, "
     "X-Iso-Normals-Ms, X-Iso-Measure-Ms, X-Iso-Encode-Ms, X-Iso-Draco-Speed, X-Iso-Error-Bound, "
     "X-Iso-Tolerance, X-Iso-Area-Mm2, X-Iso-Volume-Mm3, X-Iso-Budget-Fits, X-Iso-Simplified, "
-    "X-Iso-Simplify-Error-Mm, X-Iso-Simplify-Error-Voxels, X-Iso-Cache, X-Iso-Replica, X-Iso-Load";
+    "X-Iso-Simplify-Error-Mm, X-Iso-Simplify-Error-Voxels, X-Iso-Distance-Mm, "
+    "X-Iso-Distance-Max-Mm, X-Iso-Distance-Voxels, X-Iso-Chain-Level, X-Iso-Exact-Triangles, "
+    "X-Iso-Cache, X-Iso-Replica, X-Iso-Load";
 
 /* ---------------------------------------------------------------- responses */
 
@@ -411,6 +413,15 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
         add_number(r, "X-Iso-Draco-Speed", "%.0f", body->draco_speed);
     add_number(r, "X-Iso-Error-Bound", "%.9g", body->error_bound);
     add_number(r, "X-Iso-Tolerance", "%.17g", body->tolerance);
+    if (body->distance_measured) {
+        add_number(r, "X-Iso-Distance-Mm", "%.6g", body->distance_mm);
+        add_number(r, "X-Iso-Distance-Max-Mm", "%.6g", body->distance_max_mm);
+        add_number(r, "X-Iso-Distance-Voxels", "%.6g", body->distance_voxels);
+    }
+    if (body->chain_level >= 0) {
+        add_number(r, "X-Iso-Chain-Level", "%.0f", (double)body->chain_level);
+        add_number(r, "X-Iso-Exact-Triangles", "%.0f", (double)body->exact_triangles);
+    }
     if (body->measured) {
         add_number(r, "X-Iso-Measure-Ms", "%.3f", body->measure_ms);
         add_number(r, "X-Iso-Area-Mm2", "%.6g", body->area_mm2);

@@ -2,6 +2,7 @@
  * and its facts into the cache (see mesh_job.h). */
 #include "mesh_job.h"
 
+#include <stdio.h>
 #include <stdlib.h>
 
 #include "base/base.h"
@@ -26,6 +27,8 @@ static void pipeline_request(const srv_mesh_job *job, proto_pipeline_request *re
     req->extract.tolerance = r->tolerance;
     req->extract.cap = r->cap;
     req->budget = r->budget;
+    req->budget_chain = 1;
+    req->distance = r->distance;
     req->max_triangles = job->max_triangles;
     req->normals = r->normals;
     req->measure = r->measures;
@@ -76,6 +79,32 @@ static void keep_gzip(srv_body *body, proto_format format)
     body->gzip_ms = iso_clock_ms() - start;
 }
 
+/* The cache key of the simplification chain a request would use: one per (volume,
+ * level, tolerance, cap), whatever the distance, budget or format. */
+static void chain_key(const srv_mesh_job *job, char *key, size_t size)
+{
+    const proto_mesh_request *r = &job->request;
+    snprintf(key, size, "chain:%s/%s?level=%.17g&tolerance=%.17g&cap=%d", job->volume->entry->id,
+             job->volume->version, r->level, r->tolerance, r->cap);
+}
+
+/* A chain the run built goes into the cache, in a body of no bytes that owns it and
+ * weighs what it holds; without memory for that, it is dropped (a cache is optional). */
+static void keep_chain(const srv_mesh_job *job, const char *key, proto_pipeline_result *res)
+{
+    if (!job->cache || !res->chain_built)
+        return;
+    srv_body *holder = srv_body_create(NULL, 0);
+    if (!holder)
+        return;
+    holder->chain = res->chain_built;
+    holder->size = res->chain_built->bytes;
+    holder->triangles = res->faithful_triangles;
+    res->chain_built = NULL;
+    srv_cache_put(job->cache, key, holder);
+    srv_body_release(holder);
+}
+
 srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
 {
     srv_mesh_job *job = arg;
@@ -83,9 +112,20 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     proto_pipeline_result res;
     iso_error err = {0};
     pipeline_request(job, &req);
+    char key[256] = "";
+    srv_body *chain = NULL;
+    if (job->cache && (req.distance >= 0 || req.budget)) {
+        chain_key(job, key, sizeof key);
+        if ((chain = srv_cache_get(job->cache, key))) {
+            req.chain = chain->chain;
+            req.faithful_triangles = chain->triangles;
+        }
+    }
     int rc = proto_pipeline_run(job->volume->tree, job->volume->vol, &req, &res, &err);
+    srv_body_release(chain);
     if (rc)
         return failed(job, rc, &err, problem);
+    keep_chain(job, key, &res);
     srv_body *body = srv_body_create(res.bytes, res.size); /* takes the bytes, even failing */
     res.bytes = NULL;
     if (!body) {
@@ -110,6 +150,12 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     body->simplify_error_mm = res.chosen.simplify.error;
     body->simplify_error_voxels = res.chosen.simplify.error_voxels;
     body->measured = res.measured;
+    body->distance_measured = res.distance_measured;
+    body->distance_mm = res.distance.p99;
+    body->distance_max_mm = res.distance.max;
+    body->distance_voxels = res.distance.p99 / iso_vol_min_spacing(job->volume->vol);
+    body->chain_level = res.chain_level;
+    body->exact_triangles = res.exact_triangles;
     body->area_mm2 = res.area;
     body->closed = res.census.closed;
     body->volume_mm3 = res.enclosed_volume;

@@ -216,6 +216,8 @@ typedef struct iso_simplify_params {
     int measure;             /* 1: measure the distance between input and result (result->
                               * distance, iso_mesh_distance_compute, samples voxel_size apart) */
     int threads;             /* for the measure: 0 = all cores */
+    int keep_vertices;       /* 1: keep unused vertices (indices stay valid for the input's
+                              * positions); 0: drop them */
 } iso_simplify_params;
 
 typedef struct iso_simplify_result {
@@ -244,5 +246,54 @@ typedef struct iso_simplify_result {
  * own allocations included). Safe on any mesh whose indices are below vertex_count. */
 int iso_simplify(iso_mesh *mesh, const iso_simplify_params *params,
                  iso_simplify_result *result, iso_error *err);
+
+/* A simplification chain: one surface at a few levels of detail, each measured.
+ *
+ * Level 0 is the surface given (the exact one); level k halves level k - 1's triangles
+ * (iso_simplify with borders locked: 50%, 25%, 12.5%, ... of level 0), each from the one
+ * before, so the chain costs little more than its first step. Every level indexes the one
+ * position array, a copy of level 0's: every vertex of every level is a vertex of the
+ * exact surface, so its value error is the exact surface's. Each level carries its
+ * distance from level 0, measured (iso_mesh_distance_compute, a = level 0, samples three
+ * voxels apart), and meshoptimizer's estimate beside it. A built chain is read-only:
+ * any number of threads may pick from it and copy meshes out of it at once. */
+#define ISO_CHAIN_LEVELS 6
+#define ISO_CHAIN_SPACING_VOXELS 3 /* the measures' sample spacing */
+
+typedef struct iso_mesh_chain_level {
+    uint32_t *indices;            /* 3 * triangle_count, into the chain's positions */
+    size_t triangle_count, vertex_count;
+    iso_mesh_distance distance;   /* from level 0; all zero for level 0 */
+    double estimate;              /* meshoptimizer's error for the step, position units */
+    size_t nonmanifold_edges, folds_dropped;
+    double simplify_ms, measure_ms;
+} iso_mesh_chain_level;
+
+typedef struct iso_mesh_chain {
+    float *positions;             /* level 0's, 3 * vertex_count */
+    size_t vertex_count;
+    iso_mesh_chain_level level[ISO_CHAIN_LEVELS + 1];
+    int levels;                   /* 1 + the levels made (fewer for tiny surfaces) */
+    double voxel_size;            /* position units per voxel */
+    size_t bytes;                 /* what it holds in memory */
+    double build_ms;
+} iso_mesh_chain;
+
+/* Builds the chain of `exact` (copied; the caller keeps its mesh). voxel_size: position
+ * units per voxel (> 0). threads: for the measures, 0 = all cores. On success *out is a
+ * chain for iso_mesh_chain_destroy. Cost: the simplifications and one measure per level;
+ * memory about twice the exact mesh's. Returns 0, ISO_E_ARGUMENT or ISO_E_NOMEM. */
+int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
+                         iso_mesh_chain **out, iso_error *err);
+void iso_mesh_chain_destroy(iso_mesh_chain *chain);
+/* The level with the fewest triangles whose measured p99 distance is at most `distance`
+ * (0, the exact surface, when none is). O(levels). */
+int iso_mesh_chain_pick_distance(const iso_mesh_chain *chain, double distance);
+/* The finest level with at most `triangles` triangles, else the coarsest. O(levels). */
+int iso_mesh_chain_pick_budget(const iso_mesh_chain *chain, size_t triangles);
+/* Copies level k into mesh (its arrays reused or grown; normals dropped), its vertices
+ * in the exact surface's order (level 0 comes out as the surface went in). O(level's triangles) plus a table of the chain's vertex count.
+ * Returns 0, ISO_E_ARGUMENT (no such level) or ISO_E_NOMEM (mesh left empty). */
+int iso_mesh_chain_mesh(const iso_mesh_chain *chain, int k, iso_mesh *mesh, iso_error *err);
 
 #endif

@@ -159,7 +159,8 @@ int iso_simplify(iso_mesh *mesh, const iso_simplify_params *params,
     memcpy(mesh->indices, indices, 3 * triangles * sizeof *indices);
     free(indices);
     mesh->triangle_count = triangles;
-    iso_mesh_drop_unused_into(mesh, remap); /* PASS 5 */
+    if (!params->keep_vertices)
+        iso_mesh_drop_unused_into(mesh, remap); /* PASS 5 */
     free(remap);
     describe(mesh, r);
     r->error = (double)achieved * r->scale;

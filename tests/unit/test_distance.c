@@ -5,7 +5,8 @@
  * sphere against its exact surface, where every sample's distance is found again here by
  * brute force with a point-to-triangle distance of another construction (projection onto
  * the plane, else the nearest of the three sides) and the weighted percentile by a full
- * sort: the maxima and the 99th percentiles must agree to float rounding. */
+ * sort: the maxima and the 99th percentiles must agree to float rounding. Then the
+ * simplification chain of a torus, level by level, against the same brute force. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -296,11 +297,107 @@ static void test_simplified_sphere_matches_brute_force(void)
     iso_vol_destroy(vol);
 }
 
+/* The chain of a torus (genus 1): level k has at most 1/2^k of the exact triangles, every
+ * level is closed with the torus's Euler characteristic, every vertex of every level is
+ * bit for bit one of the exact surface's, each level's stored distance is what brute force
+ * measures, and the picks choose as documented. */
+static long euler_of(const iso_mesh *m)
+{
+    iso_mesh_edges e;
+    CHECK(iso_mesh_count_edges(m, &e) == 0);
+    return (long)m->vertex_count - (long)e.edges + (long)m->triangle_count;
+}
+
+static int by_position(const void *pa, const void *pb)
+{
+    return memcmp(pa, pb, 3 * sizeof(float));
+}
+
+static void test_chain_levels_are_measured_and_closed(void)
+{
+    iso_volume *vol = NULL;
+    iso_error err;
+    CHECK_OK(iso_field_load("field:torus:32", NULL, &vol, &err), &err);
+    if (!vol)
+        return;
+    iso_vol_update_stats(vol);
+    iso_tree *tree = surface_build(vol);
+    iso_mesh exact, m;
+    iso_mesh_init(&exact);
+    iso_mesh_init(&m);
+    iso_extract_stats st;
+    iso_extract_params xp = {.level = 1.0, .space = ISO_SPACE_INDEX};
+    CHECK_OK(iso_extract(tree, &xp, &exact, &st, &err), &err);
+    CHECKF(exact.triangle_count >= 2048, "%zu triangles", exact.triangle_count);
+    iso_mesh_chain *chain = NULL;
+    CHECK_EQ(iso_mesh_chain_build(&exact, 0, 0, &chain, &err), ISO_E_ARGUMENT);
+    CHECK_OK(iso_mesh_chain_build(&exact, 1, 0, &chain, &err), &err);
+    if (!chain)
+        return;
+    CHECK_EQ(chain->levels, ISO_CHAIN_LEVELS + 1);
+    float *sorted = malloc(3 * exact.vertex_count * sizeof *sorted);
+    memcpy(sorted, exact.positions, 3 * exact.vertex_count * sizeof *sorted);
+    qsort(sorted, exact.vertex_count, 3 * sizeof(float), by_position);
+    for (int k = 0; k < chain->levels && !check_failed(); k++) {
+        const iso_mesh_chain_level *lv = &chain->level[k];
+        CHECK_OK(iso_mesh_chain_mesh(chain, k, &m, &err), &err);
+        CHECK_EQ(m.triangle_count, lv->triangle_count);
+        CHECK_EQ(m.vertex_count, lv->vertex_count);
+        CHECKF(lv->triangle_count <= exact.triangle_count >> k &&
+               lv->triangle_count >= (exact.triangle_count >> k) * 8 / 10,
+               "level %d: %zu triangles of %zu", k, lv->triangle_count, exact.triangle_count);
+        iso_census c;
+        CHECK_OK(iso_census_compute(vol, &m, ISO_SPACE_INDEX, &c, &err), &err);
+        CHECKF(c.closed, "level %d: open %zu, non-manifold %zu, misoriented %zu", k, c.open_edges,
+               c.nonmanifold_edges, c.misoriented_edges);
+        CHECK_EQ(euler_of(&m), 0);
+        for (size_t v = 0; v < m.vertex_count; v++)
+            CHECKF(bsearch(m.positions + 3 * v, sorted, exact.vertex_count, 3 * sizeof(float), by_position),
+                   "level %d: vertex %zu is not an exact vertex", k, v);
+        if (k == 0) {
+            CHECK(!memcmp(m.positions, exact.positions, 3 * exact.vertex_count * sizeof(float)));
+            CHECK(!memcmp(m.indices, exact.indices, 3 * exact.triangle_count * sizeof(uint32_t)));
+            CHECK(lv->distance.p99 == 0 && lv->distance.max == 0);
+            continue;
+        }
+        double p99, max;
+        size_t n;
+        brute_one_way(&exact, &m, ISO_CHAIN_SPACING_VOXELS, &p99, &max, &n);
+        CHECK_NEAR(lv->distance.p99_ab, p99, 1e-5);
+        CHECK_NEAR(lv->distance.max_ab, max, 1e-5);
+        brute_one_way(&m, &exact, ISO_CHAIN_SPACING_VOXELS, &p99, &max, &n);
+        CHECK_NEAR(lv->distance.p99_ba, p99, 1e-5);
+        CHECK_NEAR(lv->distance.max_ba, max, 1e-5);
+        CHECKF(lv->distance.p99 > chain->level[k - 1].distance.p99 * 0.9,
+               "level %d p99 %g after %g", k, lv->distance.p99, chain->level[k - 1].distance.p99);
+    }
+    /* Picks: the coarsest level within a distance; the finest within a budget. */
+    for (int k = 1; k < chain->levels; k++) {
+        int j = iso_mesh_chain_pick_distance(chain, chain->level[k].distance.p99);
+        CHECK(chain->level[j].distance.p99 <= chain->level[k].distance.p99);
+        CHECK(chain->level[j].triangle_count <= chain->level[k].triangle_count);
+        CHECK_EQ(iso_mesh_chain_pick_budget(chain, chain->level[k].triangle_count), k);
+        CHECK_EQ(iso_mesh_chain_pick_budget(chain, chain->level[k].triangle_count - 1),
+                 k + 1 < chain->levels ? k + 1 : k);
+    }
+    CHECK_EQ(iso_mesh_chain_pick_distance(chain, 0), 0);
+    CHECK_EQ(iso_mesh_chain_pick_distance(chain, 1e9), chain->levels - 1);
+    CHECK_EQ(iso_mesh_chain_pick_budget(chain, exact.triangle_count), 0);
+    CHECK_EQ(iso_mesh_chain_mesh(chain, chain->levels, &m, &err), ISO_E_ARGUMENT);
+    free(sorted);
+    iso_mesh_chain_destroy(chain);
+    iso_mesh_free(&m);
+    iso_mesh_free(&exact);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_parallel_squares_are_a_quarter_apart);
     CHECK_RUN(test_square_against_its_half);
     CHECK_RUN(test_point_against_each_feature);
     CHECK_RUN(test_simplified_sphere_matches_brute_force);
+    CHECK_RUN(test_chain_levels_are_measured_and_closed);
     return check_finish();
 }

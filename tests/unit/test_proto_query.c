@@ -26,6 +26,37 @@ static int parse(const proto_param *p, size_t n, proto_mesh_request *r, proto_pr
     return proto_mesh_request_parse(p, n, r, pr);
 }
 
+/* distance=: millimetres, >= 0, not with budget; spelt in the key only when given, and a
+ * key with it parses back to the same key; a small buffer gets the same length back. */
+static void test_query_distance(void)
+{
+    proto_mesh_request r;
+    proto_problem pr;
+    proto_param none[] = {P("level", "700")};
+    CHECK_EQ(parse(none, 1, &r, &pr), 0);
+    CHECK(r.distance == -1);
+    proto_param half[] = {P("level", "700"), P("distance", "0.50")};
+    CHECK_EQ(parse(half, 2, &r, &pr), 0);
+    CHECK(r.distance == 0.5);
+    char key[512], again[512], small[100];
+    size_t n = proto_mesh_request_key(&r, key, sizeof key);
+    CHECKF(n == strlen(key) && strstr(key, "&measures=false&distance=0.5") &&
+           !strcmp(strstr(key, "&distance="), "&distance=0.5"), "%s", key);
+    CHECK_EQ(proto_mesh_request_key(&r, small, sizeof small), n);
+    CHECK_EQ(strlen(small), sizeof small - 1);
+    CHECK(!strncmp(small, key, sizeof small - 1));
+    proto_param zero[] = {P("level", "700"), P("distance", "-0")};
+    CHECK_EQ(parse(zero, 2, &r, &pr), 0);
+    proto_mesh_request_key(&r, again, sizeof again);
+    CHECKF(strstr(again, "&distance=0") && !signbit(r.distance), "%s", again);
+    proto_param negative[] = {P("level", "700"), P("distance", "-1")};
+    CHECK_EQ(parse(negative, 2, &r, &pr), -1);
+    CHECK(pr.status == 400 && !strcmp(pr.parameter, "distance"));
+    proto_param both[] = {P("level", "700"), P("budget", "100"), P("distance", "1")};
+    CHECK_EQ(parse(both, 3, &r, &pr), -1);
+    CHECKF(pr.status == 400 && !strcmp(pr.parameter, "distance") && strstr(pr.detail, "budget"), "%s", pr.detail);
+}
+
 static void test_query_defaults_and_values(void)
 {
     proto_mesh_request r;
@@ -390,5 +421,6 @@ int main(void)
     CHECK_RUN(test_otsu_levels);
     CHECK_RUN(test_histogram_counts);
     CHECK_RUN(test_budget_picks_finest_fit);
+    CHECK_RUN(test_query_distance);
     return check_finish();
 }
