@@ -16,7 +16,8 @@
  * ISO_E_LIMIT (more than 2^32 - 1 vertices), ISO_E_NOMEM (the mesh is then empty).
  * Thread-safety: any number of extractions may share one tree, each with its own mesh.
  * Cost: at tolerance 0, the bricks whose [min, max] holds the level plus the output; above
- * it, the stored nodes visited plus the bricks' walks; under a budget, a few extractions. */
+ * it, the same bricks' cells at each brick's own coarse level (lod.h) plus the output;
+ * under a budget, a few extractions. */
 #ifndef ISO_EXTRACT_H
 #define ISO_EXTRACT_H
 
@@ -39,18 +40,17 @@ typedef struct iso_extract_params {
 
 typedef struct iso_extract_stats {
     size_t triangles, vertices;
-    size_t nodes_visited;   /* hierarchy nodes examined, stored and on the fly, plus the
-                             * bricks the kernel classified */
-    size_t cells_visited;   /* cells of the bricks the kernel classified, less those fans
-                             * cover, plus the nodes fanned (the paper's column, counted as
-                             * the kernel reads: 8 cells at a time, whole bricks) */
-    size_t nodes_polygonized;/* nodes larger than a cell emitted whole, as fans */
+    size_t nodes_visited;   /* the root, plus the bricks classified */
+    size_t cells_visited;   /* cells classified (the paper's column): at tolerance 0 the
+                             * data cells of the bricks the kernel reads (8 at a time, whole
+                             * bricks); above it, each brick's cells at its own level */
+    size_t nodes_polygonized;/* bricks marched on a coarse level (cells of 2, 4 or 8) */
     double extract_ms;
     double error_bound;     /* max |f(v) - level| over the vertices on the level (all but
-                             * a cap's): fan centres as measured, crossings moved off a
-                             * tie by ISO_MC_END_GAP; 0 otherwise */
-    double fit_error;       /* max fit error of the nodes fanned: how far the data strays
-                             * from the trilinear of a node emitted whole */
+                             * a cap's): measured at every vertex above tolerance 0; at 0,
+                             * crossings moved off a tie by ISO_MC_END_GAP, 0 otherwise */
+    double fit_error;       /* max level error (tree.h) of the bricks marched coarse: how
+                             * far the data strays from the grids the surface came from */
 } iso_extract_stats;
 
 /* Extracts the iso-surface at params->level within params->tolerance into mesh (which is

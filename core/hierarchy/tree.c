@@ -24,7 +24,7 @@
 #include <zlib.h>
 
 #include "base/base.h"
-#include "fan_floor.h"
+#include "levels.h"
 #include "volume/volume.h"
 
 /* ---- boxes ---- */
@@ -269,7 +269,7 @@ int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress,
     l.nodes = NULL;
     int rc = iso_bricks_build(vol, threads, &tree->bricks, err);
     if (!rc)
-        rc = iso_fan_floor_build(vol, &tree->bricks, threads, &tree->fan_floor, err);
+        rc = iso_levels_build(vol, &tree->bricks, threads, &tree->level_error, err);
     if (rc) {
         iso_tree_destroy(tree);
         free(l.boxes);
@@ -294,7 +294,7 @@ void iso_tree_destroy(iso_tree *tree)
     else
         free(tree->nodes);
     iso_bricks_free(&tree->bricks);
-    free(tree->fan_floor);
+    free(tree->level_error);
     free(tree);
 }
 
@@ -305,7 +305,7 @@ size_t iso_tree_bytes(const iso_tree *tree)
 
 size_t iso_tree_memory(const iso_tree *tree)
 {
-    return iso_tree_bytes(tree) + iso_bricks_total(&tree->bricks) * 3 * sizeof(float);
+    return iso_tree_bytes(tree) + iso_bricks_total(&tree->bricks) * (2 + ISO_TREE_LEVELS) * sizeof(float);
 }
 
 uint32_t iso_tree_volume_crc(const iso_volume *vol)
@@ -327,8 +327,9 @@ uint32_t iso_tree_volume_crc(const iso_volume *vol)
 
 #define TREE_MAGIC "ISOTREE"
 /* 2: splits above brick size aligned to the brick grid; 3: the bricks' fan floors after
- * the nodes (fan_floor.h), so that loading need not compute them again. */
-#define TREE_VERSION 3
+ * the nodes; 4: the bricks' level errors instead (tree.h), so that loading need not
+ * compute them again. An older file is refused as stale, and the caller rebuilds it. */
+#define TREE_VERSION 4
 
 typedef struct tree_header {
     char magic[8];          /* "ISOTREE\0" */
@@ -378,9 +379,9 @@ int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err)
     h.type = (uint32_t)tree->vol->type;
     h.volume_crc = tree->volume_crc;
     h.node_count = tree->node_count;
-    size_t floor_bytes = iso_bricks_total(&tree->bricks) * sizeof(float);
+    size_t floor_bytes = iso_bricks_total(&tree->bricks) * ISO_TREE_LEVELS * sizeof(float);
     uLong crc = crc32(0L, (const Bytef *)tree->nodes, (uInt)iso_tree_bytes(tree));
-    h.node_crc = (uint32_t)crc32(crc, (const Bytef *)tree->fan_floor, (uInt)floor_bytes);
+    h.node_crc = (uint32_t)crc32(crc, (const Bytef *)tree->level_error, (uInt)floor_bytes);
     h.header_crc = header_crc(h);
 
     size_t len = strlen(path);
@@ -395,7 +396,7 @@ int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err)
         return iso_error_set(err, ISO_E_IO, "%s: cannot create a temporary file: %s", path, strerror(e));
     }
     if (write_all(fd, &h, sizeof h) || write_all(fd, tree->nodes, iso_tree_bytes(tree)) ||
-        write_all(fd, tree->fan_floor, floor_bytes) || fsync(fd) != 0) {
+        write_all(fd, tree->level_error, floor_bytes) || fsync(fd) != 0) {
         int e = errno;
         close(fd);
         unlink(tmp);
@@ -464,7 +465,7 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
     memcpy(&h, map, sizeof h);
     uint32_t count[3];
     iso_bricks_count(vol, count);
-    size_t floors = (size_t)count[0] * count[1] * count[2]; /* one per brick (tree.h) */
+    size_t floors = (size_t)count[0] * count[1] * count[2] * ISO_TREE_LEVELS; /* per brick (tree.h) */
     int rc = 0;
     if (memcmp(h.magic, TREE_MAGIC, sizeof TREE_MAGIC) != 0)
         rc = iso_error_set(err, ISO_E_FORMAT, "%s: not a hierarchy file (bad magic)", path);
@@ -482,7 +483,7 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
     else if (h.node_count > (bytes - sizeof h) / sizeof(iso_tree_node) ||
              sizeof h + h.node_count * sizeof(iso_tree_node) + floors * sizeof(float) != bytes)
         rc = iso_error_set(err, ISO_E_CORRUPT,
-                           "%s: %zu bytes do not hold the %llu nodes the header announces and %zu brick floors",
+                           "%s: %zu bytes do not hold the %llu nodes the header announces and %zu level errors",
                            path, bytes, (unsigned long long)h.node_count, floors);
     else if ((uint32_t)crc32(0L, (const Bytef *)map + sizeof h, (uInt)(bytes - sizeof h)) != h.node_crc)
         rc = iso_error_set(err, ISO_E_CORRUPT, "%s: node checksum mismatch", path);
@@ -495,7 +496,8 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
         floor = (const float *)((const char *)map + sizeof h + h.node_count * sizeof(iso_tree_node));
         for (size_t b = 0; rc == 0 && b < floors; b++)
             if (!(floor[b] >= 0))
-                rc = iso_error_set(err, ISO_E_CORRUPT, "%s: brick %zu's fan floor is %g", path, b, (double)floor[b]);
+                rc = iso_error_set(err, ISO_E_CORRUPT, "%s: brick %zu's level %zu error is %g", path,
+                                   b / ISO_TREE_LEVELS, b % ISO_TREE_LEVELS + 1, (double)floor[b]);
     }
     if (rc) {
         munmap(map, bytes);
@@ -512,12 +514,12 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
     tree->volume_crc = h.volume_crc;
     tree->mapping = map;
     tree->mapping_bytes = bytes;
-    tree->fan_floor = malloc(floors * sizeof(float));
-    if (!tree->fan_floor) {
+    tree->level_error = malloc(floors * sizeof(float));
+    if (!tree->level_error) {
         iso_tree_destroy(tree);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory loading %s", path);
     }
-    memcpy(tree->fan_floor, floor, floors * sizeof(float));
+    memcpy(tree->level_error, floor, floors * sizeof(float));
     if ((rc = iso_bricks_build(vol, 0, &tree->bricks, err))) {
         iso_tree_destroy(tree);
         return rc;

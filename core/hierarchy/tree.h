@@ -74,12 +74,16 @@ void iso_bricks_box(const iso_volume *vol, const uint32_t brick[3], size_t lo[3]
 
 #define ISO_TREE_BRICK ISO_BRICK_CELLS /* the stored leaves are the grid's bricks */
 
-/* The smallest box extraction keeps whole (fans, fan.h). A fan emits about one triangle
- * per loop vertex, marching cubes about two per crossed cell, so a small box spares few
- * triangles while an attempt (faces marched, loops linked, a centre placed; accepted or
- * not) costs as much as marching it: 2x2x2 boxes spared under one triangle per attempt
- * (counts in docs/performance.md), boxes of 16 cells and up spare several. */
-#define ISO_TREE_FAN_MIN_CELLS 16
+/* The coarse levels of a brick. Level l (1..ISO_TREE_LEVELS) is the brick's sample grid
+ * taken every 2^l samples per axis; its error is Lemma 1 over each cell of that grid,
+ *     err_l = max over samples s of the brick |p(s) - T_l(s)|,
+ * T_l the trilinear through the corners of the level's cell holding s: it bounds |f - T_l|
+ * over the whole brick, so a surface marched on the level's grid has every vertex on a
+ * grid edge within err_l of the level (extract.h). Computed in the build and saved with
+ * the nodes, so extraction chooses each brick's level a-priori, reading no fine sample of
+ * a brick it coarsens. INFINITY where 2^l does not divide the brick's extent on some
+ * axis (bricks clipped by the volume's border). 12 bytes per brick. */
+#define ISO_TREE_LEVELS 3
 
 typedef struct iso_box {
     uint32_t lo[3], hi[3]; /* inclusive sample indices; hi[a] - lo[a] cells along a */
@@ -97,7 +101,7 @@ typedef struct iso_tree {
     uint32_t volume_crc;    /* CRC-32 of dims, type and samples: ties a file to its volume */
     double build_ms;        /* time to build (or to load and verify the file) */
     iso_bricks bricks;      /* regular min/max grid for exact extraction; computed, not saved */
-    float *fan_floor;       /* per brick, the least fit error below it (fan_floor.h); saved */
+    float *level_error;     /* per brick, ISO_TREE_LEVELS errors: iso_tree_level_error; saved */
     void *mapping;          /* file mapping when loaded with iso_tree_load, else NULL */
     size_t mapping_bytes;
 } iso_tree;
@@ -112,9 +116,9 @@ int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress,
 /* Frees the tree (or unmaps its file). NULL is allowed. */
 void iso_tree_destroy(iso_tree *tree);
 /* Bytes the tree's nodes occupy (what its file holds after the header, before the bricks'
- * fan floors). */
+ * level errors). */
 size_t iso_tree_bytes(const iso_tree *tree);
-/* Bytes the tree occupies in memory: its nodes, its brick grid and the bricks' fan floors. */
+/* Bytes the tree occupies in memory: its nodes, its brick grid and the bricks' level errors. */
 size_t iso_tree_memory(const iso_tree *tree);
 
 /* CRC-32 identifying the volume's dims, type and samples (the hierarchy file's key). O(N). */
@@ -127,6 +131,12 @@ int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err);
  * the node checksum, node structure, and that it was built from this volume (dims, type,
  * sample CRC): ISO_E_FORMAT/ISO_E_CORRUPT/ISO_E_STALE otherwise. Safe on untrusted files. */
 int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_error *err);
+
+/* Fit error of brick `brick` (index in the grid, x fastest) at level l, 1..ISO_TREE_LEVELS. */
+static inline float iso_tree_level_error(const iso_tree *tree, size_t brick, int l)
+{
+    return tree->level_error[brick * ISO_TREE_LEVELS + (size_t)(l - 1)];
+}
 
 /* The root box of vol. */
 iso_box iso_box_root(const iso_volume *vol);
@@ -146,8 +156,7 @@ void iso_tree_scan_box(const iso_volume *vol, const iso_box *box, double *min, d
                        double *err);
 
 /* A box's fit error (Lemma 1) over a block of samples already read as doubles, with
- * an early exit: the test extraction makes below each brick on the fly, and the one the
- * hierarchy makes a-priori for each brick's fan floor.
+ * an early exit: what the build computes for each brick's coarse levels.
  *
  * The block is a brick's samples, x fastest: n[a] samples per axis from lo[a]. A box inside
  * it spans at most ISO_BRICK_CELLS cells per axis. */

@@ -188,10 +188,10 @@ def main_tests(s, tmp, blob):
         assert r.status == 200 and len(h["counts"]) == 256 and sum(h["counts"]) == blob.size
         top = int(np.floor((blob.max() - h["min"]) / (h["max"] - h["min"]) * 256))
         assert h["counts"][255] >= 1 and top >= 255
-        # 16 bytes per kd-tree node plus, per brick of 8^3 cells, its float min, max and
-        # fan floor (core/hierarchy/fan_floor.h).
+        # 16 bytes per kd-tree node plus, per brick of 8^3 cells, its float min and max and
+        # its three level errors (core/hierarchy/tree.h).
         bricks = int(np.prod([-(-(d - 1) // 8) for d in v["dims"]]))
-        assert v["hierarchy"]["nodes"] >= 1 and v["hierarchy"]["bytes"] == 16 * v["hierarchy"]["nodes"] + 12 * bricks, \
+        assert v["hierarchy"]["nodes"] >= 1 and v["hierarchy"]["bytes"] == 16 * v["hierarchy"]["nodes"] + 20 * bricks, \
             (v["hierarchy"], bricks)
         assert v["hierarchy"]["share_of_volume"] < 0.1, v["hierarchy"]
     check("volume_document", one_volume)

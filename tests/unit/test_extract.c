@@ -218,14 +218,30 @@ static void test_d3_ijk_is_one_trilinear(void)
     iso_mesh m;
     iso_mesh_init(&m);
     iso_extract_stats st;
-    /* Its twist needs sub-boxes of a few cells to stay within 1000 of linear pieces. */
+    /* ijk is trilinear, so every brick's coarse levels fit it exactly: each active brick
+     * 8 cells wide on every axis is one cell, the others (7 wide at the far end) stay at the
+     * data's cells. */
     extract(tree, 3000, 1000, &m, &st);
-    /* The root is fanned whole. The kernel then reads only the bricks on its boundary
-     * that hold the level, to number the loop vertices: at most the 4^3 - 2^3 bricks
-     * touching the volume's border; the 8 inner ones are never read. */
-    CHECK_EQ(st.nodes_polygonized, 1);
-    CHECKF(st.nodes_visited >= 2 && st.nodes_visited <= 1 + 56, "%zu nodes visited", st.nodes_visited);
-    CHECKF(st.cells_visited <= 56 * 512 + 1, "%zu cells visited", st.cells_visited);
+    const iso_bricks *g = &tree->bricks;
+    size_t coarse = 0, fine_cells = 0;
+    for (uint32_t k = 0; k < g->count[2]; k++)
+        for (uint32_t j = 0; j < g->count[1]; j++)
+            for (uint32_t i = 0; i < g->count[0]; i++) {
+                size_t at = ((size_t)k * g->count[1] + j) * g->count[0] + i;
+                if (!(g->min[at] <= 3000 && 3000 < g->max[at]))
+                    continue;
+                uint32_t brick[3] = {i, j, k};
+                size_t lo[3], hi[3];
+                iso_bricks_box(vol, brick, lo, hi);
+                if (hi[0] - lo[0] == 8 && hi[1] - lo[1] == 8 && hi[2] - lo[2] == 8)
+                    coarse++;
+                else
+                    fine_cells += (hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]);
+            }
+    CHECK(coarse > 0);
+    CHECK_EQ(st.nodes_polygonized, coarse);
+    CHECK_EQ(st.cells_visited, coarse + fine_cells);
+    CHECK_EQ(st.fit_error, 0);
     CHECK(st.triangles > 0);
     CHECK(st.error_bound <= 1000);
     CHECKF(surface_worst_vertex_error(vol, &m, 3000) <= st.error_bound + surface_rounding_slack(vol),
@@ -361,7 +377,7 @@ static void test_tree_file_round_trip_and_refusals(void)
         CHECK_EQ(back->node_count, tree->node_count);
         CHECK(memcmp(back->nodes, tree->nodes, iso_tree_bytes(tree)) == 0);
         /* The bricks' fan floors are saved after the nodes and read back to the same bits. */
-        CHECK(memcmp(back->fan_floor, tree->fan_floor, iso_bricks_total(&tree->bricks) * sizeof(float)) == 0);
+        CHECK(memcmp(back->level_error, tree->level_error, iso_bricks_total(&tree->bricks) * ISO_TREE_LEVELS * sizeof(float)) == 0);
         iso_tree_destroy(back);
     }
     FILE *f = fopen(path, "rb");
@@ -422,7 +438,7 @@ static void test_tree_is_small(void)
     iso_vol_destroy(vol);
 }
 
-/* ---- fans and the brick kernel share vertex ids ---- */
+/* ---- coarse bricks and transition cells ---- */
 
 static void extract_threads(const iso_tree *tree, double level, double tolerance, int threads, iso_mesh *m,
                             iso_extract_stats *st)
@@ -432,21 +448,12 @@ static void extract_threads(const iso_tree *tree, double level, double tolerance
     CHECK_OK(iso_extract(tree, &p, m, st, &err), &err);
 }
 
-/* 1 if the two meshes are the same bytes: counts, positions and indices. */
-static int same_mesh(const iso_mesh *a, const iso_mesh *b)
-{
-    return a->vertex_count == b->vertex_count && a->triangle_count == b->triangle_count &&
-           memcmp(a->positions, b->positions, 12 * a->vertex_count) == 0 &&
-           memcmp(a->indices, b->indices, 12 * a->triangle_count) == 0;
-}
 
-/* Fans name their loop vertices by grid edge and take the kernel's ids for them, so the
+/* Coarse bricks and transition cells name every crossing by its lattice segment, so the
  * mesh comes out welded: welding again merges nothing, every vertex is used, every
  * interior edge has two triangles, and the bytes do not depend on the thread count. */
-static void test_fans_join_the_kernel_without_weld(void)
+static void test_coarse_bricks_join_without_weld(void)
 {
-    /* The last is large enough (2,744 bricks) that threads take many 64-brick chunks in
-     * turn, so fans come from both threads interleaved and are numbered by brick. */
     static const char *fields[] = {"field:sphere:61x47x53", "field:torus:64x64x40", "field:ml:65x65x65",
                                    "field:ml:113x113x113"};
     static const double levels[] = {0.5, 0.5, 0.5, 0.5};
@@ -494,70 +501,19 @@ static void test_fans_join_the_kernel_without_weld(void)
             iso_mesh_free(&two);
             iso_mesh_free(&five);
         }
-        CHECKF(fanned > 0, "%s: no tolerance fanned anything", fields[f]);
+        CHECKF(fanned > 0, "%s: no tolerance coarsened a brick", fields[f]);
         iso_tree_destroy(tree);
         iso_vol_destroy(vol);
     }
 }
 
-/* PASS 1 walks the top of the tree on one thread and leaves the subtrees below to the
- * threads: their fans must come out in the one-thread walk's order, whatever the thread
- * count. On this sphere, tolerance 4 with 5 threads and 8 with 2 threads fan stored nodes
- * both in the top walk and in the threads' subtrees (counted when this test was written);
- * 1 fans only below the top. */
-static void test_top_walk_on_threads_keeps_the_order(void)
-{
-    iso_volume *vol;
-    iso_error err;
-    CHECK_OK(iso_load("field:sphere:61x47x53", NULL, &vol, &err), &err);
-    iso_tree *tree = surface_build(vol);
-    static const double tolerances[] = {1, 4, 8};
-    static const int thread_counts[] = {2, 3, 5, 8, 64};
-    for (int i = 0; i < 3 && !check_failed(); i++) {
-        iso_mesh one;
-        iso_mesh_init(&one);
-        iso_extract_stats st;
-        extract_threads(tree, 0.5, tolerances[i], 1, &one, &st);
-        CHECKF(st.nodes_polygonized > 0, "tolerance %g fanned nothing", tolerances[i]);
-        for (int k = 0; k < 5; k++) {
-            iso_mesh many;
-            iso_mesh_init(&many);
-            iso_extract_stats sm;
-            extract_threads(tree, 0.5, tolerances[i], thread_counts[k], &many, &sm);
-            CHECKF(same_mesh(&many, &one),
-                   "tolerance %g, %d threads: %zu vertices and %zu triangles, not the same mesh as one "
-                   "thread's %zu and %zu", tolerances[i], thread_counts[k], many.vertex_count,
-                   many.triangle_count, one.vertex_count, one.triangle_count);
-            CHECK_EQ(sm.nodes_polygonized, st.nodes_polygonized);
-            CHECK_EQ(sm.nodes_visited, st.nodes_visited);
-            iso_mesh_free(&many);
-        }
-        iso_mesh_free(&one);
-    }
-    iso_tree_destroy(tree);
-    iso_vol_destroy(vol);
-}
+/* ---- the bricks' level errors ---- */
 
-/* ---- the bricks' fan floors ---- */
-
-/* The least fit error of the non-constant boxes from box down to the fan size, by scanning
- * each box in full (iso_tree_scan_box), INFINITY if there is none. */
-static double least_fit_brute(const iso_volume *vol, const iso_box *box)
-{
-    if (iso_box_cells(box) < ISO_TREE_FAN_MIN_CELLS)
-        return INFINITY;
-    double best = INFINITY, mn, mx, er;
-    iso_box left, right;
-    if (iso_box_split(box, &left, &right) >= 0)
-        best = fmin(least_fit_brute(vol, &left), least_fit_brute(vol, &right));
-    iso_tree_scan_box(vol, box, &mn, &mx, &er);
-    return mn < mx && er < best ? er : best;
-}
-
-/* Every brick's floor is the least fit error of the boxes extraction could fan below it:
- * on fields with partial and one-cell bricks, a volume with constant regions (whose boxes
- * no level crosses: left out), and a float volume with a NaN (its boxes: infinite error). */
-static void test_fan_floor_is_the_least_fit_below(void)
+/* Every brick's error at level l is the largest Lemma 1 error of the cells of its 2^l
+ * grid, each scanned in full (iso_tree_scan_box), INFINITY where 2^l does not divide the
+ * brick's extent: on fields with partial and one-cell bricks, a volume with constant
+ * regions, and a float volume with a NaN (its cells: infinite error). */
+static void test_level_errors_are_lemma1_per_coarse_cell(void)
 {
     static const char *fields[] = {"field:ml:41x37x29", "field:sphere:10x18x26", "field:torus:33x33x17"};
     iso_error err;
@@ -581,66 +537,40 @@ static void test_fan_floor_is_the_least_fit_below(void)
         iso_vol_update_stats(vol);
         iso_tree *tree = surface_build(vol);
         const iso_bricks *g = &tree->bricks;
-        size_t finite = 0, total = iso_bricks_total(g);
+        size_t finite = 0, infinite = 0;
         for (uint32_t k = 0; k < g->count[2]; k++)
             for (uint32_t j = 0; j < g->count[1]; j++)
                 for (uint32_t i = 0; i < g->count[0]; i++) {
                     uint32_t brick[3] = {i, j, k};
-                    size_t lo[3], hi[3];
+                    size_t lo[3], hi[3], at = ((size_t)k * g->count[1] + j) * g->count[0] + i;
                     iso_bricks_box(vol, brick, lo, hi);
-                    iso_box box, left, right;
-                    for (int d = 0; d < 3; d++)
-                        box.lo[d] = (uint32_t)lo[d], box.hi[d] = (uint32_t)hi[d];
-                    double want = iso_box_split(&box, &left, &right) < 0
-                                      ? INFINITY
-                                      : fmin(least_fit_brute(vol, &left), least_fit_brute(vol, &right));
-                    float floor = tree->fan_floor[((size_t)k * g->count[1] + j) * g->count[0] + i];
-                    float expected = isinf(want) ? INFINITY : iso_float_down(want);
-                    CHECKF(floor == expected, "%d: brick (%u, %u, %u): floor %.9g, least fit below %.9g", f, i, j,
-                           k, floor, want);
-                    finite += isfinite(floor);
+                    for (int l = 1; l <= ISO_TREE_LEVELS; l++) {
+                        uint32_t s = 1u << l;
+                        double want = 0;
+                        for (int d = 0; d < 3; d++)
+                            if ((hi[d] - lo[d]) % s)
+                                want = INFINITY;
+                        for (size_t z = lo[2]; want < INFINITY && z < hi[2]; z += s)
+                            for (size_t y = lo[1]; y < hi[1]; y += s)
+                                for (size_t x = lo[0]; x < hi[0]; x += s) {
+                                    iso_box cell = {{(uint32_t)x, (uint32_t)y, (uint32_t)z},
+                                                    {(uint32_t)x + s, (uint32_t)y + s, (uint32_t)z + s}};
+                                    double mn, mx, er;
+                                    iso_tree_scan_box(vol, &cell, &mn, &mx, &er);
+                                    want = er == er && er > want ? er : (er == er ? want : INFINITY);
+                                }
+                        float got = iso_tree_level_error(tree, at, l);
+                        /* A constant brick stores 0: no level crosses it. */
+                        float expected = g->min[at] == g->max[at] ? 0.0f : iso_float_up(want);
+                        CHECKF(got == expected, "%d: brick (%u, %u, %u) level %d: %.9g, Lemma 1 gives %.9g", f,
+                               i, j, k, l, got, want);
+                        finite += isfinite(got);
+                        infinite += !isfinite(got);
+                    }
                 }
-        CHECKF(finite > 0 && finite < total + (f < 3), "%d: %zu of %zu floors finite", f, finite, total);
-        iso_tree_destroy(tree);
-        iso_vol_destroy(vol);
-    }
-}
-
-/* A brick whose floor is past the fit limit is marched without its walk: the mesh is the
- * same, to the byte, as with every floor at 0 (every walk made), and fewer boxes are
- * visited at a small tolerance. */
-static void test_fan_floor_skips_only_what_cannot_fan(void)
-{
-    static const char *fields[] = {"field:ml:65x65x65", "field:sphere:61x47x53"};
-    for (int f = 0; f < 2 && !check_failed(); f++) {
-        iso_volume *vol;
-        iso_error err;
-        CHECK_OK(iso_load(fields[f], NULL, &vol, &err), &err);
-        iso_tree *tree = surface_build(vol);
-        size_t total = iso_bricks_total(&tree->bricks);
-        float *floors = tree->fan_floor, *zero = calloc(total, sizeof *zero);
-        double range = tree->nodes[0].max - tree->nodes[0].min;
-        size_t skipped = 0;
-        for (double share = 0.001; share < 0.1; share *= 3) {
-            iso_mesh gated, walked;
-            iso_mesh_init(&gated);
-            iso_mesh_init(&walked);
-            iso_extract_stats a, b;
-            extract_threads(tree, 0.5, share * range, 2, &gated, &a);
-            tree->fan_floor = zero;
-            extract_threads(tree, 0.5, share * range, 2, &walked, &b);
-            tree->fan_floor = floors;
-            CHECKF(same_mesh(&gated, &walked),
-                   "%s tol %g: %zu/%zu triangles gated, %zu/%zu walked", fields[f], share * range,
-                   gated.triangle_count, gated.vertex_count, walked.triangle_count, walked.vertex_count);
-            CHECK_EQ(a.nodes_polygonized, b.nodes_polygonized);
-            CHECK(a.nodes_visited <= b.nodes_visited);
-            skipped += b.nodes_visited - a.nodes_visited;
-            iso_mesh_free(&gated);
-            iso_mesh_free(&walked);
-        }
-        CHECKF(skipped > 0, "%s: the floors skipped no walk", fields[f]);
-        free(zero);
+        /* Field 1 has bricks clipped to 1 cell, field 4 a NaN: INFINITY above stride 1. */
+        CHECKF(finite > 0 && ((f != 1 && f != 4) || infinite > 0), "%d: %zu finite, %zu infinite level errors", f,
+               finite, infinite);
         iso_tree_destroy(tree);
         iso_vol_destroy(vol);
     }
@@ -735,11 +665,9 @@ int main(void)
     CHECK_RUN(test_torus_surface_is_bounded);
     CHECK_RUN(test_tree_file_round_trip_and_refusals);
     CHECK_RUN(test_tree_is_small);
-    CHECK_RUN(test_fans_join_the_kernel_without_weld);
-    CHECK_RUN(test_top_walk_on_threads_keeps_the_order);
+    CHECK_RUN(test_coarse_bricks_join_without_weld);
     CHECK_RUN(test_tolerance_on_one_cell_bricks);
-    CHECK_RUN(test_fan_floor_is_the_least_fit_below);
-    CHECK_RUN(test_fan_floor_skips_only_what_cannot_fan);
+    CHECK_RUN(test_level_errors_are_lemma1_per_coarse_cell);
     CHECK_RUN(test_cthead_guarantee_and_trend);
     return check_finish();
 }

@@ -305,10 +305,10 @@ static unsigned char *read_all(const char *path, long *n)
     return bytes;
 }
 
-/* Copies src to dst with brick `b`'s fan floor set to `value` and both checksums made
- * right again (the header's fields: node_crc at 56, header_crc at 60): a file only its
+/* Copies src to dst with level error `b` (brick b / 3, level b % 3 + 1) set to `value`
+ * and both checksums made right again (the header's fields: node_crc at 56, header_crc at 60): a file only its
  * values betray. */
-static void floor_forged_copy(const char *src, const char *dst, size_t nodes, size_t b, float value)
+static void level_forged_copy(const char *src, const char *dst, size_t nodes, size_t b, float value)
 {
     long n;
     unsigned char *bytes = read_all(src, &n);
@@ -353,34 +353,36 @@ static void test_tree_file_damage_exact(void)
     CHECK_OK(iso_tree_save(tree, good, &err), &err);
     long size = file_size(good);
     size_t bricks = iso_bricks_total(&tree->bricks);
-    CHECK_EQ(size, 64 + 16 * (long)tree->node_count + 4 * (long)bricks); /* nodes, then fan floors */
+    long levels = 12 * (long)bricks; /* 3 level errors per brick */
+    CHECK_EQ(size, 64 + 16 * (long)tree->node_count + levels); /* nodes, then level errors */
     char format[256];
     const char *bad = temp_path("bad.isotree");
 
-    damaged_copy(good, bad, size - 16, -1); /* the last four floors missing */
+    damaged_copy(good, bad, size - 16, -1); /* the last four level errors missing */
     snprintf(format, sizeof format,
-             "%%s: %ld bytes do not hold the %zu nodes the header announces and %zu brick floors", size - 16,
-             tree->node_count, bricks);
+             "%%s: %ld bytes do not hold the %zu nodes the header announces and %zu level errors", size - 16,
+             tree->node_count, 3 * bricks);
     expect_tree(vol, bad, ISO_E_CORRUPT, format);
-    damaged_copy(good, bad, size - 4 * (long)bricks - 3, -1); /* cut mid-node, no floors */
+    damaged_copy(good, bad, size - levels - 3, -1); /* cut mid-node, no level errors */
     snprintf(format, sizeof format,
-             "%%s: %ld bytes do not hold the %zu nodes the header announces and %zu brick floors",
-             size - 4 * (long)bricks - 3, tree->node_count, bricks);
+             "%%s: %ld bytes do not hold the %zu nodes the header announces and %zu level errors",
+             size - levels - 3, tree->node_count, 3 * bricks);
     expect_tree(vol, bad, ISO_E_CORRUPT, format);
     damaged_copy(good, bad, 40, -1);
     expect_tree(vol, bad, ISO_E_FORMAT, "%s: 40 bytes, shorter than the 64-byte header");
     damaged_copy(good, bad, 0, -1);
     expect_tree(vol, bad, ISO_E_FORMAT, "%s: 0 bytes, shorter than the 64-byte header");
-    damaged_copy(good, bad, -1, size - 5); /* a byte of a floor: the checksum covers them */
+    damaged_copy(good, bad, -1, size - 5); /* a byte of a level error: the checksum covers them */
     expect_tree(vol, bad, ISO_E_CORRUPT, "%s: node checksum mismatch");
     damaged_copy(good, bad, -1, 64 + 5); /* a byte of the first node */
     expect_tree(vol, bad, ISO_E_CORRUPT, "%s: node checksum mismatch");
-    /* Checksums right, a floor wrong: a negative or NaN floor would skip bricks. */
-    floor_forged_copy(good, bad, tree->node_count, bricks - 1, -1.0f);
-    snprintf(format, sizeof format, "%%s: brick %zu's fan floor is -1", bricks - 1);
+    /* Checksums right, a level error wrong: a negative or NaN one would coarsen a brick
+     * past the tolerance. */
+    level_forged_copy(good, bad, tree->node_count, 3 * bricks - 1, -1.0f);
+    snprintf(format, sizeof format, "%%s: brick %zu's level 3 error is -1", bricks - 1);
     expect_tree(vol, bad, ISO_E_CORRUPT, format);
-    floor_forged_copy(good, bad, tree->node_count, 0, NAN);
-    expect_tree(vol, bad, ISO_E_CORRUPT, "%s: brick 0's fan floor is nan");
+    level_forged_copy(good, bad, tree->node_count, 1, NAN);
+    expect_tree(vol, bad, ISO_E_CORRUPT, "%s: brick 0's level 2 error is nan");
     damaged_copy(good, bad, -1, 16); /* dims[0] in the header */
     expect_tree(vol, bad, ISO_E_CORRUPT, "%s: header checksum mismatch");
     damaged_copy(good, bad, -1, 0);

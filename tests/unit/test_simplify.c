@@ -351,7 +351,7 @@ static void test_analytic_fields_stay_within_reported_error(void)
 static void test_budget_policy(void)
 {
     iso_volume *vol;
-    iso_tree *tree = field_tree("field:ml:40", &vol);
+    iso_tree *tree = field_tree("field:ml:41", &vol); /* 40 cells: whole bricks, some coarse at range / 32 */
     if (!tree)
         return;
     /* Anisotropic world geometry: voxels of 0.5 x 1 x 2 mm. */

@@ -22,7 +22,7 @@
 #define MRICRON_CH2BET "/usr/share/mricron/templates/ch2bet.nii.gz"
 
 typedef struct totals {
-    size_t cases, fanned_cases, fans, capped_closed;
+    size_t cases, coarse_cases, coarse_bricks, capped_closed;
 } totals;
 
 static int extract(const iso_tree *tree, double level, double tolerance, int cap, iso_space space,
@@ -60,10 +60,10 @@ static void check_sound(const iso_volume *vol, const iso_mesh *m, const iso_extr
 
 /* ---- hand-built: exact answers ---- */
 
-/* f = x on 9^3 at level 4.25: the root is one trilinear, so one fan. The plane crosses the
- * faces y = 0, y = 8, z = 0, z = 8 on 9 x-edges each, 4 of them shared: a loop of 32
- * crossings around a centre at (4.25, 4, 4), 32 triangles where marching cubes makes 128. */
-static void test_plane_is_one_fan(void)
+/* f = x on 9^3 at level 4.25: the brick's coarsest level fits exactly (fit error 0), so
+ * the surface is marching cubes on its one 8-cell cell: 2 triangles on 4 crossings, where
+ * marching cubes on the data makes 128. */
+static void test_plane_is_one_coarse_cell(void)
 {
     iso_volume *vol = surface_make_volume(9, 9, 9, ISO_F32);
     for (size_t k = 0; k < 9; k++)
@@ -77,20 +77,19 @@ static void test_plane_is_one_fan(void)
     iso_extract_stats st;
     extract(tree, 4.25, 1, 0, ISO_SPACE_INDEX, &m, &st);
     CHECK_EQ(st.nodes_polygonized, 1);
-    CHECK_EQ(st.triangles, 32);
-    CHECK_EQ(st.vertices, 33);
-    int centre_found = 0;
+    CHECK_EQ(st.cells_visited, 1);
+    CHECK_EQ(st.triangles, 2);
+    CHECK_EQ(st.vertices, 4);
     for (size_t v = 0; v < m.vertex_count; v++) {
         const float *p = m.positions + 3 * v;
         CHECK(fabs(p[0] - 4.25) < 1e-6);
-        centre_found |= p[1] == 4.0f && p[2] == 4.0f;
+        CHECK((p[1] == 0.0f || p[1] == 8.0f) && (p[2] == 0.0f || p[2] == 8.0f));
     }
-    CHECK(centre_found);
     iso_census c;
     iso_error err;
     CHECK_OK(iso_census_compute(vol, &m, ISO_SPACE_INDEX, &c, &err), &err);
-    CHECK_EQ(c.boundary_edges, 32);
-    CHECK_EQ(c.edges, 64);
+    CHECK_EQ(c.boundary_edges, 4);
+    CHECK_EQ(c.edges, 5);
     check_sound(vol, &m, &st, 4.25, 1, 0, "plane");
     /* Marching cubes: 8 x 8 crossed cells, two triangles each. */
     extract(tree, 4.25, 0, 0, ISO_SPACE_INDEX, &m, &st);
@@ -105,9 +104,10 @@ static void test_plane_is_one_fan(void)
     iso_vol_destroy(vol);
 }
 
-/* Half smooth, half rough: big fans on the left meet single marching cubes on the right,
- * and every depth between, along one plane. A crack would be an open edge there. */
-static void test_fans_meet_cells(void)
+/* Half smooth, half rough: bricks at their coarsest level on the left meet marching cubes
+ * on the data's cells on the right, through transition cells, along one plane. A crack
+ * would be an open edge there. */
+static void test_coarse_bricks_meet_cells(void)
 {
     iso_volume *vol = surface_make_volume(33, 17, 17, ISO_F32);
     for (size_t k = 0; k < 17; k++)
@@ -121,13 +121,15 @@ static void test_fans_meet_cells(void)
     iso_mesh m;
     iso_mesh_init(&m);
     iso_extract_stats st;
+    size_t coarse = 0;
     for (double level = 3.3; level < 24; level += 1.7) {
         extract(tree, level, 0.5, 0, ISO_SPACE_INDEX, &m, &st);
-        CHECK(st.nodes_polygonized > 0);
+        coarse += st.nodes_polygonized;
         check_sound(vol, &m, &st, level, 0.5, 0, "half rough");
         extract(tree, level, 0.5, 1, ISO_SPACE_INDEX, &m, &st);
         check_sound(vol, &m, &st, level, 0.5, 1, "half rough capped");
     }
+    CHECKF(coarse >= 4, "%zu bricks coarsened", coarse);
     iso_mesh_free(&m);
     iso_tree_destroy(tree);
     iso_vol_destroy(vol);
@@ -189,8 +191,8 @@ static void check_levels(const iso_volume *vol, const double *levels, int level_
             extract(tree, levels[l], tolerance, cap, ISO_SPACE_INDEX, &m, &st);
             check_sound(vol, &m, &st, levels[l], tolerance, cap, what);
             t->cases++;
-            t->fans += st.nodes_polygonized;
-            t->fanned_cases += st.nodes_polygonized > 0;
+            t->coarse_bricks += st.nodes_polygonized;
+            t->coarse_cases += st.nodes_polygonized > 0;
             if (cap && m.triangle_count)
                 t->capped_closed++;
         }
@@ -214,10 +216,10 @@ static void test_random_fields_property(void)
         check_levels(vol, levels, 2, &t, integer ? "integer field" : "random field");
         iso_vol_destroy(vol);
     }
-    printf("  info: %zu random cases, %zu with fans (%zu fans), %zu capped closed\n", t.cases,
-           t.fanned_cases, t.fans, t.capped_closed);
+    printf("  info: %zu random cases, %zu with coarse bricks (%zu in all), %zu capped closed\n", t.cases,
+           t.coarse_cases, t.coarse_bricks, t.capped_closed);
     CHECK(t.cases >= 900);
-    CHECK(t.fanned_cases > t.cases / 3);
+    CHECK(t.coarse_cases > t.cases / 4); /* a sixth are tolerance 0; clipped bricks stay fine */
 }
 
 static void test_analytic_fields_property(void)
@@ -240,8 +242,8 @@ static void test_analytic_fields_property(void)
         check_levels(vol, fields[f].levels, 4, &t, fields[f].name);
         iso_vol_destroy(vol);
     }
-    printf("  info: %zu analytic cases, %zu with fans (%zu fans)\n", t.cases, t.fanned_cases, t.fans);
-    CHECK(t.fanned_cases > t.cases / 2);
+    printf("  info: %zu analytic cases, %zu with coarse bricks (%zu in all)\n", t.cases, t.coarse_cases, t.coarse_bricks);
+    CHECK(t.coarse_cases > t.cases / 2);
 }
 
 /* ---- real scans ---- */
@@ -275,10 +277,12 @@ static void check_scan(const char *path, const double *levels, int level_count)
             check_sound(vol, &m, &st, levels[l], tolerances[t], 0, path);
             if (t == 0)
                 exact = st.triangles;
-            /* A tolerance may only cost accuracy, never triangles. */
-            CHECKF(st.triangles <= exact, "%s level %g tol %g: %zu triangles, exact %zu", path,
+            /* A tolerance costs accuracy, not triangles: a brick whose coarse level barely
+             * fits may give its transition cells a few more triangles than its data cells
+             * would, never a thousandth of the mesh. */
+            CHECKF(st.triangles <= exact + exact / 1000, "%s level %g tol %g: %zu triangles, exact %zu", path,
                    levels[l], tolerances[t], st.triangles, exact);
-            printf("  info: %s level %g tol %g: %zu triangles, %zu fans, bound %.3g\n",
+            printf("  info: %s level %g tol %g: %zu triangles, %zu coarse bricks, bound %.3g\n",
                    strrchr(path, '/') + 1, levels[l], tolerances[t], st.triangles,
                    st.nodes_polygonized, st.error_bound);
         }
@@ -354,8 +358,8 @@ static void test_cranium_enclosed_volumes(void)
 
 int main(void)
 {
-    CHECK_RUN(test_plane_is_one_fan);
-    CHECK_RUN(test_fans_meet_cells);
+    CHECK_RUN(test_plane_is_one_coarse_cell);
+    CHECK_RUN(test_coarse_bricks_meet_cells);
     CHECK_RUN(test_random_fields_property);
     CHECK_RUN(test_analytic_fields_property);
     CHECK_RUN(test_mricron_brain);

@@ -1,0 +1,590 @@
+/* lod.c: extraction within a tolerance, bricks on their own coarse grids joined by
+ * transition cells (lod.h says how and why). */
+#include "lod.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "base/base.h"
+#include "hierarchy/tree.h"
+#include "mc.h"
+
+#define BRICK_SAMPLES (ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES)
+/* Bisection steps placing a loop's centre on the level: 2^-40 of a brick is far below a
+ * float's resolution. */
+#define CENTRE_STEPS 40
+
+/* Vertex ids by lattice segment, open addressing; key 0 marks a free slot. */
+typedef struct vertex_map {
+    uint64_t *keys;
+    uint32_t *ids;
+    size_t mask, count;
+} vertex_map;
+
+/* One iso-segment on a transition cell's boundary, between two crossings' vertices, and
+ * the sample points on either side of its end's crossing (for the centre's bisection). */
+typedef struct loop_segment {
+    uint32_t from, to;
+    uint32_t above[3], below[3];
+    int used;
+} loop_segment;
+
+typedef struct lod {
+    const iso_tree *tree;
+    const iso_volume *vol;
+    double level;
+    int cap;
+    uint32_t dims[3], count[3];
+    uint8_t *shift;               /* per brick: log2 of its stride (PASS 1) */
+    iso_mesh *mesh;
+    vertex_map map;
+    double error;                 /* largest |f(v) - level| measured */
+    size_t cells;
+    /* The brick at hand: its samples, x fastest. */
+    uint32_t lo[3], n[3];
+    double samples[BRICK_SAMPLES];
+    loop_segment *segments;
+    size_t segment_count, segment_capacity;
+    uint32_t *loop;
+    size_t loop_capacity;
+} lod;
+
+/* ---- PASS 1: plan ---- */
+
+static void plan(lod *c, double tolerance)
+{
+    const iso_bricks *g = &c->tree->bricks;
+    for (size_t b = 0; b < iso_bricks_total(g); b++) {
+        int l = ISO_TREE_LEVELS;
+        if (g->min[b] <= c->level && c->level < g->max[b])
+            while (l > 0 && !(iso_tree_level_error(c->tree, b, l) <= tolerance))
+                l--;
+        c->shift[b] = (uint8_t)l;
+    }
+}
+
+/* The stride (log2) of the lattice set (face, edge or segment) whose midpoint is twice[]
+ * / 2: the finest of the bricks holding it, whose closed boxes are [8i, 8i + 8] per axis. */
+static unsigned set_shift(const lod *c, const uint32_t twice[3])
+{
+    uint32_t lo[3], hi[3];
+    for (int d = 0; d < 3; d++) {
+        if (c->cap && (twice[d] == 0 || twice[d] == 2 * (c->dims[d] - 1)))
+            return 0; /* the cap's cells are data cells */
+        hi[d] = twice[d] / (2 * ISO_BRICK_CELLS);
+        if (hi[d] >= c->count[d])
+            hi[d] = c->count[d] - 1;
+        lo[d] = twice[d] >= 2 * ISO_BRICK_CELLS ? (twice[d] - 1) / (2 * ISO_BRICK_CELLS) : 0;
+        if (lo[d] > hi[d])
+            lo[d] = hi[d];
+    }
+    unsigned best = ISO_TREE_LEVELS;
+    for (uint32_t k = lo[2]; k <= hi[2]; k++)
+        for (uint32_t j = lo[1]; j <= hi[1]; j++)
+            for (uint32_t i = lo[0]; i <= hi[0]; i++) {
+                unsigned s = c->shift[((size_t)k * c->count[1] + j) * c->count[0] + i];
+                best = s < best ? s : best;
+            }
+    return best;
+}
+
+/* ---- PASS 2: march ---- */
+
+static double sample(const lod *c, const uint32_t p[3])
+{
+    return c->samples[((size_t)(p[2] - c->lo[2]) * c->n[1] + (p[1] - c->lo[1])) * c->n[0] + (p[0] - c->lo[0])];
+}
+
+/* f, the data's trilinear interpolant, at x inside the brick at hand. */
+static double value_at(const lod *c, const double x[3])
+{
+    uint32_t cell[3];
+    double u[3], corner[8];
+    for (int d = 0; d < 3; d++) {
+        double local = x[d] - c->lo[d];
+        uint32_t i = local <= 0 ? 0 : (uint32_t)local;
+        if (i + 1 >= c->n[d])
+            i = c->n[d] - 2;
+        cell[d] = c->lo[d] + i;
+        u[d] = x[d] - cell[d];
+    }
+    for (int k = 0; k < 8; k++) {
+        uint32_t p[3] = {cell[0] + (k & 1), cell[1] + ((k >> 1) & 1), cell[2] + ((k >> 2) & 1)};
+        corner[k] = sample(c, p);
+    }
+    return iso_tri_eval(corner, u[0], u[1], u[2]);
+}
+
+static void measure(lod *c, const double x[3])
+{
+    double e = fabs(value_at(c, x) - c->level);
+    if (e > c->error)
+        c->error = e; /* NaN (a NaN or infinite sample nearby) proves nothing and is left out */
+}
+
+static int grow_map(vertex_map *m)
+{
+    size_t capacity = m->mask ? 2 * (m->mask + 1) : 4096;
+    uint64_t *keys = calloc(capacity, sizeof *keys);
+    uint32_t *ids = malloc(capacity * sizeof *ids);
+    if (!keys || !ids) {
+        free(keys);
+        free(ids);
+        return ISO_E_NOMEM;
+    }
+    for (size_t i = 0; m->mask && i <= m->mask; i++) {
+        if (!m->keys[i])
+            continue;
+        size_t at = (size_t)(m->keys[i] * UINT64_C(0x9E3779B97F4A7C15) >> 20) & (capacity - 1);
+        while (keys[at])
+            at = (at + 1) & (capacity - 1);
+        keys[at] = m->keys[i];
+        ids[at] = m->ids[i];
+    }
+    free(m->keys);
+    free(m->ids);
+    m->keys = keys;
+    m->ids = ids;
+    m->mask = capacity - 1;
+    return 0;
+}
+
+static int add_vertex(lod *c, const double x[3], uint32_t *id)
+{
+    iso_mesh *mesh = c->mesh;
+    if (mesh->vertex_count >= UINT32_MAX)
+        return ISO_E_LIMIT;
+    if (mesh->vertex_count == mesh->vertex_capacity &&
+        iso_mesh_reserve(mesh, 2 * mesh->vertex_capacity + 1024, mesh->triangle_capacity))
+        return ISO_E_NOMEM;
+    float *p = mesh->positions + 3 * mesh->vertex_count;
+    for (int d = 0; d < 3; d++)
+        p[d] = (float)x[d];
+    *id = (uint32_t)mesh->vertex_count++;
+    return 0;
+}
+
+/* The vertex of the crossing on the lattice segment from p along axis, 2^shift long: made
+ * on first use, where iso_mc_edge_t puts it between the segment's two samples. */
+static int crossing(lod *c, const uint32_t p[3], int axis, unsigned shift, uint32_t *id)
+{
+    uint64_t key = (((((uint64_t)p[2] * c->dims[1] + p[1]) * c->dims[0] + p[0]) * 3 + (uint64_t)axis) << 2 |
+                    shift) + 1;
+    vertex_map *m = &c->map;
+    if (2 * (m->count + 1) > m->mask && grow_map(m))
+        return ISO_E_NOMEM;
+    size_t at = (size_t)(key * UINT64_C(0x9E3779B97F4A7C15) >> 20) & m->mask;
+    for (; m->keys[at]; at = (at + 1) & m->mask)
+        if (m->keys[at] == key) {
+            *id = m->ids[at];
+            return 0;
+        }
+    uint32_t q[3] = {p[0], p[1], p[2]};
+    double len = (double)(1u << shift), x[3] = {p[0], p[1], p[2]};
+    q[axis] += 1u << shift;
+    x[axis] += iso_mc_edge_t(sample(c, p), sample(c, q), c->level) * len;
+    int rc = add_vertex(c, x, id);
+    if (rc)
+        return rc;
+    measure(c, x);
+    m->keys[at] = key;
+    m->ids[at] = *id;
+    m->count++;
+    return 0;
+}
+
+static int add_triangle(lod *c, uint32_t a, uint32_t b, uint32_t d)
+{
+    iso_mesh *mesh = c->mesh;
+    if (mesh->triangle_count == mesh->triangle_capacity &&
+        iso_mesh_reserve(mesh, mesh->vertex_capacity, 2 * mesh->triangle_capacity + 1024))
+        return ISO_E_NOMEM;
+    uint32_t *t = mesh->indices + 3 * mesh->triangle_count++;
+    t[0] = a;
+    t[1] = b;
+    t[2] = d;
+    return 0;
+}
+
+/* Marching cubes on the cell at o, s = 2^shift wide. */
+static int regular_cell(lod *c, const uint32_t o[3], unsigned shift)
+{
+    uint32_t s = 1u << shift;
+    double v[8];
+    for (int k = 0; k < 8; k++) {
+        uint32_t p[3] = {o[0] + (k & 1) * s, o[1] + ((k >> 1) & 1) * s, o[2] + ((k >> 2) & 1) * s};
+        v[k] = sample(c, p);
+    }
+    const iso_mc_case *cs = iso_mc_cases() + iso_mc_case_index(v, c->level);
+    for (int t = 0; t < cs->triangle_count; t++) {
+        uint32_t id[3];
+        for (int i = 0; i < 3; i++) {
+            int e = cs->edges[3 * t + i], lo = iso_mc_edge_corner[e][0];
+            uint32_t p[3] = {o[0] + (lo & 1) * s, o[1] + ((lo >> 1) & 1) * s, o[2] + ((lo >> 2) & 1) * s};
+            int rc = crossing(c, p, e / 4, shift, &id[i]);
+            if (rc)
+                return rc;
+        }
+        int rc = add_triangle(c, id[0], id[1], id[2]);
+        if (rc)
+            return rc;
+    }
+    return 0;
+}
+
+/* 1 if every face and edge of the cell at o has the cell's own stride. */
+static int cell_is_regular(const lod *c, const uint32_t o[3], unsigned shift)
+{
+    uint32_t s = 1u << shift;
+    for (int a = 0; a < 3; a++)
+        for (int side = 0; side < 2; side++) {
+            uint32_t face[3];
+            for (int d = 0; d < 3; d++)
+                face[d] = 2 * o[d] + (d == a ? 2 * s * (uint32_t)side : s);
+            if (set_shift(c, face) != shift)
+                return 0;
+        }
+    for (int a = 0; a < 3; a++)
+        for (int k = 0; k < 4; k++) {
+            uint32_t edge[3];
+            int b = (a + 1) % 3, d2 = (a + 2) % 3;
+            edge[a] = 2 * o[a] + s;
+            edge[b] = 2 * o[b] + 2 * s * (uint32_t)(k & 1);
+            edge[d2] = 2 * o[d2] + 2 * s * (uint32_t)(k >> 1);
+            if (set_shift(c, edge) != shift)
+                return 0;
+        }
+    return 1;
+}
+
+static int add_segment(lod *c, loop_segment s)
+{
+    if (c->segment_count == c->segment_capacity) {
+        size_t more = c->segment_capacity ? 2 * c->segment_capacity : 256;
+        loop_segment *grown = realloc(c->segments, more * sizeof *grown);
+        if (!grown)
+            return ISO_E_NOMEM;
+        c->segments = grown;
+        c->segment_capacity = more;
+    }
+    c->segments[c->segment_count++] = s;
+    return 0;
+}
+
+/* Polygon points of one face square: its corners counter-clockwise from outside the cell,
+ * each side split at its own stride. At most 4 * 8 points. */
+#define MAX_POLYGON (4 * ISO_BRICK_CELLS)
+
+/* The segments of one square of a transition cell's face, by mc.h's face rule on its
+ * polygon. corner[4]: the square's corners in order. */
+static int square_segments(lod *c, const uint32_t corner[4][3], uint32_t side_len)
+{
+    uint32_t points[MAX_POLYGON][3];
+    int m = 0;
+    for (int k = 0; k < 4; k++) {
+        const uint32_t *p = corner[k], *q = corner[(k + 1) % 4];
+        uint32_t mid[3];
+        int axis = 0;
+        for (int d = 0; d < 3; d++) {
+            mid[d] = p[d] + q[d];
+            if (p[d] != q[d])
+                axis = d;
+        }
+        uint32_t step = 1u << set_shift(c, mid);
+        if (step > side_len)
+            step = side_len;
+        for (uint32_t j = 0; j < side_len; j += step) {
+            memcpy(points[m], p, sizeof points[m]);
+            points[m][axis] = q[axis] > p[axis] ? p[axis] + j : p[axis] - j;
+            m++;
+        }
+    }
+    /* Crossings in order around the polygon: which were entries, and their vertices. */
+    uint32_t id[MAX_POLYGON];
+    int entry[MAX_POLYGON], above[MAX_POLYGON], n = 0, at[MAX_POLYGON];
+    for (int i = 0; i < m; i++)
+        above[i] = sample(c, points[i]) > c->level;
+    for (int i = 0; i < m; i++) {
+        int j = (i + 1) % m;
+        if (above[i] == above[j])
+            continue;
+        const uint32_t *lo = points[i], *hi = points[j];
+        int axis = 0;
+        for (int d = 0; d < 3; d++)
+            if (lo[d] != hi[d])
+                axis = d;
+        if (lo[axis] > hi[axis]) {
+            const uint32_t *t = lo;
+            lo = hi;
+            hi = t;
+        }
+        unsigned shift = (unsigned)__builtin_ctz(hi[axis] - lo[axis]);
+        int rc = crossing(c, lo, axis, shift, &id[n]);
+        if (rc)
+            return rc;
+        entry[n] = above[j];
+        at[n] = i;
+        n++;
+    }
+    /* Crossings alternate entry and exit: the one after an entry leaves its run. */
+    for (int r = 0; r < n; r++) {
+        if (!entry[r])
+            continue;
+        int leave = (r + 1) % n, i = at[r];
+        loop_segment s = {.from = id[leave], .to = id[r]};
+        const uint32_t *in = points[(i + 1) % m], *out = points[i];
+        memcpy(s.above, in, sizeof s.above);
+        memcpy(s.below, out, sizeof s.below);
+        int rc = add_segment(c, s);
+        if (rc)
+            return rc;
+    }
+    return 0;
+}
+
+/* A point on f = level for a loop: its vertices' mean pulled a quarter of the way to the
+ * cell's centre (strictly inside the cell), then bisected toward the nearest of the loop's
+ * samples strictly on the other side of the level. The root is then strictly inside too,
+ * never on a face, so no fan triangle lies flat in one. A sample exactly on the level
+ * (a tie) is approached only to ISO_MC_END_GAP of the way, as crossings are. */
+static void place_centre(const lod *c, const uint32_t *loop, size_t n, const loop_segment *const *ends,
+                         const double middle[3], double x[3])
+{
+    const float *pos = c->mesh->positions;
+    double a[3] = {0, 0, 0};
+    for (size_t i = 0; i < n; i++)
+        for (int d = 0; d < 3; d++)
+            a[d] += pos[3 * loop[i] + d];
+    for (int d = 0; d < 3; d++)
+        a[d] = 0.75 * a[d] / (double)n + 0.25 * middle[d];
+    double fa = value_at(c, a) - c->level;
+    int a_above = fa > 0;
+    double best = INFINITY, b[3] = {a[0], a[1], a[2]};
+    int strict = 0;
+    for (size_t i = 0; i < n && fa != 0; i++) {
+        const uint32_t *p = a_above ? ends[i]->below : ends[i]->above;
+        double fp = sample(c, p) - c->level, dist = 0;
+        int opposite = a_above ? fp < 0 : fp > 0;
+        if (strict && !opposite)
+            continue;
+        for (int d = 0; d < 3; d++)
+            dist += (p[d] - a[d]) * (p[d] - a[d]);
+        if (dist < best || (opposite && !strict)) {
+            best = dist;
+            strict = opposite;
+            for (int d = 0; d < 3; d++)
+                b[d] = opposite ? p[d] : a[d] + (1 - ISO_MC_END_GAP) * (p[d] - a[d]);
+        }
+    }
+    for (int step = 0; step < CENTRE_STEPS && fa != 0; step++) {
+        double mid[3];
+        for (int d = 0; d < 3; d++)
+            mid[d] = 0.5 * (a[d] + b[d]);
+        if ((value_at(c, mid) > c->level) == a_above)
+            memcpy(a, mid, sizeof a);
+        else
+            memcpy(b, mid, sizeof b);
+    }
+    /* The end still on a's side: b may be the sample itself after a tie. */
+    memcpy(x, a, 3 * sizeof *x);
+}
+
+/* Chains the cell's segments into loops and fans each, reversed so that normals point
+ * toward lower values (as mc.c does). */
+static int fan_loops(lod *c, const double middle[3], iso_error *err)
+{
+    size_t count = c->segment_count;
+    if (c->loop_capacity < count) {
+        free(c->loop);
+        c->loop = malloc(count * sizeof *c->loop);
+        if (!c->loop)
+            return ISO_E_NOMEM;
+        c->loop_capacity = count;
+    }
+    for (size_t start = 0; start < count; start++) {
+        if (c->segments[start].used)
+            continue;
+        size_t n = 0;
+        loop_segment *s = &c->segments[start];
+        while (!s->used) {
+            s->used = 1;
+            c->loop[n++] = s->from;
+            loop_segment *next = NULL;
+            for (size_t k = 0; k < count && !next; k++)
+                if (c->segments[k].from == s->to)
+                    next = &c->segments[k];
+            if (!next)
+                return iso_error_set(err, ISO_E_INTERNAL, "a transition cell's loop does not close");
+            s = next;
+        }
+        if (s != &c->segments[start])
+            return iso_error_set(err, ISO_E_INTERNAL, "a transition cell's loop does not close");
+        /* Two segments between the same two crossings: a run of inside samples along one
+         * subdivided edge, cut off on both faces by the edge itself. The neighbours across
+         * those faces hold the same two segments, reversed: the surface creases along the
+         * edge and this cell holds none of it. */
+        if (n == 2)
+            continue;
+        uint32_t *r = c->loop;
+        for (size_t i = 0; i < n / 2; i++) {
+            uint32_t t = r[i];
+            r[i] = r[n - 1 - i];
+            r[n - 1 - i] = t;
+        }
+        int rc;
+        if (n == 3) {
+            rc = add_triangle(c, r[0], r[1], r[2]);
+        } else {
+            /* The segments whose ends these loop vertices are, for the bisection. */
+            const loop_segment *seg[64];
+            size_t m = 0;
+            for (size_t k = 0; k < count && m < 64; k++)
+                for (size_t i = 0; i < n; i++)
+                    if (c->segments[k].to == r[i]) {
+                        seg[m++] = &c->segments[k];
+                        break;
+                    }
+            double x[3];
+            place_centre(c, r, m < n ? m : n, seg, middle, x);
+            uint32_t centre;
+            rc = add_vertex(c, x, &centre);
+            if (!rc)
+                measure(c, x);
+            for (size_t i = 0; i < n && !rc; i++)
+                rc = add_triangle(c, centre, r[i], r[(i + 1) % n]);
+        }
+        if (rc)
+            return iso_error_set(err, rc, "out of memory extracting the surface");
+    }
+    return 0;
+}
+
+/* A cell whose faces or edges are finer than itself: face squares, loops, fans. */
+static int transition_cell(lod *c, const uint32_t o[3], unsigned shift, iso_error *err)
+{
+
+    static const int bc[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+    uint32_t s = 1u << shift;
+    c->segment_count = 0;
+    for (int a = 0; a < 3; a++)
+        for (int side = 0; side < 2; side++) {
+            int b = (a + 1) % 3, d2 = (a + 2) % 3;
+            uint32_t face[3];
+            for (int d = 0; d < 3; d++)
+                face[d] = 2 * o[d] + (d == a ? 2 * s * (uint32_t)side : s);
+            uint32_t f = 1u << set_shift(c, face);
+            for (uint32_t jc = 0; jc < s; jc += f)
+                for (uint32_t jb = 0; jb < s; jb += f) {
+                    uint32_t corner[4][3];
+                    for (int k = 0; k < 4; k++) {
+                        int q = side ? k : 3 - k; /* (b, c, a) is right-handed: reversed below */
+                        corner[k][a] = o[a] + s * (uint32_t)side;
+                        corner[k][b] = o[b] + jb + f * (uint32_t)bc[q][0];
+                        corner[k][d2] = o[d2] + jc + f * (uint32_t)bc[q][1];
+                    }
+                    int rc = square_segments(c, (const uint32_t(*)[3])corner, f);
+                    if (rc)
+                        return iso_error_set(err, rc, "out of memory extracting the surface");
+                }
+        }
+    if (!c->segment_count)
+        return 0;
+    double middle[3];
+    for (int d = 0; d < 3; d++)
+        middle[d] = o[d] + 0.5 * s;
+    return fan_loops(c, middle, err);
+}
+
+/* 1 if no brick next to b (nor, with a cap, the border) is finer than b: all its cells
+ * are regular. */
+static int no_finer_neighbour(const lod *c, const uint32_t b[3], unsigned shift)
+{
+    for (int d = 0; d < 3; d++)
+        if (c->cap && shift && (b[d] == 0 || b[d] + 1 == c->count[d]))
+            return 0;
+    for (int dz = -1; dz <= 1; dz++)
+        for (int dy = -1; dy <= 1; dy++)
+            for (int dx = -1; dx <= 1; dx++) {
+                long i = (long)b[0] + dx, j = (long)b[1] + dy, k = (long)b[2] + dz;
+                if (i < 0 || j < 0 || k < 0 || i >= c->count[0] || j >= c->count[1] || k >= c->count[2])
+                    continue;
+                if (c->shift[((size_t)k * c->count[1] + (size_t)j) * c->count[0] + (size_t)i] < shift)
+                    return 0;
+            }
+    return 1;
+}
+
+static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *err)
+{
+    size_t lo[3], hi[3];
+    iso_bricks_box(c->vol, b, lo, hi);
+    for (int d = 0; d < 3; d++) {
+        c->lo[d] = (uint32_t)lo[d];
+        c->n[d] = (uint32_t)(hi[d] - lo[d] + 1);
+    }
+    iso_vol_read_box(c->vol, lo, hi, c->samples);
+    uint32_t s = 1u << shift;
+    int regular = no_finer_neighbour(c, b, shift);
+    for (uint32_t z = 0; z + 1 < c->n[2]; z += s)
+        for (uint32_t y = 0; y + 1 < c->n[1]; y += s)
+            for (uint32_t x = 0; x + 1 < c->n[0]; x += s) {
+                uint32_t o[3] = {c->lo[0] + x, c->lo[1] + y, c->lo[2] + z};
+                c->cells++;
+                int rc;
+                if (regular || cell_is_regular(c, o, shift)) {
+                    rc = regular_cell(c, o, shift);
+                    if (rc)
+                        return iso_error_set(err, rc, rc == ISO_E_LIMIT ? "more than 2^32 - 1 vertices"
+                                                                         : "out of memory extracting the surface");
+                } else if ((rc = transition_cell(c, o, shift, err))) {
+                    return rc;
+                }
+            }
+    return 0;
+}
+
+int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
+                    iso_extract_stats *stats, iso_error *err)
+{
+    lod c = {.tree = tree, .vol = tree->vol, .level = params->level, .cap = params->cap, .mesh = mesh};
+    const iso_bricks *g = &tree->bricks;
+    for (int d = 0; d < 3; d++) {
+        c.dims[d] = (uint32_t)tree->vol->dims[d];
+        c.count[d] = g->count[d];
+    }
+    iso_mesh_clear(mesh);
+    size_t total = iso_bricks_total(g);
+    c.shift = malloc(total ? total : 1);
+    if (!c.shift)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    plan(&c, params->tolerance);
+    int rc = 0;
+    for (uint32_t k = 0; k < g->count[2] && !rc; k++)
+        for (uint32_t j = 0; j < g->count[1] && !rc; j++)
+            for (uint32_t i = 0; i < g->count[0] && !rc; i++) {
+                size_t at = ((size_t)k * g->count[1] + j) * g->count[0] + i;
+                int active = g->min[at] <= c.level && c.level < g->max[at];
+                if (!active && !params->no_minmax)
+                    continue;
+                uint32_t b[3] = {i, j, k};
+                stats->nodes_visited++;
+                if (active && c.shift[at]) {
+                    stats->nodes_polygonized++;
+                    double fit = iso_tree_level_error(tree, at, c.shift[at]);
+                    stats->fit_error = fit > stats->fit_error ? fit : stats->fit_error;
+                }
+                /* Without pruning a brick the level cannot cross is still read, cell by cell. */
+                rc = march_brick(&c, b, active ? c.shift[at] : 0, err);
+            }
+    stats->cells_visited = c.cells;
+    stats->error_bound = c.error;
+    free(c.shift);
+    free(c.map.keys);
+    free(c.map.ids);
+    free(c.segments);
+    free(c.loop);
+    if (rc)
+        iso_mesh_free(mesh);
+    return rc;
+}
