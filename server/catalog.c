@@ -3,6 +3,7 @@
 
 #include <dirent.h>
 #include <jansson.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -32,15 +33,59 @@ void srv_catalog_free(srv_catalog *catalog)
         free(catalog->entries[i].orthanc_series);
     }
     free(catalog->entries);
-    catalog->entries = NULL;
-    catalog->count = 0;
+    free(catalog->slots);
+    memset(catalog, 0, sizeof *catalog);
+}
+
+/* ---------------------------------------------------------------- the id index */
+
+/* FNV-1a, 64 bits: ids are short, and the index only needs them spread. */
+static size_t id_hash(const char *id)
+{
+    uint64_t h = 14695981039346656037ull;
+    for (const unsigned char *p = (const unsigned char *)id; *p; p++)
+        h = (h ^ *p) * 1099511628211ull;
+    return (size_t)(h ^ (h >> 32));
+}
+
+size_t srv_catalog_find(const srv_catalog *catalog, const char *id)
+{
+    if (!catalog->slot_count)
+        return catalog->count;
+    size_t mask = catalog->slot_count - 1;
+    for (size_t s = id_hash(id) & mask;; s = (s + 1) & mask) {
+        size_t at = catalog->slots[s];
+        if (!at)
+            return catalog->count;
+        if (!strcmp(catalog->entries[at - 1].id, id))
+            return at - 1;
+    }
 }
 
 static int has_id(const srv_catalog *catalog, const char *id)
 {
-    for (size_t i = 0; i < catalog->count; i++)
-        if (!strcmp(catalog->entries[i].id, id))
-            return 1;
+    return srv_catalog_find(catalog, id) < catalog->count;
+}
+
+/* Rebuilds the index for every entry, with at least twice as many slots (linear probing
+ * stays short below half full). 0 or ISO_E_NOMEM. */
+static int reindex(srv_catalog *catalog, size_t want, iso_error *err)
+{
+    size_t slots = 16;
+    while (slots < 2 * want)
+        slots *= 2;
+    size_t *table = calloc(slots, sizeof *table);
+    if (!table)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory indexing the catalog");
+    for (size_t i = 0; i < catalog->count; i++) {
+        size_t s = id_hash(catalog->entries[i].id) & (slots - 1);
+        while (table[s])
+            s = (s + 1) & (slots - 1);
+        table[s] = i + 1;
+    }
+    free(catalog->slots);
+    catalog->slots = table;
+    catalog->slot_count = slots;
     return 0;
 }
 
@@ -48,11 +93,17 @@ static int has_id(const srv_catalog *catalog, const char *id)
 static int add(srv_catalog *catalog, const char *id, const char *path, const char *name,
                const char *modality, const double *levels, size_t level_count, iso_error *err)
 {
-    srv_catalog_entry *grown = realloc(catalog->entries, (catalog->count + 1) * sizeof *grown);
-    if (!grown)
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory reading the catalog");
-    catalog->entries = grown;
-    srv_catalog_entry *e = &grown[catalog->count];
+    if (catalog->count == catalog->capacity) {
+        size_t cap = catalog->capacity ? 2 * catalog->capacity : 16;
+        srv_catalog_entry *grown = realloc(catalog->entries, cap * sizeof *grown);
+        if (!grown)
+            return iso_error_set(err, ISO_E_NOMEM, "out of memory reading the catalog");
+        catalog->entries = grown;
+        catalog->capacity = cap;
+    }
+    if (2 * (catalog->count + 1) > catalog->slot_count && reindex(catalog, catalog->count + 1, err))
+        return ISO_E_NOMEM;
+    srv_catalog_entry *e = &catalog->entries[catalog->count];
     memset(e, 0, sizeof *e);
     snprintf(e->id, sizeof e->id, "%s", id);
     e->path = strdup(path);
@@ -67,7 +118,10 @@ static int add(srv_catalog *catalog, const char *id, const char *path, const cha
     e->level_count = level_count < SRV_LEVELS_MAX ? level_count : SRV_LEVELS_MAX;
     if (e->level_count)
         memcpy(e->levels, levels, e->level_count * sizeof *levels);
-    catalog->count++;
+    size_t s = id_hash(e->id) & (catalog->slot_count - 1);
+    while (catalog->slots[s])
+        s = (s + 1) & (catalog->slot_count - 1);
+    catalog->slots[s] = ++catalog->count;
     return 0;
 }
 
@@ -251,7 +305,10 @@ int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err)
         return rc;
     }
     qsort(out->entries, out->count, sizeof *out->entries, by_id);
-    return 0;
+    rc = reindex(out, out->count, err); /* the sort moved every entry */
+    if (rc)
+        srv_catalog_free(out);
+    return rc;
 }
 
 /* ---------------------------------------------------------------- default collection */

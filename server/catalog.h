@@ -25,7 +25,9 @@ typedef struct srv_catalog_entry {
 
 typedef struct srv_catalog {
     srv_catalog_entry *entries;
-    size_t count;
+    size_t count, capacity;
+    size_t *slots;            /* the id index: open addressing, entry index + 1, 0 empty */
+    size_t slot_count;        /* a power of two, at least twice count */
 } srv_catalog;
 
 /* 1 if id matches [A-Za-z0-9._-]{1,64}. */
@@ -49,6 +51,10 @@ int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err);
 /* The default collection: Debian's mricron-data brain templates (those installed) and
  * analytic phantoms, each with suggested levels. */
 int srv_catalog_default(srv_catalog *out, iso_error *err);
+
+/* The index of the entry with this id, or catalog->count: one hash probe sequence, never a
+ * scan (a catalog may hold 100,000 studies and every request looks its volume up). */
+size_t srv_catalog_find(const srv_catalog *catalog, const char *id);
 
 void srv_catalog_free(srv_catalog *catalog);
 

@@ -33,7 +33,9 @@ int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
     c->state = calloc(catalog->count ? catalog->count : 1, 1);
     c->upstream = calloc(catalog->count ? catalog->count : 1, 1);
     c->failure = calloc(catalog->count ? catalog->count : 1, sizeof *c->failure);
-    if (!c->volumes || !c->state || !c->upstream || !c->failure || pthread_mutex_init(&c->lock, NULL))
+    c->published = calloc(catalog->count ? catalog->count : 1, sizeof *c->published);
+    if (!c->volumes || !c->state || !c->upstream || !c->failure || !c->published ||
+        pthread_mutex_init(&c->lock, NULL))
         goto err;
     if (pthread_cond_init(&c->changed, NULL)) {
         pthread_mutex_destroy(&c->lock);
@@ -45,6 +47,7 @@ err:
     free(c->state);
     free(c->upstream);
     free(c->failure);
+    free(c->published);
     memset(c, 0, sizeof *c);
     return ISO_E_NOMEM;
 }
@@ -62,6 +65,7 @@ void srv_collection_free(srv_collection *c)
     free(c->state);
     free(c->upstream);
     free(c->failure);
+    free(c->published);
     pthread_cond_destroy(&c->changed);
     pthread_mutex_destroy(&c->lock);
     memset(c, 0, sizeof *c);
@@ -69,11 +73,9 @@ void srv_collection_free(srv_collection *c)
 
 const srv_volume *srv_collection_find(const srv_collection *c, const char *id)
 {
-    size_t n = atomic_load_explicit(&c->count, memory_order_acquire);
-    for (size_t i = 0; i < n; i++)
-        if (!strcmp(c->volumes[i].entry->id, id))
-            return &c->volumes[i];
-    return NULL;
+    size_t i = srv_catalog_find(c->catalog, id);
+    size_t at = i < c->total ? atomic_load_explicit(&c->published[i], memory_order_acquire) : 0;
+    return at ? &c->volumes[at - 1] : NULL;
 }
 
 size_t srv_collection_hierarchy_bytes(const srv_collection *c)
@@ -207,6 +209,7 @@ static void load_entry(srv_collection *c, size_t i, int on_demand)
         size_t n = atomic_load(&c->count);
         c->volumes[n] = v;
         atomic_store_explicit(&c->count, n + 1, memory_order_release);
+        atomic_store_explicit(&c->published[i], n + 1, memory_order_release);
         if (on_demand)
             atomic_fetch_add(&c->on_demand, 1);
         if (v.tree_unsaved)
@@ -232,12 +235,12 @@ static int is_tree_temporary(const srv_catalog *catalog, const char *name)
     for (const char *p = name + n - 6; *p; p++)
         if (!isalnum((unsigned char)*p))
             return 0;
-    for (size_t i = 0; i < catalog->count; i++) {
-        const char *id = catalog->entries[i].id;
-        if (strlen(id) == n - tail && !strncmp(id, name, n - tail))
-            return 1;
-    }
-    return 0;
+    char id[SRV_ID_MAX + 1];
+    if (n - tail > SRV_ID_MAX)
+        return 0;
+    memcpy(id, name, n - tail);
+    id[n - tail] = '\0';
+    return srv_catalog_find(catalog, id) < catalog->count;
 }
 
 /* Removes the temporary hierarchy files a killed writer left (iso_tree_save renames its
@@ -291,18 +294,9 @@ void srv_collection_preload(srv_collection *c)
     atomic_store(&c->ready, 1);
 }
 
-/* The catalog index of id, or c->total. */
-static size_t entry_index(const srv_collection *c, const char *id)
-{
-    size_t i = 0;
-    while (i < c->total && strcmp(c->catalog->entries[i].id, id))
-        i++;
-    return i;
-}
-
 const char *srv_collection_failure(srv_collection *c, const char *id)
 {
-    size_t i = entry_index(c, id);
+    size_t i = srv_catalog_find(c->catalog, id);
     if (i == c->total)
         return "";
     pthread_mutex_lock(&c->lock);
@@ -315,7 +309,7 @@ srv_volume_state srv_collection_acquire(srv_collection *c, const char *id, const
 {
     if ((*out = srv_collection_find(c, id)))
         return SRV_VOLUME_READY;
-    size_t i = entry_index(c, id);
+    size_t i = srv_catalog_find(c->catalog, id);
     if (i == c->total)
         return SRV_VOLUME_UNKNOWN;
     load_entry(c, i, 1);

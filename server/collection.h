@@ -60,6 +60,7 @@ typedef struct srv_collection {
     unsigned char *state;             /* per catalog entry: SRV_ENTRY_* */
     iso_error *failure;               /* per catalog entry: why it failed (SRV_ENTRY_FAILED) */
     unsigned char *upstream;          /* per catalog entry: 1 if its source server failed */
+    _Atomic size_t *published;        /* per catalog entry: its index in volumes + 1, 0 none */
 } srv_collection;
 
 enum { SRV_ENTRY_IDLE, SRV_ENTRY_LOADING, SRV_ENTRY_LOADED, SRV_ENTRY_FAILED };
@@ -76,7 +77,7 @@ int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
  * atomically. A volume that fails to load is reported and skipped. Sets ready at the end.
  * Blocking: run it in a thread; setting c->stop ends it after the volume at hand. */
 void srv_collection_preload(srv_collection *c);
-/* The published volume with this id, or NULL. Lock-free. */
+/* The published volume with this id, or NULL. Lock-free: one catalog hash lookup. */
 const srv_volume *srv_collection_find(const srv_collection *c, const char *id);
 /* What srv_collection_acquire found; server/status.c maps it to an HTTP status. */
 typedef enum srv_volume_state {

@@ -41,7 +41,7 @@ static const char expose_headers[] =
     "X-Iso-Tolerance, X-Iso-Area-Mm2, X-Iso-Volume-Mm3, X-Iso-Budget-Fits, X-Iso-Simplified, "
     "X-Iso-Simplify-Error-Mm, X-Iso-Simplify-Error-Voxels, X-Iso-Distance-Mm, "
     "X-Iso-Distance-Max-Mm, X-Iso-Distance-Voxels, X-Iso-Chain-Level, X-Iso-Exact-Triangles, "
-    "X-Iso-Cache, X-Iso-Replica, X-Iso-Load";
+    "X-Iso-Cache, X-Iso-Replica, X-Iso-Load, X-Iso-Total, Link";
 
 /* ---------------------------------------------------------------- responses */
 
@@ -198,39 +198,119 @@ static proto_volume_doc doc_of(const srv_server *s, const srv_volume *v)
         .hierarchy_ms = v->tree->build_ms, .hierarchy_from_file = v->tree_from_file};
 }
 
+/* A page of /v1/volumes: ?limit=N (1..SRV_PAGE_MAX) and ?after=ID (the last id of the
+ * previous page) pick positions [first, first + count) of the listing; without either, the
+ * whole listing. */
+#define SRV_PAGE_MAX 10000
+
+typedef struct srv_page {
+    size_t first, count, total;
+} srv_page;
+
+/* Reads limit and after; the position of after comes from position_of (total when it is
+ * not listed). 0, or ISO_E_ARGUMENT with detail saying what is wrong. */
+static int read_page(struct MHD_Connection *c, const srv_collection *col, size_t total,
+                     size_t (*position_of)(const srv_collection *, const char *), srv_page *page,
+                     char *detail, size_t size)
+{
+    const char *limit = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "limit");
+    const char *after = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "after");
+    *page = (srv_page){.first = 0, .count = total, .total = total};
+    if (limit) {
+        char *end;
+        long n = strtol(limit, &end, 10);
+        if (!*limit || *end || n < 1 || n > SRV_PAGE_MAX) {
+            snprintf(detail, size, "limit must be an integer from 1 to %d", SRV_PAGE_MAX);
+            return ISO_E_ARGUMENT;
+        }
+        page->count = (size_t)n;
+    }
+    if (after) {
+        size_t at = srv_catalog_id_valid(after) ? position_of(col, after) : total;
+        if (at >= total) {
+            snprintf(detail, size, "after: \"%.64s\" is not a listed volume id", after);
+            return ISO_E_ARGUMENT;
+        }
+        page->first = at + 1;
+    }
+    if (page->count > total - page->first)
+        page->count = total - page->first;
+    return 0;
+}
+
+/* Sends the list of docs (a page), with Link: rel="next" when more follow. */
+static enum MHD_Result send_page(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                                 const proto_volume_doc *docs, const srv_page *page)
+{
+    size_t size = 0;
+    struct MHD_Response *r = text_response(proto_json_volume_list(docs, page->count),
+                                           "application/json", "no-cache", &size);
+    char value[32];
+    snprintf(value, sizeof value, "%zu", page->total);
+    if (r)
+        add_header(r, "X-Iso-Total", value);
+    if (r && page->count && page->first + page->count < page->total) {
+        char link[SRV_ID_MAX + 80];
+        snprintf(link, sizeof link, "</v1/volumes?limit=%zu&after=%s>; rel=\"next\"", page->count,
+                 docs[page->count - 1].id);
+        add_header(r, "Link", link);
+    }
+    return send_response(s, c, req, 200, r, size);
+}
+
+static size_t catalog_position(const srv_collection *col, const char *id)
+{
+    return srv_catalog_find(col->catalog, id);
+}
+
+static size_t loaded_position(const srv_collection *col, const char *id)
+{
+    const srv_volume *v = srv_collection_find(col, id);
+    return v ? (size_t)(v - col->volumes) : atomic_load(&col->count);
+}
+
 /* Sharded: the catalog, the same on every replica whatever it has loaded; each entry
  * names its shard. The volume's own document (routed to that shard) has the rest. */
 static enum MHD_Result route_catalog(srv_server *s, struct MHD_Connection *c, srv_request *req)
 {
     const srv_catalog *catalog = s->collection->catalog;
     const srv_shard_ring *ring = s->config.shard_ring;
-    proto_volume_doc *docs = calloc(catalog->count ? catalog->count : 1, sizeof *docs);
+    srv_page page;
+    char detail[160];
+    if (read_page(c, s->collection, catalog->count, catalog_position, &page, detail, sizeof detail))
+        return fail(s, c, req, "/v1/volumes", 400, "%s", detail);
+    proto_volume_doc *docs = calloc(page.count ? page.count : 1, sizeof *docs);
     if (!docs)
         return send_out_of_memory(s, c, req);
-    for (size_t i = 0; i < catalog->count; i++) {
-        const srv_catalog_entry *e = &catalog->entries[i];
+    for (size_t i = 0; i < page.count; i++) {
+        const srv_catalog_entry *e = &catalog->entries[page.first + i];
         docs[i] = (proto_volume_doc){.id = e->id, .name = e->name, .modality = e->modality,
                                      .levels = e->levels, .level_count = e->level_count,
                                      .shard = ring->peers[srv_shard_owner(ring, e->id)]};
     }
-    char *text = proto_json_volume_list(docs, catalog->count);
+    enum MHD_Result ok = send_page(s, c, req, docs, &page);
     free(docs);
-    return send_text(s, c, req, 200, text, "application/json", "no-cache");
+    return ok;
 }
 
+/* The loaded volumes in the order they were loaded (an order that only ever grows). */
 static enum MHD_Result route_volumes(srv_server *s, struct MHD_Connection *c, srv_request *req)
 {
     if (s->config.shard_ring)
         return route_catalog(s, c, req);
     size_t n = atomic_load(&s->collection->count);
-    proto_volume_doc *docs = calloc(n ? n : 1, sizeof *docs);
+    srv_page page;
+    char detail[160];
+    if (read_page(c, s->collection, n, loaded_position, &page, detail, sizeof detail))
+        return fail(s, c, req, "/v1/volumes", 400, "%s", detail);
+    proto_volume_doc *docs = calloc(page.count ? page.count : 1, sizeof *docs);
     if (!docs)
         return send_out_of_memory(s, c, req);
-    for (size_t i = 0; i < n; i++)
-        docs[i] = doc_of(s, &s->collection->volumes[i]);
-    char *text = proto_json_volume_list(docs, n);
+    for (size_t i = 0; i < page.count; i++)
+        docs[i] = doc_of(s, &s->collection->volumes[page.first + i]);
+    enum MHD_Result ok = send_page(s, c, req, docs, &page);
     free(docs);
-    return send_text(s, c, req, 200, text, "application/json", "no-cache");
+    return ok;
 }
 
 static enum MHD_Result route_volume(srv_server *s, struct MHD_Connection *c, srv_request *req,

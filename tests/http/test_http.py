@@ -181,6 +181,25 @@ def main_tests(s, tmp, blob):
         assert len(b["index_to_world"]) == 16 and b["index_to_world"][0] == 0.75
     check("volumes_list", volumes)
 
+    def volumes_paged():
+        whole = [v["id"] for v in json.loads(s.get("/v1/volumes").body)["volumes"]]
+        walked, target = [], "/v1/volumes?limit=2"
+        while target:
+            r = s.get(target)
+            assert r.status == 200 and r.getheader("X-Iso-Total") == "3", (r.status, r.getheader("X-Iso-Total"))
+            page = [v["id"] for v in json.loads(r.body)["volumes"]]
+            assert 1 <= len(page) <= 2, page
+            walked += page
+            link = r.getheader("Link")
+            target = re.fullmatch(r'<(/v1/volumes\?limit=2&after=[A-Za-z0-9._-]+)>; rel="next"', link).group(1) if link else None
+        assert walked == whole, (walked, whole)
+        r = s.get(f"/v1/volumes?after={whole[-1]}")
+        assert r.status == 200 and json.loads(r.body)["volumes"] == [] and r.getheader("Link") is None
+        for bad in ("limit=0", "limit=10001", "limit=2x", "after=nosuch", "after=..%2F"):
+            r = s.get(f"/v1/volumes?{bad}")
+            assert r.status == 400 and problem(r)["status"] == 400, (bad, r.status)
+    check("volumes_paged_with_limit_and_after", volumes_paged)
+
     def one_volume():
         r = s.get("/v1/volumes/blob")
         v = json.loads(r.body)
