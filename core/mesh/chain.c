@@ -67,7 +67,7 @@ static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *s
         return rc;
     }
     uint32_t *shrunk = realloc(m.indices, (3 * m.triangle_count + 1) * sizeof *m.indices);
-    lv->indices = shrunk ? shrunk : m.indices;
+    lv->indices = m.indices = shrunk ? shrunk : m.indices;
     lv->triangle_count = m.triangle_count;
     lv->vertex_count = used_vertices(&m, seen);
     lv->estimate = r.error;

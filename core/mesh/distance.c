@@ -29,12 +29,14 @@ typedef struct grid {
     int n[3];
     uint32_t *start; /* cells + 1 offsets into items */
     uint32_t *items; /* triangle indices */
+    float *boxes;    /* per triangle: min x, y, z, max x, y, z */
 } grid;
 
 static void grid_free(grid *g)
 {
     free(g->start);
     free(g->items);
+    free(g->boxes);
 }
 
 static void triangle_corners(const iso_mesh *m, size_t t, double c[3][3])
@@ -93,8 +95,21 @@ static int grid_build(grid *g, const iso_mesh *m, const float lo[3], const float
         g->n[a] = n > GRID_SIDE_MAX ? GRID_SIDE_MAX : (int)n;
         total *= (size_t)g->n[a];
     }
-    if (!(g->start = calloc(total + 1, sizeof *g->start)))
+    if (!(g->start = calloc(total + 1, sizeof *g->start)) ||
+        !(g->boxes = malloc((6 * m->triangle_count + 1) * sizeof *g->boxes))) {
+        grid_free(g);
         return ISO_E_NOMEM;
+    }
+    for (size_t t = 0; t < m->triangle_count; t++) {
+        const uint32_t *v = m->indices + 3 * t;
+        float *box = g->boxes + 6 * t;
+        for (int a = 0; a < 3; a++) {
+            float x = m->positions[3 * (size_t)v[0] + a], y = m->positions[3 * (size_t)v[1] + a];
+            float z = m->positions[3 * (size_t)v[2] + a];
+            box[a] = fminf(x, fminf(y, z));
+            box[3 + a] = fmaxf(x, fmaxf(y, z));
+        }
+    }
     size_t items = 0;
     for (size_t t = 0; t < m->triangle_count; t++) {
         int a[3], b[3];
@@ -229,6 +244,16 @@ static double nearest(const grid *g, const iso_mesh *m, const double p[3])
                         continue;
                     size_t at = cell_index(g, i, j, k);
                     for (uint32_t e = g->start[at]; e < g->start[at + 1]; e++) {
+                        /* A triangle whose box is no nearer than the best is skipped. */
+                        const float *box = g->boxes + 6 * (size_t)g->items[e];
+                        double gap = 0;
+                        for (int a = 0; a < 3; a++) {
+                            double below = box[a] - p[a], above = p[a] - box[3 + a];
+                            double d = below > 0 ? below : above > 0 ? above : 0;
+                            gap += d * d;
+                        }
+                        if (gap >= best)
+                            continue;
                         double tc[3][3];
                         triangle_corners(m, g->items[e], tc);
                         double d = point_triangle_sq(p, tc);
