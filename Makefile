@@ -128,7 +128,8 @@ node-deps: web/node_modules/.package-lock.json
 
 # The web client: web/src plus the npm files it imports, copied into $(BUILD)/web, which
 # the server serves at / (nothing is loaded from another host). three.module.js imports
-# ./three.core.js; DRACOLoader's decoder (js + wasm) runs in a worker from libs/draco.
+# ./three.core.js; DRACOLoader's decoder (js + wasm) runs in a worker from libs/draco;
+# GLTFLoader (with the two utils it imports) and MeshoptDecoder read glb-meshopt.
 WEB_SRC := $(sort $(wildcard web/src/*))
 THREE   := web/node_modules/three
 $(BUILD)/web/.stamp: $(WEB_SRC) web/node_modules/.package-lock.json
@@ -138,6 +139,10 @@ $(BUILD)/web/.stamp: $(WEB_SRC) web/node_modules/.package-lock.json
 	cp $(THREE)/build/three.module.js $(THREE)/build/three.core.js $(BUILD)/web/three/
 	cp $(THREE)/examples/jsm/controls/OrbitControls.js $(BUILD)/web/three/addons/controls/
 	cp $(THREE)/examples/jsm/loaders/DRACOLoader.js $(BUILD)/web/three/addons/loaders/
+	cp $(THREE)/examples/jsm/loaders/GLTFLoader.js $(BUILD)/web/three/addons/loaders/
+	mkdir -p $(BUILD)/web/three/addons/utils
+	cp $(THREE)/examples/jsm/utils/BufferGeometryUtils.js $(THREE)/examples/jsm/utils/SkeletonUtils.js $(BUILD)/web/three/addons/utils/
+	cp $(THREE)/examples/jsm/libs/meshopt_decoder.module.js $(BUILD)/web/three/addons/libs/
 	cp -r $(THREE)/examples/jsm/libs/draco $(BUILD)/web/three/addons/libs/
 	touch $@
 

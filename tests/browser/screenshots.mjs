@@ -1,5 +1,6 @@
-// screenshots.mjs: the README's pictures: the shared CT head at skin and bone levels, as
-// the web client shows them. Not part of make test (it needs ../shared/volumes).
+// screenshots.mjs: the README's pictures: the shared CT head at the skin level, then skin
+// (translucent) over bone with a clipping plane, as the web client shows them. Not part of
+// make test (it needs ../shared/volumes).
 // usage: node tests/browser/screenshots.mjs   (from the repository root, after make)
 import { spawn } from 'node:child_process';
 import { mkdtempSync, rmSync, writeFileSync } from 'node:fs';
@@ -28,15 +29,27 @@ const context = await chromium.launchPersistentContext(profile, {
     '--disable-background-networking', '--disable-component-update', '--disable-sync', '--no-first-run'],
 });
 const page = context.pages()[0] ?? await context.newPage();
-for (const [name, level] of [['skin', 700.5], ['bone', 1500.5]]) {
-  await page.goto(`http://127.0.0.1:${port}/?volume=cthead&level=${level}&tolerance=0&normals=tricubic`);
-  const final = await page.waitForResponse((r) => r.url().includes(`level=${level}&tolerance=0&`), { timeout: 120000 });
-  const t = final.headers()['x-iso-triangles'];
-  await page.waitForFunction((n) => document.getElementById('stat-triangles')?.textContent.replace(/,/g, '') === n, t, { timeout: 120000 });
+const views = [
+  ['skin', 'level=700.5&tolerance=0&normals=tricubic'],
+  ['skin-over-bone', 'level=700.5&tolerance=0&normals=tricubic&color=e8b89a&opacity=0.3&level2=1500.5&color2=f2efe6&clip=x:0.55'],
+];
+for (const [name, query] of views) {
+  await page.goto(`http://127.0.0.1:${port}/?volume=cthead&${query}`);
+  const surfaces = query.includes('level2') ? 2 : 1;
+  await page.waitForFunction((n) => [...Array(n).keys()].every((i) => window.isoViewer?.shown.some((m) => m.surface === i && m.kind === 'final')),
+    surfaces, { timeout: 180000 });
   await page.check('#flip'); // CThead's header has no orientation; its slices run foot to crown
   await page.waitForTimeout(300);
+  if (surfaces === 2) { // a quarter turn: the cut faces the viewer
+    await page.mouse.move(760, 380);
+    await page.mouse.down();
+    await page.mouse.move(640, 380, { steps: 10 });
+    await page.mouse.up();
+  }
+  await page.click('#measure');
+  await page.waitForFunction((n) => (document.getElementById('measures').textContent.match(/mm²/g) || []).length === n, surfaces, { timeout: 180000 });
   await page.screenshot({ path: `docs/screenshot-${name}.png` });
-  console.log(`docs/screenshot-${name}.png: level ${level}, ${t} triangles`);
+  console.log(`docs/screenshot-${name}.png: ${query}`);
 }
 await context.close();
 server.kill('SIGTERM');

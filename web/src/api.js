@@ -18,22 +18,36 @@ export async function getJson(url, signal) {
   return response.json();
 }
 
-export function meshUrl(volume, { level, tolerance, normals, format = 'draco' }) {
+// The viewer's codecs and the API formats that carry them.
+export const CODEC_FORMATS = { draco: 'draco', meshopt: 'glb-meshopt' };
+
+export function meshUrl(volume, { level, tolerance, normals, format = 'draco', measures = false, cap = false }) {
   const q = new URLSearchParams({ level: String(level), tolerance: String(tolerance), normals, format });
+  if (cap) q.set('cap', 'true');
+  if (measures) q.set('measures', 'true');
   return `v1/volumes/${encodeURIComponent(volume)}/mesh?${q}`;
 }
 
 const number = (h, name) => (h.get(name) === null ? null : Number(h.get(name)));
 
-// Fetches a Draco mesh; returns its bytes and what the headers say about it.
+// Fetches a mesh (params.format: draco or glb-meshopt); returns its bytes and what the
+// headers say about it.
 export async function getMesh(volume, params, signal) {
   const response = await fetch(meshUrl(volume, params), { signal });
   if (!response.ok) throw await failure(response);
   const bytes = await response.arrayBuffer();
-  const h = response.headers;
+  return { bytes, size: bytes.byteLength, ...facts(response.headers) };
+}
+
+// The measures of a surface (measures=true), from the headers alone: a HEAD request.
+export async function getMeasures(volume, params, signal) {
+  const response = await fetch(meshUrl(volume, { ...params, measures: true }), { method: 'HEAD', signal });
+  if (!response.ok) throw new ApiError(`${response.status} ${response.statusText}: the server could not measure`);
+  return facts(response.headers);
+}
+
+function facts(h) {
   return {
-    bytes,
-    size: bytes.byteLength,
     triangles: number(h, 'X-Iso-Triangles'),
     vertices: number(h, 'X-Iso-Vertices'),
     cellsVisited: number(h, 'X-Iso-Cells-Visited'),
@@ -46,6 +60,7 @@ export async function getMesh(volume, params, signal) {
     tolerance: number(h, 'X-Iso-Tolerance'),
     areaMm2: number(h, 'X-Iso-Area-Mm2'),
     volumeMm3: number(h, 'X-Iso-Volume-Mm3'),
+    closed: h.get('X-Iso-Closed'),
     cache: h.get('X-Iso-Cache'),
   };
 }

@@ -1,5 +1,5 @@
 // ui.js: the panel's pieces that draw: the histogram behind the level slider, suggested
-// level chips, the stats table, the scale bar, the error line.
+// level chips, the stats table, the measures, the scale bar, the error line.
 
 export function drawHistogram(canvas, histogram, levels, onPick) {
   const ctx = canvas.getContext('2d');
@@ -38,24 +38,7 @@ export function formatNumber(x, digits = 4) {
 
 const integer = (x) => (x === null ? '–' : Math.round(x).toLocaleString('en-US'));
 
-export function showStats(table, mesh, decodeMs) {
-  const rows = [
-    ['triangles', integer(mesh.triangles), 'stat-triangles'],
-    ['vertices', integer(mesh.vertices)],
-    ['bytes over the wire', `${integer(mesh.size)} B`],
-    ['server extract', `${formatNumber(mesh.extractMs, 3)} ms`],
-    ['server normals', `${formatNumber(mesh.normalsMs, 3)} ms`],
-    ['server measure', `${formatNumber(mesh.measureMs, 3)} ms`],
-    ['server encode', `${formatNumber(mesh.encodeMs, 3)} ms`],
-    ['Draco speed', mesh.dracoSpeed === null ? '–' : String(mesh.dracoSpeed), 'stat-speed'],
-    ['decode', `${formatNumber(decodeMs, 3)} ms`],
-    ['cells visited', integer(mesh.cellsVisited)],
-    ['error bound', formatNumber(mesh.errorBound)],
-    ['tolerance used', formatNumber(mesh.tolerance)],
-    ['area', mesh.areaMm2 === null ? '–' : `${formatNumber(mesh.areaMm2)} mm²`],
-    ['enclosed volume', mesh.volumeMm3 === null ? '– (open surface)' : `${formatNumber(mesh.volumeMm3)} mm³`],
-    ['server cache', mesh.cache ?? '–'],
-  ];
+function fillTable(table, rows) {
   table.replaceChildren(...rows.map(([name, value, id]) => {
     const tr = document.createElement('tr');
     const a = document.createElement('td');
@@ -66,6 +49,40 @@ export function showStats(table, mesh, decodeMs) {
     tr.append(a, b);
     return tr;
   }));
+}
+
+export function showStats(table, mesh, decodeMs, codec) {
+  fillTable(table, [
+    ['triangles', integer(mesh.triangles), 'stat-triangles'],
+    ['vertices', integer(mesh.vertices)],
+    ['bytes over the wire', `${integer(mesh.size)} B`],
+    ['server extract', `${formatNumber(mesh.extractMs, 3)} ms`],
+    ['server normals', `${formatNumber(mesh.normalsMs, 3)} ms`],
+    ['server encode', `${formatNumber(mesh.encodeMs, 3)} ms`],
+    ['codec', codec, 'stat-codec'],
+    ['Draco speed', mesh.dracoSpeed === null ? '–' : String(mesh.dracoSpeed), 'stat-speed'],
+    ['decode', `${formatNumber(decodeMs, 3)} ms`],
+    ['cells visited', integer(mesh.cellsVisited)],
+    ['error bound', formatNumber(mesh.errorBound)],
+    ['tolerance used', formatNumber(mesh.tolerance)],
+    ['server cache', mesh.cache ?? '–'],
+  ]);
+}
+
+// Area in mm² and enclosed volume in mL (1 mL = 1,000 mm³) per surface; a surface that is
+// not closed has no volume (cap closes it at the volume's border).
+export function showMeasures(table, rows) {
+  const lines = [];
+  for (const r of rows) {
+    lines.push([r.name, '']);
+    if (r.areaMm2 === undefined) continue;
+    lines.push(['area', `${formatNumber(r.areaMm2, 6)} mm²`]);
+    lines.push(['enclosed volume', r.closed === 'true' && r.volumeMm3 !== null
+      ? `${formatNumber(r.volumeMm3 / 1000, 5)} mL`
+      : (r.cap ? '– (not closed)' : '– (open: tick “close at the border”)')]);
+  }
+  fillTable(table, lines);
+  table.querySelectorAll('tr').forEach((tr, k) => { tr.dataset.row = String(k); });
 }
 
 // A bar of a round length (1, 2 or 5 times a power of ten mm) about 100 px long.
