@@ -34,7 +34,10 @@ int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
     c->upstream = calloc(catalog->count ? catalog->count : 1, 1);
     c->failure = calloc(catalog->count ? catalog->count : 1, sizeof *c->failure);
     c->published = calloc(catalog->count ? catalog->count : 1, sizeof *c->published);
+    c->retry_at = calloc(catalog->count ? catalog->count : 1, sizeof *c->retry_at);
+    c->attempts = calloc(catalog->count ? catalog->count : 1, sizeof *c->attempts);
     if (!c->volumes || !c->state || !c->upstream || !c->failure || !c->published ||
+        !c->retry_at || !c->attempts ||
         pthread_mutex_init(&c->lock, NULL))
         goto err;
     if (pthread_cond_init(&c->changed, NULL)) {
@@ -48,6 +51,8 @@ err:
     free(c->upstream);
     free(c->failure);
     free(c->published);
+    free(c->retry_at);
+    free(c->attempts);
     memset(c, 0, sizeof *c);
     return ISO_E_NOMEM;
 }
@@ -66,6 +71,8 @@ void srv_collection_free(srv_collection *c)
     free(c->upstream);
     free(c->failure);
     free(c->published);
+    free(c->retry_at);
+    free(c->attempts);
     pthread_cond_destroy(&c->changed);
     pthread_mutex_destroy(&c->lock);
     memset(c, 0, sizeof *c);
@@ -186,6 +193,15 @@ static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload
     return 0;
 }
 
+/* The wait after the n-th upstream failure in a row (n >= 1). */
+static unsigned backoff_s(unsigned n)
+{
+    unsigned s = SRV_RETRY_FIRST_S;
+    while (--n && s < SRV_RETRY_MAX_S)
+        s *= 2;
+    return s < SRV_RETRY_MAX_S ? s : SRV_RETRY_MAX_S;
+}
+
 /* Loads catalog entry i unless another thread has it or had it: claims it, loads it
  * without the lock, then publishes it (or marks it failed) and wakes the waiters. */
 static void load_entry(srv_collection *c, size_t i, int on_demand)
@@ -219,6 +235,11 @@ static void load_entry(srv_collection *c, size_t i, int on_demand)
     if (failed) {
         c->failure[i] = err;
         c->upstream[i] = (unsigned char)upstream;
+        c->attempts[i] = upstream ? c->attempts[i] + 1 : 0;
+        if (upstream)
+            c->retry_at[i] = iso_clock_ms() + 1000.0 * backoff_s(c->attempts[i]);
+    } else {
+        c->attempts[i] = 0;
     }
     pthread_cond_broadcast(&c->changed);
     pthread_mutex_unlock(&c->lock);
@@ -294,15 +315,36 @@ void srv_collection_preload(srv_collection *c)
     atomic_store(&c->ready, 1);
 }
 
-const char *srv_collection_failure(srv_collection *c, const char *id)
+unsigned srv_collection_failure(srv_collection *c, const char *id, char *why, size_t size)
 {
     size_t i = srv_catalog_find(c->catalog, id);
+    unsigned wait = 0;
+    snprintf(why, size, "%s", "");
     if (i == c->total)
-        return "";
+        return 0;
     pthread_mutex_lock(&c->lock);
-    int failed = c->state[i] == SRV_ENTRY_FAILED;
+    if (c->state[i] == SRV_ENTRY_FAILED) {
+        snprintf(why, size, "%s", c->failure[i].message);
+        if (c->upstream[i]) {
+            double left = (c->retry_at[i] - iso_clock_ms()) / 1000.0;
+            wait = left < 1 ? 1 : (unsigned)(left + 0.999);
+        }
+    }
     pthread_mutex_unlock(&c->lock);
-    return failed ? c->failure[i].message : ""; /* never written again once failed */
+    return wait;
+}
+
+/* An entry whose source failed and whose backoff has passed goes back to idle, so that
+ * this request loads it again. */
+static void rearm_if_due(srv_collection *c, size_t i)
+{
+    pthread_mutex_lock(&c->lock);
+    if (c->state[i] == SRV_ENTRY_FAILED && c->upstream[i] && iso_clock_ms() >= c->retry_at[i]) {
+        c->state[i] = SRV_ENTRY_IDLE;
+        fprintf(stderr, "isoserve: volume \"%s\": asking its source again (failure %u in a row)\n",
+                c->catalog->entries[i].id, c->attempts[i]);
+    }
+    pthread_mutex_unlock(&c->lock);
 }
 
 srv_volume_state srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out)
@@ -312,6 +354,7 @@ srv_volume_state srv_collection_acquire(srv_collection *c, const char *id, const
     size_t i = srv_catalog_find(c->catalog, id);
     if (i == c->total)
         return SRV_VOLUME_UNKNOWN;
+    rearm_if_due(c, i);
     load_entry(c, i, 1);
     pthread_mutex_lock(&c->lock);
     while (c->state[i] == SRV_ENTRY_LOADING) /* another request's load of the same entry */

@@ -22,6 +22,12 @@
 /* A hierarchy's temporary file unchanged for this long before a start has no writer left
  * (see srv_collection_preload). */
 #define SRV_TEMP_STALE_S 60
+/* After its source server (an archive) failed, an entry is tried again at a request no
+ * sooner than SRV_RETRY_FIRST_S later, the wait doubling with each failure in a row up to
+ * SRV_RETRY_MAX_S: an outage costs the archive one attempt per entry per wait, and a
+ * recovered archive is used again within SRV_RETRY_MAX_S, without a restart. */
+#define SRV_RETRY_FIRST_S 1
+#define SRV_RETRY_MAX_S 30
 
 typedef struct srv_volume {
     const srv_catalog_entry *entry;   /* borrowed from the catalog */
@@ -61,6 +67,9 @@ typedef struct srv_collection {
     iso_error *failure;               /* per catalog entry: why it failed (SRV_ENTRY_FAILED) */
     unsigned char *upstream;          /* per catalog entry: 1 if its source server failed */
     _Atomic size_t *published;        /* per catalog entry: its index in volumes + 1, 0 none */
+    double *retry_at;                 /* per catalog entry: when a failed source may be asked
+                                         again (iso_clock_ms), after upstream failures */
+    unsigned *attempts;               /* per catalog entry: upstream failures in a row */
 } srv_collection;
 
 enum { SRV_ENTRY_IDLE, SRV_ENTRY_LOADING, SRV_ENTRY_LOADED, SRV_ENTRY_FAILED };
@@ -83,17 +92,20 @@ const srv_volume *srv_collection_find(const srv_collection *c, const char *id);
 typedef enum srv_volume_state {
     SRV_VOLUME_READY,           /* loaded: *out is set */
     SRV_VOLUME_UNKNOWN,         /* the catalog has no such id */
-    SRV_VOLUME_UPSTREAM_FAILED, /* its source server (Orthanc) was unreachable or answered an error */
+    SRV_VOLUME_UPSTREAM_FAILED, /* its source server (an archive) was unreachable or answered an
+                                   error: tried again after a backoff (SRV_RETRY_FIRST_S) */
     SRV_VOLUME_FAILED           /* loading or building failed otherwise */
 } srv_volume_state;
 
 /* The volume with this id, loaded now (as preloading would) if the catalog names it and
  * it is not loaded yet; concurrent callers for one id wait for one load. Blocking for as
- * long as the load takes. A failure is reported on stderr once; later calls fail at once,
- * and srv_collection_failure says why. */
+ * long as the load takes. A failure is reported on stderr; later calls fail at once, and
+ * srv_collection_failure says why. An upstream failure is retried by the first call after
+ * its backoff has passed; other failures are final (the files came and are bad). */
 srv_volume_state srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out);
-/* Why the entry with this id failed to load ("" if it did not fail). */
-const char *srv_collection_failure(srv_collection *c, const char *id);
+/* Copies why the entry with this id failed to load into why ("" if it did not fail).
+ * Returns the seconds until it is tried again (at least 1), 0 when it will not be. */
+unsigned srv_collection_failure(srv_collection *c, const char *id, char *why, size_t size);
 /* Bytes of all published hierarchies. */
 size_t srv_collection_hierarchy_bytes(const srv_collection *c);
 void srv_collection_free(srv_collection *c);

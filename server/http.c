@@ -31,6 +31,7 @@ typedef struct srv_request {
     int status;
     size_t bytes;
     const srv_volume *volume;      /* the volume a response concerns (X-Iso-Load), or NULL */
+    unsigned retry_after_s;        /* a 503's Retry-After when not the configured one, or 0 */
     char method[16];
     char path[256];
 } srv_request;
@@ -134,10 +135,10 @@ static struct MHD_Response *text_response(char *text, const char *content_type,
     return r;
 }
 
-static void add_retry_after(const srv_server *s, struct MHD_Response *r)
+static void add_retry_after(const srv_server *s, struct MHD_Response *r, unsigned seconds)
 {
     char retry[16];
-    snprintf(retry, sizeof retry, "%u", s->config.retry_after_s);
+    snprintf(retry, sizeof retry, "%u", seconds ? seconds : s->config.retry_after_s);
     add_header(r, MHD_HTTP_HEADER_RETRY_AFTER, retry);
 }
 
@@ -163,7 +164,7 @@ static enum MHD_Result send_problem(srv_server *s, struct MHD_Connection *c, srv
     if (r && problem->status == 401)
         add_header(r, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"isoserve\"");
     if (r && problem->status == 503)
-        add_retry_after(s, r);
+        add_retry_after(s, r, req ? req->retry_after_s : 0);
     return send_response(s, c, req, problem->status, r, size);
 }
 
@@ -329,7 +330,7 @@ static enum MHD_Result route_health(srv_server *s, struct MHD_Connection *c, srv
     size_t size = 0;
     struct MHD_Response *r = text_response(text, "application/json", "no-store", &size);
     if (r && !ready)
-        add_retry_after(s, r);
+        add_retry_after(s, r, 0);
     return send_response(s, c, req, ready ? 200 : 503, r, size);
 }
 
@@ -714,9 +715,12 @@ static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_reques
     srv_volume_state state = srv_collection_acquire(s->collection, id, &v); /* loads another shard's volume */
     if (state == SRV_VOLUME_UNKNOWN)
         return fail(s, c, req, path, 404, "no volume \"%s\"; /v1/volumes lists them", id);
-    if (state != SRV_VOLUME_READY)
-        return fail(s, c, req, path, srv_status_volume_http(state), "volume \"%s\" could not be loaded: %s",
-                    id, srv_collection_failure(s->collection, id));
+    if (state != SRV_VOLUME_READY) {
+        char why[sizeof ((iso_error *)0)->message];
+        req->retry_after_s = srv_collection_failure(s->collection, id, why, sizeof why);
+        return fail(s, c, req, path, srv_status_volume_http(state), "volume \"%s\" could not be loaded: %s%s",
+                    id, why, req->retry_after_s ? "; its source is asked again after Retry-After" : "");
+    }
     req->volume = v;
     return kind == 1 ? route_volume(s, c, req, v) : route_mesh(s, c, req, v, path);
 }
@@ -852,7 +856,7 @@ int srv_http_start(srv_server *s, iso_error *err)
     header_failed = 0;
     add_header(s->out_of_memory, MHD_HTTP_HEADER_CONTENT_TYPE, "application/problem+json");
     add_header(s->out_of_memory, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");
-    add_retry_after(s, s->out_of_memory);
+    add_retry_after(s, s->out_of_memory, 0);
     if (header_failed) {
         header_failed = 0;
         MHD_destroy_response(s->out_of_memory);

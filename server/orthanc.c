@@ -6,6 +6,7 @@
 #include <errno.h>
 #include <jansson.h>
 #include <pthread.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -214,15 +215,29 @@ static int fetch_series(const char *url, const char *series, const char *dir, co
     return rc;
 }
 
-/* Fetches into {cache}/orthanc/{series}.partial-PID, then renames it into place. */
+/* The archive's part of a cache key: FNV-1a (64 bits) of its base URL, in hex. A series id
+ * names the same instances on any Orthanc, but two archives may hold different versions of
+ * a series (one corrected, say), and what one of them served must never be read back as
+ * the other's. */
+static void archive_key(const char *url, char key[17])
+{
+    uint64_t h = 14695981039346656037ull;
+    for (const unsigned char *p = (const unsigned char *)url; *p; p++)
+        h = (h ^ *p) * 1099511628211ull;
+    snprintf(key, 17, "%016llx", (unsigned long long)h);
+}
+
+/* Fetches into {cache}/orthanc/{archive}/{series}.partial-PID, then renames it into place. */
 static int fetch_into_cache(const char *url, const char *series, const char *cache_dir, const char *final,
                             const iso_load_options *opt, iso_error *err, int *upstream)
 {
-    char parent[4096], partial[4200];
+    char parent[4096], archive[4200], partial[4200], key[17];
+    archive_key(url, key);
     snprintf(parent, sizeof parent, "%s/orthanc", cache_dir);
+    snprintf(archive, sizeof archive, "%s/orthanc/%s", cache_dir, key);
     snprintf(partial, sizeof partial, "%s.partial-%ld", final, (long)getpid());
     if ((mkdir(cache_dir, 0755) && errno != EEXIST) || (mkdir(parent, 0755) && errno != EEXIST) ||
-        mkdir(partial, 0755))
+        (mkdir(archive, 0755) && errno != EEXIST) || mkdir(partial, 0755))
         return iso_error_set(err, ISO_E_IO, "%s: cannot create: %s", partial, strerror(errno));
     int rc = fetch_series(url, series, partial, opt, err, upstream);
     if (!rc && rename(partial, final) && errno != ENOTEMPTY && errno != EEXIST)
@@ -244,7 +259,9 @@ int srv_orthanc_load(const char *url, const char *series, const char *cache_dir,
     int rc;
     struct stat st;
     if (cache_dir) {
-        snprintf(dir, sizeof dir, "%s/orthanc/%s", cache_dir, series);
+        char key[17];
+        archive_key(url, key);
+        snprintf(dir, sizeof dir, "%s/orthanc/%s/%s", cache_dir, key, series);
         rc = stat(dir, &st) == 0 && S_ISDIR(st.st_mode) ? 0
                                                         : fetch_into_cache(url, series, cache_dir, dir, opt, err, upstream);
     } else {

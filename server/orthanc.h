@@ -3,10 +3,10 @@
  *
  * GET {url}/series/{id} lists the instances, GET {url}/instances/{iid}/file fetches each
  * one's DICOM file; the files then load as a DICOM series directory (core/io/io.h). With a
- * cache dir the files stay in {cache_dir}/orthanc/{id}/ (written under a temporary name,
- * renamed when complete), and later loads read them without asking the server: an Orthanc
- * series id is a hash of the patient, study and series UIDs, so it names the same
- * instances wherever it comes from. Without a cache dir they go to a temporary directory
+ * cache dir the files stay in {cache_dir}/orthanc/{archive}/{id}/ (written under a
+ * temporary name, renamed when complete; {archive} is a hash of the server's base URL, so
+ * two archives holding the same series never share files), and later loads read them
+ * without asking the server. Without a cache dir they go to a temporary directory
  * that is removed after loading. */
 #ifndef SRV_ORTHANC_H
 #define SRV_ORTHANC_H
@@ -20,7 +20,7 @@ int srv_orthanc_url_valid(const char *url);
 int srv_orthanc_id_valid(const char *id);
 
 /* Loads the series (from the cache dir when it holds it). On failure *upstream is 1 when
- * the server was unreachable or answered an error (the caller's 502), 0 when the files
+ * the server was unreachable or answered an error (the caller's 503, retried later), 0 when the files
  * came but did not make a volume. Progress on the terminal through opt->progress. */
 int srv_orthanc_load(const char *url, const char *series, const char *cache_dir,
                      const iso_load_options *opt, iso_volume **out, iso_error *err, int *upstream);

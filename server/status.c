@@ -25,7 +25,7 @@ int srv_status_volume_http(int state)
     switch (state) {
     case SRV_VOLUME_READY: return 200;
     case SRV_VOLUME_UNKNOWN: return 404;
-    case SRV_VOLUME_UPSTREAM_FAILED: return 502;
+    case SRV_VOLUME_UPSTREAM_FAILED: return 503; /* with Retry-After: retried after a backoff */
     default: return 500;
     }
 }

@@ -16,8 +16,9 @@
 int srv_status_http(int code);
 
 /* The HTTP status for a volume that is not ready (an srv_volume_state other than READY):
- * UNKNOWN 404, UPSTREAM_FAILED 502 (its archive failed), FAILED 500 (the server's own
- * data or hierarchy could not be loaded: not the request's fault). */
+ * UNKNOWN 404, UPSTREAM_FAILED 503 with Retry-After (its archive failed; asked again after
+ * a backoff), FAILED 500 (the server's own data or hierarchy could not be loaded: not the
+ * request's fault). */
 int srv_status_volume_http(int state);
 
 #endif

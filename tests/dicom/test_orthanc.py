@@ -4,13 +4,17 @@ A phantom CT series (RLE Lossless, written by tests/support/dicom_series.py) is 
 its folder and, uploaded over REST to a real Orthanc (Debian's `Orthanc`, on 127.0.0.1 with
 a temporary storage dir, its DICOM port off, remote access and authentication off), from
 Orthanc: the two meshes must be byte-identical. An unreachable Orthanc and an unknown series
-give 502 problems that name the volume and the cause while the rest of the catalog serves;
+give 503 problems (with Retry-After) that name the volume and the cause while the rest of
+the catalog serves; an archive stopped and started again under load recovers without a
+restart (503 meanwhile, attempts backing off);
 the fetched files and the hierarchy are cached and serve again with Orthanc stopped. Also
 the CLI on a series folder and `--volumes` with a series subdirectory. Servers are stopped
 by PID. Prints PASS/FAIL/SKIP lines; exit status 1 on failure."""
 
 import json
 import os
+import re
+import threading
 import shutil
 import socket
 import subprocess
@@ -40,10 +44,11 @@ def free_port():
 
 
 class Orthanc:
-    """Debian's Orthanc on 127.0.0.1 with its storage in tmp; stopped by PID."""
+    """Debian's Orthanc on 127.0.0.1 with its storage in tmp; stopped by PID. port: the
+    port of an earlier instance to start again on (its storage is kept)."""
 
-    def __init__(self, tmp):
-        self.port = free_port()
+    def __init__(self, tmp, port=None):
+        self.port = port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         storage = os.path.join(tmp, "orthanc-db")
         config = {"Name": "isoserve-test", "StorageDirectory": storage, "IndexDirectory": storage,
@@ -52,7 +57,7 @@ class Orthanc:
         path = os.path.join(tmp, "orthanc.json")
         with open(path, "w") as f:
             json.dump(config, f)
-        self.log = open(os.path.join(tmp, "orthanc.log"), "w")
+        self.log = open(os.path.join(tmp, "orthanc.log"), "a")
         self.proc = subprocess.Popen([ORTHANC, path], stdout=self.log, stderr=subprocess.STDOUT)
         deadline = time.time() + 30
         while time.time() < deadline and self.proc.poll() is None:
@@ -140,28 +145,103 @@ def served_tests(s, sid, cache):
     def unreachable():
         r = s.get("/v1/volumes/down" + MESH)
         body = problem(r)
-        assert r.status == 502, r.status
+        assert r.status == 503 and 1 <= int(r.getheader("Retry-After")) <= 30, (r.status, r.getheader("Retry-After"))
         assert '"down"' in body["detail"] and "connect" in body["detail"].lower(), body["detail"]
-    check("orthanc_unreachable_is_502", unreachable)
+    check("orthanc_unreachable_is_503_with_retry_after", unreachable)
 
     def unknown_series():
         r = s.get("/v1/volumes/unknown")
         body = problem(r)
-        assert r.status == 502, r.status
+        assert r.status == 503 and r.getheader("Retry-After"), r.status
         assert '"unknown"' in body["detail"] and "HTTP 404" in body["detail"], body["detail"]
         assert mesh(s, "disk").status == 200  # the rest of the catalog keeps serving
-    check("orthanc_unknown_series_is_502", unknown_series)
+    check("orthanc_unknown_series_is_503", unknown_series)
 
     def cached_files():
-        folder = os.path.join(cache, "orthanc", sid)
+        # one folder per archive (a hash of its URL; "down" made one too): series of two
+        # servers never mix, and the fetched series is in its server's folder only
+        archives = os.listdir(os.path.join(cache, "orthanc"))
+        assert len(archives) == 2 and all(re.fullmatch(r"[0-9a-f]{16}", a) for a in archives), archives
+        holding = [a for a in archives if os.path.isdir(os.path.join(cache, "orthanc", a, sid))]
+        assert len(holding) == 1, holding
+        archives = holding
+        folder = os.path.join(cache, "orthanc", archives[0], sid)
         names = os.listdir(folder)
         assert len(names) == 24 and all(n.endswith(".dcm") for n in names), names
         assert os.path.exists(os.path.join(cache, "pacs.isotree"))
-        assert not [n for n in os.listdir(os.path.join(cache, "orthanc")) if "partial" in n]
+        assert not [n for n in os.listdir(os.path.join(cache, "orthanc", archives[0])) if "partial" in n]
     check("orthanc_series_cached_by_id", cached_files)
 
 
 report_numbers = {}
+
+
+def outage_tests(tmp, series_dir):
+    """The archive stops and starts again under load: requests for its volume answer 503
+    with Retry-After while it is down, the first after its backoff asks it again, and once
+    it is back the volume serves (the same mesh as the folder's) without a restart; the
+    folder's volume answers 200 throughout; no other status appears."""
+    pacs = Orthanc(tmp)
+    sid = pacs.upload(series_dir)
+    port = pacs.port
+    pacs.stop()
+    catalog = write_catalog(tmp, [{"id": "disk", "path": series_dir},
+                                  {"id": "flaky", "orthanc": {"url": f"http://127.0.0.1:{port}", "series": sid}}])
+    s = Server(["--catalog", catalog])  # no cache dir: every attempt asks the archive
+    seen, lock, stop = [], threading.Lock(), threading.Event()
+
+    def load(vid):
+        while not stop.is_set():
+            r = s.get(f"/v1/volumes/{vid}{MESH}")
+            with lock:
+                seen.append((time.time(), vid, r.status, r.getheader("Retry-After"), r.body if r.status == 200 else b""))
+            time.sleep(0.05)
+    threads = [threading.Thread(target=load, args=(v,)) for v in ("disk", "flaky", "flaky", "disk")]
+    pacs = None
+    try:
+        for t in threads:
+            t.start()
+        time.sleep(3)  # the archive is down: three attempts (0, 1, 3 s)
+        restarted = time.time()
+        pacs = Orthanc(tmp, port)
+        deadline = time.time() + 40
+        while time.time() < deadline and not any(v == "flaky" and st == 200 for _, v, st, _, _ in list(seen)):
+            time.sleep(0.2)
+        time.sleep(1)
+    finally:
+        stop.set()
+        for t in threads:
+            t.join(timeout=120)
+        rc = s.stop()
+        if pacs:
+            pacs.stop()
+    log = s.log()
+
+    def statuses():
+        bad = [(v, st) for _, v, st, _, _ in seen if st not in (200, 503) or (st == 503 and v != "flaky")]
+        assert not bad, bad[:5]
+        down = [ra for t, v, st, ra, _ in seen if st == 503]
+        assert down and all(ra and 1 <= int(ra) <= 30 for ra in down), down[:5]
+    check("outage_only_the_archives_volume_is_503_with_retry_after", statuses)
+
+    def recovered():
+        flaky = [(t, st, body) for t, v, st, _, body in seen if v == "flaky"]
+        first = next(i for i, (_, st, _) in enumerate(flaky) if st == 200)
+        assert all(st == 200 for _, st, _ in flaky[first:]), "a 200 was followed by a failure"
+        disk = next(body for _, v, st, _, body in seen if v == "disk" and st == 200)
+        assert flaky[first][2] == disk, "the recovered volume's mesh differs from the folder's"
+        print(f"INFO {LABEL}.outage: {sum(st == 503 for _, st, _ in flaky)} answers 503 while down, "
+              f"recovered {flaky[first][0] - restarted:.1f} s after the archive came back")
+    check("outage_recovers_without_restart", recovered)
+
+    def backoff():
+        asked = log.count('"flaky": asking its source again')
+        down = sum(1 for _, v, st, _, _ in seen if v == "flaky" and st == 503)
+        # many requests, few attempts: one per backoff (1, 2, 4, ... s) while down
+        assert 1 <= asked <= 8 and down > 3 * asked, (asked, down)
+        assert rc == 0, f"exit status {rc}"
+    check("outage_attempts_back_off", backoff)
+
 
 
 def cli_tests(tmp, series_dir):
@@ -205,6 +285,7 @@ def main():
             return 0
         if ORTHANC:
             orthanc_tests(tmp, series_dir)
+            outage_tests(tmp, series_dir)
         else:
             print(f"SKIP {LABEL}.orthanc: Debian's orthanc is not installed (scripts/setup.sh installs it)")
         cli_tests(tmp, series_dir)
