@@ -41,9 +41,16 @@ typedef struct lod {
     vertex_map map;
     double error;                 /* largest |f(v) - level| measured */
     size_t cells;
-    /* The brick at hand: its samples, x fastest. */
-    uint32_t lo[3], n[3];
+    /* The brick at hand: its box, its samples (x fastest) and their sides of the level when
+     * it was read whole (stride 1), the strides around it (brick_around), and the vertices
+     * of the segments strictly inside it, valid where their stamp is the brick's. */
+    uint32_t lo[3], hi[3], n[3];
     double samples[BRICK_SAMPLES];
+    uint8_t above[BRICK_SAMPLES];
+    int read;
+    uint8_t around[27];
+    uint32_t stamp;
+    uint32_t inner_id[BRICK_SAMPLES * 3], inner_stamp[BRICK_SAMPLES * 3];
     loop_segment *segments;
     size_t segment_count, segment_capacity;
     uint32_t *loop;
@@ -64,36 +71,59 @@ static void plan(lod *c, double tolerance)
     }
 }
 
-/* The stride (log2) of the lattice set (face, edge or segment) whose midpoint is twice[]
- * / 2: the finest of the bricks holding it, whose closed boxes are [8i, 8i + 8] per axis. */
+/* The strides of the lattice sets in brick b's closed box, by where a set lies per axis
+ * (on the box's low plane, strictly inside, on its high plane): the finest of the bricks
+ * holding it, whose closed boxes are [8i, 8i + 8] per axis. With a cap, a set on the
+ * volume's border has stride 1: the cap's cells are data cells. */
+static void brick_around(lod *c, const uint32_t b[3])
+{
+    for (int cls = 0; cls < 27; cls++) {
+        int where[3] = {cls % 3, cls / 3 % 3, cls / 9};
+        uint32_t lo[3], hi[3];
+        unsigned best = ISO_TREE_LEVELS;
+        for (int d = 0; d < 3; d++) {
+            lo[d] = where[d] == 0 && b[d] > 0 ? b[d] - 1 : b[d];
+            hi[d] = where[d] == 2 && b[d] + 1 < c->count[d] ? b[d] + 1 : b[d];
+            if (c->cap && ((where[d] == 0 && b[d] == 0) || (where[d] == 2 && b[d] + 1 == c->count[d])))
+                best = 0;
+        }
+        for (uint32_t k = lo[2]; k <= hi[2]; k++)
+            for (uint32_t j = lo[1]; j <= hi[1]; j++)
+                for (uint32_t i = lo[0]; i <= hi[0]; i++) {
+                    unsigned s = c->shift[((size_t)k * c->count[1] + j) * c->count[0] + i];
+                    best = s < best ? s : best;
+                }
+        c->around[cls] = (uint8_t)best;
+    }
+}
+
+/* The stride (log2) of the lattice set (face, edge or segment) in the brick at hand whose
+ * midpoint is twice[] / 2. */
 static unsigned set_shift(const lod *c, const uint32_t twice[3])
 {
-    uint32_t lo[3], hi[3];
-    for (int d = 0; d < 3; d++) {
-        if (c->cap && (twice[d] == 0 || twice[d] == 2 * (c->dims[d] - 1)))
-            return 0; /* the cap's cells are data cells */
-        hi[d] = twice[d] / (2 * ISO_BRICK_CELLS);
-        if (hi[d] >= c->count[d])
-            hi[d] = c->count[d] - 1;
-        lo[d] = twice[d] >= 2 * ISO_BRICK_CELLS ? (twice[d] - 1) / (2 * ISO_BRICK_CELLS) : 0;
-        if (lo[d] > hi[d])
-            lo[d] = hi[d];
-    }
-    unsigned best = ISO_TREE_LEVELS;
-    for (uint32_t k = lo[2]; k <= hi[2]; k++)
-        for (uint32_t j = lo[1]; j <= hi[1]; j++)
-            for (uint32_t i = lo[0]; i <= hi[0]; i++) {
-                unsigned s = c->shift[((size_t)k * c->count[1] + j) * c->count[0] + i];
-                best = s < best ? s : best;
-            }
-    return best;
+    int cls = 0, scale = 1;
+    for (int d = 0; d < 3; d++, scale *= 3)
+        cls += scale * (twice[d] == 2 * c->lo[d] ? 0 : twice[d] == 2 * c->hi[d] ? 2 : 1);
+    return c->around[cls];
 }
 
 /* ---- PASS 2: march ---- */
 
+/* Sample p of the brick at hand: from its copy when it was read whole (stride 1), else
+ * straight from the volume, so that a coarse brick costs the samples its grid touches. */
 static double sample(const lod *c, const uint32_t p[3])
 {
-    return c->samples[((size_t)(p[2] - c->lo[2]) * c->n[1] + (p[1] - c->lo[1])) * c->n[0] + (p[0] - c->lo[0])];
+    if (c->read)
+        return c->samples[((size_t)(p[2] - c->lo[2]) * c->n[1] + (p[1] - c->lo[1])) * c->n[0] + (p[0] - c->lo[0])];
+    return iso_vol_sample(c->vol, ((size_t)p[2] * c->dims[1] + p[1]) * c->dims[0] + p[0]);
+}
+
+/* 1 if sample p of the brick at hand is above the level. */
+static int above(const lod *c, const uint32_t p[3])
+{
+    if (c->read)
+        return c->above[((size_t)(p[2] - c->lo[2]) * c->n[1] + (p[1] - c->lo[1])) * c->n[0] + (p[0] - c->lo[0])];
+    return sample(c, p) > c->level;
 }
 
 /* f, the data's trilinear interpolant, at x inside the brick at hand. */
@@ -171,23 +201,49 @@ static int crossing(lod *c, const uint32_t p[3], int axis, unsigned shift, uint3
 {
     uint64_t key = (((((uint64_t)p[2] * c->dims[1] + p[1]) * c->dims[0] + p[0]) * 3 + (uint64_t)axis) << 2 |
                     shift) + 1;
+    int inner = 1;
+    for (int d = 0; d < 3; d++)
+        if (d != axis && (p[d] == c->lo[d] || p[d] == c->hi[d]))
+            inner = 0;
+    size_t local = (((size_t)(p[2] - c->lo[2]) * ISO_BRICK_SAMPLES + (p[1] - c->lo[1])) * ISO_BRICK_SAMPLES +
+                    (p[0] - c->lo[0])) * 3 + (size_t)axis;
+    if (inner && c->inner_stamp[local] == c->stamp) {
+        *id = c->inner_id[local];
+        return 0;
+    }
     vertex_map *m = &c->map;
-    if (2 * (m->count + 1) > m->mask && grow_map(m))
-        return ISO_E_NOMEM;
-    size_t at = (size_t)(key * UINT64_C(0x9E3779B97F4A7C15) >> 20) & m->mask;
-    for (; m->keys[at]; at = (at + 1) & m->mask)
-        if (m->keys[at] == key) {
-            *id = m->ids[at];
-            return 0;
-        }
+    size_t at = 0;
+    if (!inner) {
+        if (2 * (m->count + 1) > m->mask && grow_map(m))
+            return ISO_E_NOMEM;
+        at = (size_t)(key * UINT64_C(0x9E3779B97F4A7C15) >> 20) & m->mask;
+        for (; m->keys[at]; at = (at + 1) & m->mask)
+            if (m->keys[at] == key) {
+                *id = m->ids[at];
+                return 0;
+            }
+    }
     uint32_t q[3] = {p[0], p[1], p[2]};
     double len = (double)(1u << shift), x[3] = {p[0], p[1], p[2]};
     q[axis] += 1u << shift;
-    x[axis] += iso_mc_edge_t(sample(c, p), sample(c, q), c->level) * len;
+    double a = sample(c, p), b = sample(c, q), t = iso_mc_edge_t(a, b, c->level);
+    x[axis] += t * len;
     int rc = add_vertex(c, x, id);
     if (rc)
         return rc;
-    measure(c, x);
+    if (shift) {
+        measure(c, x);
+    } else {
+        /* f is linear along a data edge: the interpolant's own error is f's. */
+        double e = iso_mc_edge_error(a, b, t, c->level);
+        c->error = e > c->error ? e : c->error;
+    }
+    if (inner) {
+        /* Only this brick holds the segment, at its own stride: no other length occurs. */
+        c->inner_stamp[local] = c->stamp;
+        c->inner_id[local] = *id;
+        return 0;
+    }
     m->keys[at] = key;
     m->ids[at] = *id;
     m->count++;
@@ -211,12 +267,12 @@ static int add_triangle(lod *c, uint32_t a, uint32_t b, uint32_t d)
 static int regular_cell(lod *c, const uint32_t o[3], unsigned shift)
 {
     uint32_t s = 1u << shift;
-    double v[8];
+    unsigned index = 0;
     for (int k = 0; k < 8; k++) {
         uint32_t p[3] = {o[0] + (k & 1) * s, o[1] + ((k >> 1) & 1) * s, o[2] + ((k >> 2) & 1) * s};
-        v[k] = sample(c, p);
+        index |= (unsigned)above(c, p) << k;
     }
-    const iso_mc_case *cs = iso_mc_cases() + iso_mc_case_index(v, c->level);
+    const iso_mc_case *cs = iso_mc_cases() + index;
     for (int t = 0; t < cs->triangle_count; t++) {
         uint32_t id[3];
         for (int i = 0; i < 3; i++) {
@@ -302,12 +358,12 @@ static int square_segments(lod *c, const uint32_t corner[4][3], uint32_t side_le
     }
     /* Crossings in order around the polygon: which were entries, and their vertices. */
     uint32_t id[MAX_POLYGON];
-    int entry[MAX_POLYGON], above[MAX_POLYGON], n = 0, at[MAX_POLYGON];
+    int entry[MAX_POLYGON], inside[MAX_POLYGON], n = 0, at[MAX_POLYGON];
     for (int i = 0; i < m; i++)
-        above[i] = sample(c, points[i]) > c->level;
+        inside[i] = above(c, points[i]);
     for (int i = 0; i < m; i++) {
         int j = (i + 1) % m;
-        if (above[i] == above[j])
+        if (inside[i] == inside[j])
             continue;
         const uint32_t *lo = points[i], *hi = points[j];
         int axis = 0;
@@ -323,7 +379,7 @@ static int square_segments(lod *c, const uint32_t corner[4][3], uint32_t side_le
         int rc = crossing(c, lo, axis, shift, &id[n]);
         if (rc)
             return rc;
-        entry[n] = above[j];
+        entry[n] = inside[j];
         at[n] = i;
         n++;
     }
@@ -496,22 +552,12 @@ static int transition_cell(lod *c, const uint32_t o[3], unsigned shift, iso_erro
     return fan_loops(c, middle, err);
 }
 
-/* 1 if no brick next to b (nor, with a cap, the border) is finer than b: all its cells
- * are regular. */
-static int no_finer_neighbour(const lod *c, const uint32_t b[3], unsigned shift)
+/* 1 if no set around the brick at hand is finer than it: all its cells are regular. */
+static int no_finer_neighbour(const lod *c, unsigned shift)
 {
-    for (int d = 0; d < 3; d++)
-        if (c->cap && shift && (b[d] == 0 || b[d] + 1 == c->count[d]))
+    for (int cls = 0; cls < 27; cls++)
+        if (c->around[cls] < shift)
             return 0;
-    for (int dz = -1; dz <= 1; dz++)
-        for (int dy = -1; dy <= 1; dy++)
-            for (int dx = -1; dx <= 1; dx++) {
-                long i = (long)b[0] + dx, j = (long)b[1] + dy, k = (long)b[2] + dz;
-                if (i < 0 || j < 0 || k < 0 || i >= c->count[0] || j >= c->count[1] || k >= c->count[2])
-                    continue;
-                if (c->shift[((size_t)k * c->count[1] + (size_t)j) * c->count[0] + (size_t)i] < shift)
-                    return 0;
-            }
     return 1;
 }
 
@@ -521,11 +567,19 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
     iso_bricks_box(c->vol, b, lo, hi);
     for (int d = 0; d < 3; d++) {
         c->lo[d] = (uint32_t)lo[d];
+        c->hi[d] = (uint32_t)hi[d];
         c->n[d] = (uint32_t)(hi[d] - lo[d] + 1);
     }
-    iso_vol_read_box(c->vol, lo, hi, c->samples);
+    c->stamp++;
+    brick_around(c, b);
+    c->read = shift == 0;
+    if (c->read) {
+        iso_vol_read_box(c->vol, lo, hi, c->samples);
+        for (size_t i = 0; i < (size_t)c->n[0] * c->n[1] * c->n[2]; i++)
+            c->above[i] = c->samples[i] > c->level;
+    }
     uint32_t s = 1u << shift;
-    int regular = no_finer_neighbour(c, b, shift);
+    int regular = no_finer_neighbour(c, shift);
     for (uint32_t z = 0; z + 1 < c->n[2]; z += s)
         for (uint32_t y = 0; y + 1 < c->n[1]; y += s)
             for (uint32_t x = 0; x + 1 < c->n[0]; x += s) {
