@@ -195,12 +195,12 @@ static int add_vertex(lod *c, const double x[3], uint32_t *id)
     return 0;
 }
 
-/* The vertex of the crossing on the lattice segment from p along axis, 2^shift long: made
+/* The vertex of the crossing on the lattice segment from p along axis, length long: made
  * on first use, where iso_mc_edge_t puts it between the segment's two samples. */
-static int crossing(lod *c, const uint32_t p[3], int axis, unsigned shift, uint32_t *id)
+static int crossing(lod *c, const uint32_t p[3], int axis, uint32_t length, uint32_t *id)
 {
-    uint64_t key = (((((uint64_t)p[2] * c->dims[1] + p[1]) * c->dims[0] + p[0]) * 3 + (uint64_t)axis) << 2 |
-                    shift) + 1;
+    uint64_t key = (((((uint64_t)p[2] * c->dims[1] + p[1]) * c->dims[0] + p[0]) * 3 + (uint64_t)axis) << 4 |
+                    length) + 1;
     int inner = 1;
     for (int d = 0; d < 3; d++)
         if (d != axis && (p[d] == c->lo[d] || p[d] == c->hi[d]))
@@ -224,14 +224,14 @@ static int crossing(lod *c, const uint32_t p[3], int axis, unsigned shift, uint3
             }
     }
     uint32_t q[3] = {p[0], p[1], p[2]};
-    double len = (double)(1u << shift), x[3] = {p[0], p[1], p[2]};
-    q[axis] += 1u << shift;
+    double len = (double)length, x[3] = {p[0], p[1], p[2]};
+    q[axis] += length;
     double a = sample(c, p), b = sample(c, q), t = iso_mc_edge_t(a, b, c->level);
     x[axis] += t * len;
     int rc = add_vertex(c, x, id);
     if (rc)
         return rc;
-    if (shift) {
+    if (length > 1) {
         measure(c, x);
     } else {
         /* f is linear along a data edge: the interpolant's own error is f's. */
@@ -263,13 +263,12 @@ static int add_triangle(lod *c, uint32_t a, uint32_t b, uint32_t d)
     return 0;
 }
 
-/* Marching cubes on the cell at o, s = 2^shift wide. */
-static int regular_cell(lod *c, const uint32_t o[3], unsigned shift)
+/* Marching cubes on the cell at o, size[] cells per axis. */
+static int regular_cell(lod *c, const uint32_t o[3], const uint32_t size[3])
 {
-    uint32_t s = 1u << shift;
     unsigned index = 0;
     for (int k = 0; k < 8; k++) {
-        uint32_t p[3] = {o[0] + (k & 1) * s, o[1] + ((k >> 1) & 1) * s, o[2] + ((k >> 2) & 1) * s};
+        uint32_t p[3] = {o[0] + (k & 1) * size[0], o[1] + ((k >> 1) & 1) * size[1], o[2] + ((k >> 2) & 1) * size[2]};
         index |= (unsigned)above(c, p) << k;
     }
     const iso_mc_case *cs = iso_mc_cases() + index;
@@ -277,8 +276,9 @@ static int regular_cell(lod *c, const uint32_t o[3], unsigned shift)
         uint32_t id[3];
         for (int i = 0; i < 3; i++) {
             int e = cs->edges[3 * t + i], lo = iso_mc_edge_corner[e][0];
-            uint32_t p[3] = {o[0] + (lo & 1) * s, o[1] + ((lo >> 1) & 1) * s, o[2] + ((lo >> 2) & 1) * s};
-            int rc = crossing(c, p, e / 4, shift, &id[i]);
+            uint32_t p[3] = {o[0] + (lo & 1) * size[0], o[1] + ((lo >> 1) & 1) * size[1],
+                             o[2] + ((lo >> 2) & 1) * size[2]};
+            int rc = crossing(c, p, e / 4, size[e / 4], &id[i]);
             if (rc)
                 return rc;
         }
@@ -290,14 +290,13 @@ static int regular_cell(lod *c, const uint32_t o[3], unsigned shift)
 }
 
 /* 1 if every face and edge of the cell at o has the cell's own stride. */
-static int cell_is_regular(const lod *c, const uint32_t o[3], unsigned shift)
+static int cell_is_regular(const lod *c, const uint32_t o[3], const uint32_t size[3], unsigned shift)
 {
-    uint32_t s = 1u << shift;
     for (int a = 0; a < 3; a++)
         for (int side = 0; side < 2; side++) {
             uint32_t face[3];
             for (int d = 0; d < 3; d++)
-                face[d] = 2 * o[d] + (d == a ? 2 * s * (uint32_t)side : s);
+                face[d] = 2 * o[d] + (d == a ? 2 * size[d] * (uint32_t)side : size[d]);
             if (set_shift(c, face) != shift)
                 return 0;
         }
@@ -305,9 +304,9 @@ static int cell_is_regular(const lod *c, const uint32_t o[3], unsigned shift)
         for (int k = 0; k < 4; k++) {
             uint32_t edge[3];
             int b = (a + 1) % 3, d2 = (a + 2) % 3;
-            edge[a] = 2 * o[a] + s;
-            edge[b] = 2 * o[b] + 2 * s * (uint32_t)(k & 1);
-            edge[d2] = 2 * o[d2] + 2 * s * (uint32_t)(k >> 1);
+            edge[a] = 2 * o[a] + size[a];
+            edge[b] = 2 * o[b] + 2 * size[b] * (uint32_t)(k & 1);
+            edge[d2] = 2 * o[d2] + 2 * size[d2] * (uint32_t)(k >> 1);
             if (set_shift(c, edge) != shift)
                 return 0;
         }
@@ -333,8 +332,9 @@ static int add_segment(lod *c, loop_segment s)
 #define MAX_POLYGON (4 * ISO_BRICK_CELLS)
 
 /* The segments of one square of a transition cell's face, by mc.h's face rule on its
- * polygon. corner[4]: the square's corners in order. */
-static int square_segments(lod *c, const uint32_t corner[4][3], uint32_t side_len)
+ * polygon. corner[4]: the square's corners in order. A side is split at the multiples of
+ * its own stride (the volume's last sample may end it off them). */
+static int square_segments(lod *c, const uint32_t corner[4][3])
 {
     uint32_t points[MAX_POLYGON][3];
     int m = 0;
@@ -348,12 +348,17 @@ static int square_segments(lod *c, const uint32_t corner[4][3], uint32_t side_le
                 axis = d;
         }
         uint32_t step = 1u << set_shift(c, mid);
-        if (step > side_len)
-            step = side_len;
-        for (uint32_t j = 0; j < side_len; j += step) {
-            memcpy(points[m], p, sizeof points[m]);
-            points[m][axis] = q[axis] > p[axis] ? p[axis] + j : p[axis] - j;
-            m++;
+        memcpy(points[m++], p, sizeof points[0]);
+        if (q[axis] > p[axis]) {
+            for (uint32_t x = (p[axis] / step + 1) * step; x < q[axis]; x += step) {
+                memcpy(points[m], p, sizeof points[0]);
+                points[m++][axis] = x;
+            }
+        } else {
+            for (uint32_t x = (p[axis] - 1) / step * step; x > q[axis]; x -= step) {
+                memcpy(points[m], p, sizeof points[0]);
+                points[m++][axis] = x;
+            }
         }
     }
     /* Crossings in order around the polygon: which were entries, and their vertices. */
@@ -375,8 +380,7 @@ static int square_segments(lod *c, const uint32_t corner[4][3], uint32_t side_le
             lo = hi;
             hi = t;
         }
-        unsigned shift = (unsigned)__builtin_ctz(hi[axis] - lo[axis]);
-        int rc = crossing(c, lo, axis, shift, &id[n]);
+        int rc = crossing(c, lo, axis, hi[axis] - lo[axis], &id[n]);
         if (rc)
             return rc;
         entry[n] = inside[j];
@@ -517,29 +521,29 @@ static int fan_loops(lod *c, const double middle[3], iso_error *err)
 }
 
 /* A cell whose faces or edges are finer than itself: face squares, loops, fans. */
-static int transition_cell(lod *c, const uint32_t o[3], unsigned shift, iso_error *err)
+static int transition_cell(lod *c, const uint32_t o[3], const uint32_t size[3], iso_error *err)
 {
 
     static const int bc[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
-    uint32_t s = 1u << shift;
     c->segment_count = 0;
     for (int a = 0; a < 3; a++)
         for (int side = 0; side < 2; side++) {
             int b = (a + 1) % 3, d2 = (a + 2) % 3;
             uint32_t face[3];
             for (int d = 0; d < 3; d++)
-                face[d] = 2 * o[d] + (d == a ? 2 * s * (uint32_t)side : s);
+                face[d] = 2 * o[d] + (d == a ? 2 * size[d] * (uint32_t)side : size[d]);
             uint32_t f = 1u << set_shift(c, face);
-            for (uint32_t jc = 0; jc < s; jc += f)
-                for (uint32_t jb = 0; jb < s; jb += f) {
-                    uint32_t corner[4][3];
+            for (uint32_t jc = 0; jc < size[d2]; jc += f)
+                for (uint32_t jb = 0; jb < size[b]; jb += f) {
+                    uint32_t corner[4][3], wb = size[b] - jb < f ? size[b] - jb : f;
+                    uint32_t wc = size[d2] - jc < f ? size[d2] - jc : f;
                     for (int k = 0; k < 4; k++) {
                         int q = side ? k : 3 - k; /* (b, c, a) is right-handed: reversed below */
-                        corner[k][a] = o[a] + s * (uint32_t)side;
-                        corner[k][b] = o[b] + jb + f * (uint32_t)bc[q][0];
-                        corner[k][d2] = o[d2] + jc + f * (uint32_t)bc[q][1];
+                        corner[k][a] = o[a] + size[a] * (uint32_t)side;
+                        corner[k][b] = o[b] + jb + wb * (uint32_t)bc[q][0];
+                        corner[k][d2] = o[d2] + jc + wc * (uint32_t)bc[q][1];
                     }
-                    int rc = square_segments(c, (const uint32_t(*)[3])corner, f);
+                    int rc = square_segments(c, (const uint32_t(*)[3])corner);
                     if (rc)
                         return iso_error_set(err, rc, "out of memory extracting the surface");
                 }
@@ -548,7 +552,7 @@ static int transition_cell(lod *c, const uint32_t o[3], unsigned shift, iso_erro
         return 0;
     double middle[3];
     for (int d = 0; d < 3; d++)
-        middle[d] = o[d] + 0.5 * s;
+        middle[d] = o[d] + 0.5 * size[d];
     return fan_loops(c, middle, err);
 }
 
@@ -583,15 +587,17 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
     for (uint32_t z = 0; z + 1 < c->n[2]; z += s)
         for (uint32_t y = 0; y + 1 < c->n[1]; y += s)
             for (uint32_t x = 0; x + 1 < c->n[0]; x += s) {
-                uint32_t o[3] = {c->lo[0] + x, c->lo[1] + y, c->lo[2] + z};
+                uint32_t o[3] = {c->lo[0] + x, c->lo[1] + y, c->lo[2] + z}, size[3];
+                for (int d = 0; d < 3; d++)
+                    size[d] = c->hi[d] - o[d] < s ? c->hi[d] - o[d] : s; /* the last may be narrower */
                 c->cells++;
                 int rc;
-                if (regular || cell_is_regular(c, o, shift)) {
-                    rc = regular_cell(c, o, shift);
+                if (regular || cell_is_regular(c, o, size, shift)) {
+                    rc = regular_cell(c, o, size);
                     if (rc)
                         return iso_error_set(err, rc, rc == ISO_E_LIMIT ? "more than 2^32 - 1 vertices"
                                                                          : "out of memory extracting the surface");
-                } else if ((rc = transition_cell(c, o, shift, err))) {
+                } else if ((rc = transition_cell(c, o, size, err))) {
                     return rc;
                 }
             }

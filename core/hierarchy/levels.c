@@ -14,13 +14,10 @@ typedef struct levels_job {
 } levels_job;
 
 /* Lemma 1 over every cell of the brick's stride grid: the largest |p(s) - T(s)| of the
- * brick's samples against the trilinear pieces through the grid's samples. INFINITY
- * when the stride does not divide the brick's extent (a brick clipped by the border). */
+ * brick's samples against the trilinear pieces through the grid's samples. In a brick
+ * clipped by the border the last cell per axis ends at the last sample, narrower. */
 static double stride_error(const iso_fit_block *block, unsigned stride)
 {
-    for (int d = 0; d < 3; d++)
-        if ((block->n[d] - 1) % stride != 0)
-            return INFINITY;
     double worst = 0;
     iso_box cell;
     for (uint32_t z = 0; z + 1 < block->n[2]; z += stride)
@@ -29,7 +26,7 @@ static double stride_error(const iso_fit_block *block, unsigned stride)
                 uint32_t at[3] = {x, y, z};
                 for (int d = 0; d < 3; d++) {
                     cell.lo[d] = block->lo[d] + at[d];
-                    cell.hi[d] = cell.lo[d] + stride;
+                    cell.hi[d] = at[d] + stride < block->n[d] ? cell.lo[d] + stride : block->lo[d] + block->n[d] - 1;
                 }
                 double e = iso_fit_error_past(block, &cell, INFINITY);
                 if (!(e <= worst))

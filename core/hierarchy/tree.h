@@ -81,8 +81,9 @@ void iso_bricks_box(const iso_volume *vol, const uint32_t brick[3], size_t lo[3]
  * over the whole brick, so a surface marched on the level's grid has every vertex on a
  * grid edge within err_l of the level (extract.h). Computed in the build and saved with
  * the nodes, so extraction chooses each brick's level a-priori, reading no fine sample of
- * a brick it coarsens. INFINITY where 2^l does not divide the brick's extent on some
- * axis (bricks clipped by the volume's border). 12 bytes per brick. */
+ * a brick it coarsens. In a brick clipped by the volume's border the level's last cell
+ * per axis ends at the last sample, narrower (the same grid extraction marches). INFINITY
+ * where a NaN sample makes the fit meaningless. 12 bytes per brick. */
 #define ISO_TREE_LEVELS 3
 
 typedef struct iso_box {
