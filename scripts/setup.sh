@@ -6,7 +6,7 @@ set -euo pipefail
 packages=(build-essential pkg-config zlib1g-dev libmicrohttpd-dev libjansson-dev
           libdraco-dev draco libnifti2-dev python3-numpy python3-vtk9 mricron-data
           chromium wrk curl nginx python3-yaml libgdcm-dev libcurl4-openssl-dev
-          python3-pydicom orthanc python3-matplotlib clang libmeshoptimizer-dev)
+          python3-pydicom orthanc orthanc-dicomweb python3-matplotlib clang libmeshoptimizer-dev)
 # strace holds a hierarchy write in fsync, so that tests/http kills the server inside it.
 packages+=(strace)
 # The web client's packages come from npm; a machine without Node.js gets Debian's.

@@ -11,6 +11,8 @@
 #include <unistd.h>
 
 #include "io/io.h"
+#include "dicomweb.h"
+#include "fetch.h"
 #include "orthanc.h"
 
 int srv_catalog_id_valid(const char *id)
@@ -31,6 +33,10 @@ void srv_catalog_free(srv_catalog *catalog)
         free(catalog->entries[i].modality);
         free(catalog->entries[i].orthanc_url);
         free(catalog->entries[i].orthanc_series);
+        free(catalog->entries[i].dicomweb_url);
+        free(catalog->entries[i].dicomweb_study);
+        free(catalog->entries[i].dicomweb_series);
+        free(catalog->entries[i].dicomweb_credentials);
     }
     free(catalog->entries);
     free(catalog->slots);
@@ -39,8 +45,7 @@ void srv_catalog_free(srv_catalog *catalog)
 
 /* ---------------------------------------------------------------- the id index */
 
-/* FNV-1a, 64 bits: ids are short, and the index only needs them spread. */
-static size_t id_hash(const char *id)
+size_t srv_catalog_hash(const char *id)
 {
     uint64_t h = 14695981039346656037ull;
     for (const unsigned char *p = (const unsigned char *)id; *p; p++)
@@ -53,7 +58,7 @@ size_t srv_catalog_find(const srv_catalog *catalog, const char *id)
     if (!catalog->slot_count)
         return catalog->count;
     size_t mask = catalog->slot_count - 1;
-    for (size_t s = id_hash(id) & mask;; s = (s + 1) & mask) {
+    for (size_t s = srv_catalog_hash(id) & mask;; s = (s + 1) & mask) {
         size_t at = catalog->slots[s];
         if (!at)
             return catalog->count;
@@ -78,7 +83,7 @@ static int reindex(srv_catalog *catalog, size_t want, iso_error *err)
     if (!table)
         return iso_error_set(err, ISO_E_NOMEM, "out of memory indexing the catalog");
     for (size_t i = 0; i < catalog->count; i++) {
-        size_t s = id_hash(catalog->entries[i].id) & (slots - 1);
+        size_t s = srv_catalog_hash(catalog->entries[i].id) & (slots - 1);
         while (table[s])
             s = (s + 1) & (slots - 1);
         table[s] = i + 1;
@@ -118,7 +123,7 @@ static int add(srv_catalog *catalog, const char *id, const char *path, const cha
     e->level_count = level_count < SRV_LEVELS_MAX ? level_count : SRV_LEVELS_MAX;
     if (e->level_count)
         memcpy(e->levels, levels, e->level_count * sizeof *levels);
-    size_t s = id_hash(e->id) & (catalog->slot_count - 1);
+    size_t s = srv_catalog_hash(e->id) & (catalog->slot_count - 1);
     while (catalog->slots[s])
         s = (s + 1) & (catalog->slot_count - 1);
     catalog->slots[s] = ++catalog->count;
@@ -173,6 +178,120 @@ static int set_orthanc(srv_catalog *out, const char *url, const char *series, is
     return 0;
 }
 
+/* An entry's "levels" (absent: none) into values. 0 or ISO_E_FORMAT. */
+static int read_levels(const char *file, const char *id, json_t *levels, double values[SRV_LEVELS_MAX],
+                       size_t *count, iso_error *err)
+{
+    *count = 0;
+    if (levels && !json_is_array(levels))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: volume \"%s\": \"levels\" is not an array",
+                             file, id);
+    for (size_t i = 0; levels && i < json_array_size(levels) && *count < SRV_LEVELS_MAX; i++) {
+        json_t *v = json_array_get(levels, i);
+        if (!json_is_number(v))
+            return iso_error_set(err, ISO_E_FORMAT, "%s: volume \"%s\": level %zu is not a number",
+                                 file, id, i);
+        values[(*count)++] = json_number_value(v);
+    }
+    return 0;
+}
+
+/* ---------------------------------------------------------------- DICOMweb entries */
+
+/* Adds one DICOMweb series as a volume; its path is the WADO-RS URL, for people. */
+static int add_dicomweb(srv_catalog *out, const char *id, const char *name, const char *modality,
+                        const double *levels, size_t count, const char *url, const char *study,
+                        const char *series, const char *credentials, iso_error *err)
+{
+    char path[1400];
+    snprintf(path, sizeof path, "%.1100s/studies/%s/series/%s", url, study[0] ? study : "-", series);
+    int rc = add(out, id, path, name, modality, levels, count, err);
+    if (rc)
+        return rc;
+    srv_catalog_entry *e = &out->entries[out->count - 1];
+    e->dicomweb_url = strdup(url);
+    e->dicomweb_study = strdup(study);
+    e->dicomweb_series = strdup(series);
+    e->dicomweb_credentials = credentials ? strdup(credentials) : NULL;
+    if (!e->dicomweb_url || !e->dicomweb_study || !e->dicomweb_series || (credentials && !e->dicomweb_credentials))
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory reading the catalog");
+    return 0;
+}
+
+/* A query entry: each series QIDO-RS finds becomes a volume "ID-HASH" (HASH: 8 hex digits
+ * of the series UID, so ids stay the same when the archive gains series). */
+static int expand_query(const char *file, const char *id, const char *name, const double *levels,
+                        size_t count, const char *url, const char *query, const char *credentials,
+                        srv_catalog *out, iso_error *err)
+{
+    srv_dicomweb_series *found;
+    size_t n;
+    int upstream;
+    iso_error why = {0};
+    if (srv_dicomweb_find(url, query, credentials, &found, &n, &why, &upstream))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: volume \"%s\": the QIDO-RS query failed (%s); its series "
+                             "are not served until a restart", file, id, why.message);
+    int rc = 0;
+    size_t added = 0;
+    for (size_t i = 0; i < n && !rc; i++) {
+        char sid[SRV_ID_MAX + 1], label[200];
+        snprintf(sid, sizeof sid, "%.55s-%08x", id, (unsigned)(srv_catalog_hash(found[i].series) & 0xffffffffu));
+        snprintf(label, sizeof label, "%s: %s", name ? name : id, found[i].description[0] ? found[i].description
+                                                                                           : found[i].series);
+        if (has_id(out, sid)) {
+            fprintf(stderr, "isoserve: %s: volume \"%s\": series %s: id \"%s\" is taken; skipped\n", file, id,
+                    found[i].series, sid);
+            continue;
+        }
+        rc = add_dicomweb(out, sid, label, found[i].modality, levels, count, url, found[i].study,
+                          found[i].series, credentials, err);
+        added += !rc;
+    }
+    fprintf(stderr, "isoserve: %s: volume \"%s\": QIDO-RS %s/series?%s found %zu series\n", file, id, url,
+            query, added);
+    free(found);
+    return rc;
+}
+
+/* A "dicomweb" entry: {"url", "credentials"?, "study"?, and "series" or "query"}. */
+static int read_dicomweb(const char *file, size_t index, json_t *item, json_t *web, srv_catalog *out,
+                         iso_error *err)
+{
+    const char *id = json_string_value(json_object_get(item, "id"));
+    const char *url = json_string_value(json_object_get(web, "url"));
+    const char *study = json_string_value(json_object_get(web, "study"));
+    const char *series = json_string_value(json_object_get(web, "series"));
+    const char *query = json_string_value(json_object_get(web, "query"));
+    const char *cred = json_string_value(json_object_get(web, "credentials"));
+    const char *name = json_string_value(json_object_get(item, "name"));
+    if (!id || !srv_catalog_id_valid(id) || has_id(out, id))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: volume %zu: id is missing, taken or not [A-Za-z0-9._-]{1,64}",
+                             file, index);
+    if (!url || !srv_fetch_url_valid(url) || !series == !query || (series && !srv_dicomweb_uid_valid(series)) ||
+        (study && !srv_dicomweb_uid_valid(study)) || (query && strpbrk(query, " \"#\\\r\n")) ||
+        (json_object_get(web, "credentials") && !cred))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: volume \"%s\": \"dicomweb\" needs \"url\" (http:// or "
+                             "https://) and either \"series\" (a UID, [0-9.], with \"study\" optional) or \"query\" "
+                             "(a QIDO-RS query string); \"credentials\" names a file", file, id);
+    double values[SRV_LEVELS_MAX];
+    size_t count;
+    int rc = read_levels(file, id, json_object_get(item, "levels"), values, &count, err);
+    char base[1100], *cred_path = cred ? resolve(file, cred) : NULL;
+    if (cred && !cred_path)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory reading %s", file);
+    size_t n = strlen(url);
+    while (n > 0 && url[n - 1] == '/')
+        n--;
+    snprintf(base, sizeof base, "%.*s", (int)n, url);
+    if (!rc && series)
+        rc = add_dicomweb(out, id, name, json_string_value(json_object_get(item, "modality")), values, count,
+                          base, study ? study : "", series, cred_path, err);
+    else if (!rc)
+        rc = expand_query(file, id, name, values, count, base, query, cred_path, out, err);
+    free(cred_path);
+    return rc;
+}
+
 /* One entry of a catalog file: 0 = added; ISO_E_FORMAT = the entry is bad (err says why;
  * the caller skips it); any other code stops the read. */
 static int read_entry(const char *file, size_t index, json_t *item, srv_catalog *out,
@@ -184,6 +303,9 @@ static int read_entry(const char *file, size_t index, json_t *item, srv_catalog 
     json_t *orthanc = json_object_get(item, "orthanc");
     const char *series = NULL;
     char url[SRV_REST_MAX], rest[SRV_REST_MAX];
+    json_t *web = json_object_get(item, "dicomweb");
+    if (json_is_object(item) && web)
+        return read_dicomweb(file, index, item, web, out, err);
     if (!json_is_object(item) || !id || (!path && !orthanc))
         return iso_error_set(err, ISO_E_FORMAT, "%s: volume %zu needs string fields \"id\" and "
                              "\"path\" (or \"orthanc\")", file, index);
@@ -195,16 +317,8 @@ static int read_entry(const char *file, size_t index, json_t *item, srv_catalog 
                              has_id(out, id) ? "taken" : "not [A-Za-z0-9._-]{1,64}");
     double values[SRV_LEVELS_MAX];
     size_t count = 0;
-    if (levels && !json_is_array(levels))
-        return iso_error_set(err, ISO_E_FORMAT, "%s: volume \"%s\": \"levels\" is not an array",
-                             file, id);
-    for (size_t i = 0; levels && i < json_array_size(levels) && count < SRV_LEVELS_MAX; i++) {
-        json_t *v = json_array_get(levels, i);
-        if (!json_is_number(v))
-            return iso_error_set(err, ISO_E_FORMAT, "%s: volume \"%s\": level %zu is not a number",
-                                 file, id, i);
-        values[count++] = json_number_value(v);
-    }
+    if ((rc = read_levels(file, id, levels, values, &count, err)))
+        return rc;
     char *full = orthanc ? strdup(rest) : resolve(file, path);
     if (!full)
         return iso_error_set(err, ISO_E_NOMEM, "out of memory reading %s", file);

@@ -17,6 +17,10 @@ typedef struct srv_catalog_entry {
                                  Orthanc series its REST URL (for people, never opened) */
     char *orthanc_url;        /* an Orthanc series: the server's base URL, else NULL */
     char *orthanc_series;     /* ... and the series' Orthanc id */
+    char *dicomweb_url;       /* a DICOMweb series: the archive's base URL, else NULL */
+    char *dicomweb_study;     /* ... its study UID ("": looked up by QIDO-RS) */
+    char *dicomweb_series;    /* ... its series UID */
+    char *dicomweb_credentials; /* ... a credentials file (dicomweb.h), or NULL */
     char *name;               /* for people; the id when the catalog gives none */
     char *modality;           /* "CT", "MR", "phantom", ... or "" */
     double levels[SRV_LEVELS_MAX];
@@ -36,7 +40,10 @@ int srv_catalog_id_valid(const char *id);
 /* Reads a catalog file: {"volumes": [{"id", "path", "name"?, "modality"?, "levels"?}, ...]}
  * (or the array alone). Relative paths are taken from the catalog's directory. Instead of
  * "path", "orthanc": {"url": "http://host:8042", "series": "ORTHANC-SERIES-ID"} names a
- * series on an Orthanc server (orthanc.h). A bad entry (bad id, duplicate id, no path, a
+ * series on an Orthanc server (orthanc.h), and "dicomweb": {"url", "credentials"?, "study"?,
+ * "series"} one on a DICOMweb archive (dicomweb.h); with "query" (a QIDO-RS query string)
+ * instead of "series", every series the archive finds at start becomes a volume "ID-HASH".
+ * A bad entry (bad id, duplicate id, no path, a
  * bad Orthanc URL or id) is reported on stderr with its position and skipped; a file that
  * is not such JSON is an error. */
 int srv_catalog_read(const char *file, srv_catalog *out, iso_error *err);
@@ -51,6 +58,9 @@ int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err);
 /* The default collection: Debian's mricron-data brain templates (those installed) and
  * analytic phantoms, each with suggested levels. */
 int srv_catalog_default(srv_catalog *out, iso_error *err);
+
+/* FNV-1a (64 bits) of a string: the id index's hash, also for ids made from UIDs. */
+size_t srv_catalog_hash(const char *id);
 
 /* The index of the entry with this id, or catalog->count: one hash probe sequence, never a
  * scan (a catalog may hold 100,000 studies and every request looks its volume up). */

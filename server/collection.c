@@ -16,6 +16,7 @@
 #include "base/base.h"
 #include "volume/volume.h"
 #include "io/io.h"
+#include "dicomweb.h"
 #include "orthanc.h"
 
 /* Bump when extraction or encoding changes what a mesh URL returns: it is part of every
@@ -142,13 +143,16 @@ static int load_tree(srv_volume *v, const srv_preload_options *opt, char *label,
     return 0;
 }
 
-/* The entry's volume: from its Orthanc server (and the cache dir), or its path. */
+/* The entry's volume: from its archive (DICOMweb or Orthanc, and the cache dir), or its path. */
 static int load_volume(const srv_catalog_entry *e, const srv_preload_options *opt, char *label,
                        iso_volume **vol, iso_error *err, int *upstream)
 {
     iso_load_options lopt = {.max_bytes = opt->max_volume_bytes, .progress = srv_progress,
                              .progress_context = label};
     *upstream = 0;
+    if (e->dicomweb_url)
+        return srv_dicomweb_load(e->dicomweb_url, e->dicomweb_study, e->dicomweb_series, e->dicomweb_credentials,
+                                 opt->cache_dir, &lopt, vol, err, upstream);
     if (e->orthanc_url)
         return srv_orthanc_load(e->orthanc_url, e->orthanc_series, opt->cache_dir, &lopt, vol, err, upstream);
     return iso_load(e->path, &lopt, vol, err);

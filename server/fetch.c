@@ -122,6 +122,9 @@ int srv_fetch_get(srv_fetch *f, const char *what, const char *url, const char *a
     curl_easy_setopt(f->curl, CURLOPT_ERRORBUFFER, why);
     CURLcode rc = curl_easy_perform(f->curl);
     curl_easy_getinfo(f->curl, CURLINFO_RESPONSE_CODE, &status);
+    char *type = NULL;
+    curl_easy_getinfo(f->curl, CURLINFO_CONTENT_TYPE, &type);
+    snprintf(s->content_type, sizeof s->content_type, "%s", type ? type : "");
     curl_easy_setopt(f->curl, CURLOPT_ERRORBUFFER, NULL);
     curl_easy_setopt(f->curl, CURLOPT_HTTPHEADER, NULL);
     curl_slist_free_all(headers);

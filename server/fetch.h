@@ -21,6 +21,7 @@ typedef struct srv_fetch_sink {
     size_t len, cap;
     FILE *file;
     uint64_t written, limit;   /* the transfer fails past limit bytes */
+    char content_type[256];    /* the answer's Content-Type, set by srv_fetch_get, or "" */
 } srv_fetch_sink;
 
 /* A libcurl handle with the sources' settings and the credentials' header. */

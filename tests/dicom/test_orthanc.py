@@ -11,6 +11,8 @@ the fetched files and the hierarchy are cached and serve again with Orthanc stop
 the CLI on a series folder and `--volumes` with a series subdirectory. Servers are stopped
 by PID. Prints PASS/FAIL/SKIP lines; exit status 1 on failure."""
 
+import base64
+import glob
 import json
 import os
 import re
@@ -47,13 +49,19 @@ class Orthanc:
     """Debian's Orthanc on 127.0.0.1 with its storage in tmp; stopped by PID. port: the
     port of an earlier instance to start again on (its storage is kept)."""
 
-    def __init__(self, tmp, port=None):
+    def __init__(self, tmp, port=None, extra=None, auth=None):
+        """extra: more configuration (plugins); auth: (user, password) Orthanc requires."""
         self.port = port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"
+        self.headers = {}
         storage = os.path.join(tmp, "orthanc-db")
         config = {"Name": "isoserve-test", "StorageDirectory": storage, "IndexDirectory": storage,
                   "HttpPort": self.port, "DicomServerEnabled": False, "DicomPort": free_port(),
                   "RemoteAccessAllowed": False, "AuthenticationEnabled": False, "Plugins": []}
+        if auth:
+            config.update(AuthenticationEnabled=True, RegisteredUsers={auth[0]: auth[1]})
+            self.headers["Authorization"] = "Basic " + base64.b64encode(f"{auth[0]}:{auth[1]}".encode()).decode()
+        config.update(extra or {})
         path = os.path.join(tmp, "orthanc.json")
         with open(path, "w") as f:
             json.dump(config, f)
@@ -62,7 +70,8 @@ class Orthanc:
         deadline = time.time() + 30
         while time.time() < deadline and self.proc.poll() is None:
             try:
-                urllib.request.urlopen(self.url + "/system", timeout=1).read()
+                urllib.request.urlopen(urllib.request.Request(self.url + "/system", headers=self.headers),
+                                       timeout=1).read()
                 return
             except OSError:
                 time.sleep(0.1)
@@ -75,10 +84,14 @@ class Orthanc:
         for name in sorted(os.listdir(folder)):
             with open(os.path.join(folder, name), "rb") as f:
                 req = urllib.request.Request(self.url + "/instances", data=f.read(), method="POST",
-                                             headers={"Content-Type": "application/dicom"})
+                                             headers={"Content-Type": "application/dicom", **self.headers})
             series.add(json.load(urllib.request.urlopen(req, timeout=30))["ParentSeries"])
         assert len(series) == 1, series
         return series.pop()
+
+    def get_json(self, path):
+        req = urllib.request.Request(self.url + path, headers=self.headers)
+        return json.load(urllib.request.urlopen(req, timeout=30))
 
     def stop(self):
         if self.proc.poll() is None:
@@ -174,6 +187,78 @@ def served_tests(s, sid, cache):
 
 
 report_numbers = {}
+
+
+DICOMWEB_PLUGIN = (glob.glob("/usr/lib/orthanc/libOrthancDicomWeb.so*") or [None])[0]
+
+
+def dicomweb_tests(tmp, series_dir):
+    """The same series through DICOMweb: Orthanc with Debian's orthanc-dicomweb plugin,
+    basic authentication required, credentials from a file. One entry names the series by
+    its UID alone (QIDO-RS finds its study), one is a QIDO-RS query that expands to the
+    series; WADO-RS fetches it as multipart/related. Both meshes equal the folder's."""
+    if not DICOMWEB_PLUGIN:
+        print(f"SKIP {LABEL}.dicomweb: Debian's orthanc-dicomweb is not installed (apt-get install orthanc-dicomweb)")
+        return
+    tmp = os.path.join(tmp, "dicomweb")
+    os.mkdir(tmp)
+    pacs = Orthanc(tmp, extra={"Plugins": [DICOMWEB_PLUGIN], "DicomWeb": {"Enable": True, "Root": "/dicom-web/"}},
+                   auth=("isoserve", "s3cret-pass"))
+    try:
+        sid = pacs.upload(series_dir)
+        uid = pacs.get_json(f"/series/{sid}")["MainDicomTags"]["SeriesInstanceUID"]
+        cred = os.path.join(tmp, "pacs.cred")
+        with open(cred, "w") as f:
+            f.write("basic isoserve:s3cret-pass\n")
+        wrong = os.path.join(tmp, "wrong.cred")
+        with open(wrong, "w") as f:
+            f.write("basic isoserve:not-it\n")
+        web = pacs.url + "/dicom-web/"
+        cache = os.path.join(tmp, "cache")
+        catalog = write_catalog(tmp, [
+            {"id": "disk", "path": series_dir},
+            {"id": "web", "dicomweb": {"url": web, "series": uid, "credentials": "pacs.cred"}},
+            {"id": "ct", "name": "CT", "dicomweb": {"url": web, "query": "Modality=CT", "credentials": cred}},
+            # another spelling of the archive: a cache key of its own, so the series is asked for
+            {"id": "denied", "dicomweb": {"url": web.replace("127.0.0.1", "localhost"), "series": uid,
+                                          "credentials": wrong}},
+            {"id": "bad", "dicomweb": {"url": web, "series": "not-a-uid"}}])
+        s = Server(["--catalog", catalog, "--cache-dir", cache])
+        try:
+            def denied():
+                r = s.get("/v1/volumes/denied" + MESH)
+                body = problem(r)
+                assert r.status == 503 and r.getheader("Retry-After"), r.status
+                assert "HTTP 401" in body["detail"] and "not-it" not in body["detail"], body["detail"]
+            check("dicomweb_wrong_credentials_is_503", denied)
+
+            def same_mesh():
+                a, b = mesh(s, "disk"), mesh(s, "web")
+                assert a.body == b.body and int(a.getheader("X-Iso-Triangles")) > 1000, (len(a.body), len(b.body))
+                assert "dicomweb " in s.log() and "/studies/" in s.log(), s.log()[-2000:]
+            check("dicomweb_mesh_equals_folder_mesh", same_mesh)
+
+            def query():
+                vols = {v["id"]: v for v in json.loads(s.get("/v1/volumes").body)["volumes"]}
+                found = [i for i in vols if i.startswith("ct-")]
+                assert len(found) == 1 and re.fullmatch(r"ct-[0-9a-f]{8}", found[0]), sorted(vols)
+                assert vols[found[0]]["modality"] == "CT" and vols[found[0]]["name"].startswith("CT: ")
+                assert mesh(s, found[0]).body == mesh(s, "disk").body
+                assert "bad" not in vols and '"bad"' in s.log()
+            check("dicomweb_qido_query_expands_to_its_series", query)
+
+
+            def cached():
+                folders = glob.glob(os.path.join(cache, "dicomweb", "*", uid))
+                assert len(folders) == 1, folders
+                names = sorted(os.listdir(folders[0]))
+                assert len(names) == 24 and all(n.endswith(".dcm") for n in names), names
+            check("dicomweb_series_cached_by_archive_and_uid", cached)
+        finally:
+            rc = s.stop()
+            report("dicomweb_daemon_exits_0", rc == 0, f"exit status {rc}\n{s.log()[-3000:]}")
+    finally:
+        pacs.stop()
 
 
 def outage_tests(tmp, series_dir):
@@ -285,6 +370,7 @@ def main():
             return 0
         if ORTHANC:
             orthanc_tests(tmp, series_dir)
+            dicomweb_tests(tmp, series_dir)
             outage_tests(tmp, series_dir)
         else:
             print(f"SKIP {LABEL}.orthanc: Debian's orthanc is not installed (scripts/setup.sh installs it)")
