@@ -607,6 +607,12 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
 int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
                     iso_extract_stats *stats, iso_error *err)
 {
+    return iso_lod_extract_planned(tree, params, NULL, mesh, stats, err);
+}
+
+int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *params, const uint8_t *shift,
+                            iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
+{
     lod c = {.tree = tree, .vol = tree->vol, .level = params->level, .cap = params->cap, .mesh = mesh};
     const iso_bricks *g = &tree->bricks;
     for (int d = 0; d < 3; d++) {
@@ -618,7 +624,10 @@ int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, iso_
     c.shift = malloc(total ? total : 1);
     if (!c.shift)
         return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
-    plan(&c, params->tolerance);
+    if (shift)
+        memcpy(c.shift, shift, total);
+    else
+        plan(&c, params->tolerance);
     int rc = 0;
     for (uint32_t k = 0; k < g->count[2] && !rc; k++)
         for (uint32_t j = 0; j < g->count[1] && !rc; j++)

@@ -25,6 +25,8 @@
 #ifndef ISO_LOD_H
 #define ISO_LOD_H
 
+#include <stdint.h>
+
 #include "extract.h"
 
 /* Replaces mesh with the surface at params->level within params->tolerance (> 0), in index
@@ -34,5 +36,11 @@
  * does not close: a bug); the mesh is then empty. */
 int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
                     iso_extract_stats *stats, iso_error *err);
+
+/* The same with the plan given: shift[b] = log2 of brick b's stride (0..ISO_TREE_LEVELS),
+ * whatever the tolerance and the fit errors say. For tests of the construction: any plan
+ * must give a watertight mesh; only PASS 1's choice makes the value bound hold. */
+int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *params, const uint8_t *shift,
+                            iso_mesh *mesh, iso_extract_stats *stats, iso_error *err);
 
 #endif

@@ -15,6 +15,7 @@
 #include "mesh/mesh.h"
 #include "check.h"
 #include "extract/extract.h"
+#include "extract/lod.h"
 #include "io/io.h"
 #include "surface.h"
 #include "hierarchy/tree.h"
@@ -132,6 +133,95 @@ static void test_coarse_bricks_meet_cells(void)
     CHECKF(coarse >= 4, "%zu bricks coarsened", coarse);
     iso_mesh_free(&m);
     iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+/* ---- transition cells, every configuration ---- */
+
+/* The mesh of a forced plan (one log2 stride per brick), checked for cracks, folds and
+ * zero-area triangles: any plan must be watertight. */
+static void check_plan(iso_volume *vol, const uint8_t *shift, int cap, const char *what, size_t *triangles)
+{
+    iso_error err;
+    iso_tree *tree;
+    CHECK_OK(iso_tree_build(vol, 1, NULL, NULL, &tree, &err), &err);
+    if (!tree)
+        return;
+    iso_extract_params p = {.level = 0, .tolerance = 1, .cap = cap, .space = ISO_SPACE_INDEX};
+    iso_mesh m;
+    iso_mesh_init(&m);
+    iso_extract_stats st = {0};
+    CHECK_OK(iso_lod_extract_planned(tree, &p, shift, &m, &st, &err), &err);
+    iso_census c;
+    CHECK_OK(iso_census_compute(vol, &m, ISO_SPACE_INDEX, &c, &err), &err);
+    CHECKF(c.open_edges == 0 && c.nonmanifold_edges == 0 && c.misoriented_edges == 0 &&
+               c.degenerate_triangles == 0,
+           "%s: open %zu, non-manifold %zu, misoriented %zu, degenerate %zu", what, c.open_edges,
+           c.nonmanifold_edges, c.misoriented_edges, c.degenerate_triangles);
+    *triangles += m.triangle_count;
+    iso_mesh_free(&m);
+    iso_tree_destroy(tree);
+}
+
+/* A value on the given side of level 0, never on it. */
+static double side_value(int inside)
+{
+    double u = 0.3 + 0.7 * surface_uniform();
+    return inside ? u : -u;
+}
+
+/* A stride-2 cell against a stride-1 brick: its 13 samples (the 3 x 3 fine face and the 4
+ * far corners), in all 2^13 patterns, uncapped and capped; everything else below the
+ * level. The face sits in the plane x = 8 between brick 0 (stride 2) and brick 1
+ * (stride 1), the cell in the corner where two faces are the volume's border. */
+static void test_transition_cell_every_pattern(void)
+{
+    iso_volume *vol = surface_make_volume(17, 9, 9, ISO_F32);
+    static const uint8_t plan[2] = {1, 0};
+    size_t triangles = 0;
+    for (unsigned pattern = 0; pattern < (1u << 13) && !check_failed(); pattern++) {
+        for (size_t k = 0; k < 9; k++)
+            for (size_t j = 0; j < 9; j++)
+                for (size_t i = 0; i < 17; i++)
+                    iso_vol_set(vol, i, j, k, -1);
+        for (int b = 0; b < 9; b++)
+            iso_vol_set(vol, 8, (size_t)(b % 3), (size_t)(b / 3), side_value((pattern >> b) & 1));
+        for (int b = 0; b < 4; b++)
+            iso_vol_set(vol, 6, (size_t)(2 * (b & 1)), (size_t)(b & 2), side_value((pattern >> (9 + b)) & 1));
+        iso_vol_update_stats(vol);
+        char what[64];
+        snprintf(what, sizeof what, "pattern %u", pattern);
+        check_plan(vol, plan, (int)(pattern & 1), what, &triangles);
+    }
+    printf("  info: 8192 patterns of a 2:1 transition cell, %zu triangles\n", triangles);
+    CHECK(triangles > 8192);
+    iso_vol_destroy(vol);
+}
+
+/* Random plans (strides 1 to 8 per brick, so faces, edges and corners between any two) on
+ * random fields, uncapped and capped: 4 x 2 x 2 bricks, the far ones clipped. */
+static void test_random_plans(void)
+{
+    iso_volume *vol = surface_make_volume(31, 17, 12, ISO_F32);
+    uint8_t plan[4 * 3 * 2];
+    size_t triangles = 0;
+    for (int trial = 0; trial < 300 && !check_failed(); trial++) {
+        double w[3] = {0.2 + surface_uniform(), 0.2 + surface_uniform(), 0.2 + surface_uniform()};
+        for (size_t k = 0; k < 12; k++)
+            for (size_t j = 0; j < 17; j++)
+                for (size_t i = 0; i < 31; i++) {
+                    double v = sin(w[0] * (double)i) + cos(w[1] * (double)j) + sin(w[2] * (double)k + 1);
+                    iso_vol_set(vol, i, j, k, v + (trial % 3 == 0 ? surface_uniform() - 0.5 : 0) + 0.01234);
+                }
+        iso_vol_update_stats(vol);
+        for (size_t b = 0; b < sizeof plan; b++)
+            plan[b] = (uint8_t)(surface_uniform() * 4);
+        char what[64];
+        snprintf(what, sizeof what, "random plan %d", trial);
+        check_plan(vol, plan, trial & 1, what, &triangles);
+    }
+    printf("  info: 300 random plans, %zu triangles\n", triangles);
+    CHECK(triangles > 300);
     iso_vol_destroy(vol);
 }
 
@@ -360,6 +450,8 @@ int main(void)
 {
     CHECK_RUN(test_plane_is_one_coarse_cell);
     CHECK_RUN(test_coarse_bricks_meet_cells);
+    CHECK_RUN(test_transition_cell_every_pattern);
+    CHECK_RUN(test_random_plans);
     CHECK_RUN(test_random_fields_property);
     CHECK_RUN(test_analytic_fields_property);
     CHECK_RUN(test_mricron_brain);
