@@ -38,7 +38,7 @@ TEST_BIN   = $(TEST_SRC:tests/unit/%.c=$(BUILD)/tests/%)
 # Objects of the test support must survive between runs (they are not final targets).
 .SECONDARY:
 
-.PHONY: all setup test test-asan unit-tests bench run clean sanitize node-deps web fuzz fuzz-build fuzz-lib
+.PHONY: all setup test test-asan unit-tests bench run clean sanitize node-deps web fuzz fuzz-build fuzz-lib image test-image
 all: $(BUILD)/isoserve web
 
 $(BUILD)/%.o: %.c
@@ -164,6 +164,21 @@ test-asan: setup
 
 bench: setup all
 	bash tests/bench/run.sh
+
+# The container images (docker/Dockerfile): isoserve:latest and isoserve-front:latest, with
+# docker or else podman (with --format docker: OCI images would lose the HEALTHCHECKs).
+CONTAINER ?= $(shell command -v docker 2>/dev/null || command -v podman 2>/dev/null)
+IMAGE_FORMAT = $(if $(findstring podman,$(notdir $(CONTAINER))),--format docker)
+image:
+	@test -n "$(CONTAINER)" || { echo "make image: neither docker nor podman is installed"; exit 1; }
+	$(CONTAINER) build $(IMAGE_FORMAT) -f docker/Dockerfile --target isoserve -t isoserve:latest .
+	$(CONTAINER) build $(IMAGE_FORMAT) -f docker/Dockerfile --target front -t isoserve-front:latest .
+
+# Builds the images, runs one replica and the compose stack, checks /healthz, a mesh and a
+# failover (tests/image/run_image.sh; minutes, so not part of `make test`). Says SKIP,
+# and why, where nothing can run containers.
+test-image:
+	CONTAINER="$(CONTAINER)" bash tests/image/run_image.sh
 
 # The README's run command: the server on the default collection (scripts/run.sh).
 run: setup all

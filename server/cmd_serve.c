@@ -142,7 +142,9 @@ static int options_from_env(serve_options *o)
             var[n++] = *p == '-' ? '_' : (char)(*p - 'a' + 'A');
         var[n] = '\0';
         const char *v = getenv(var);
-        if (v && *v && set_option(o, option_names[i], v, 1))
+        /* Empty or blank is unset: compose files default unset variables to " " (see
+         * docker/compose.yaml). */
+        if (v && v[strspn(v, " \t")] && set_option(o, option_names[i], v, 1))
             return srv_fail("(from the environment variable %s)", var);
     }
     return 0;

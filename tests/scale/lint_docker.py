@@ -8,7 +8,9 @@ would trip on first, checked from the files.
 - the server stage runs as a non-root user, exposes its port and checks /healthz;
 - the shard ring's three copies agree: ISOSERVE_SHARD_PEERS in compose, the `server` lines
   of both upstream blocks in nginx.conf (same names, same order, weight 1), and the
-  replicas' ISOSERVE_SHARD K/N cover 0..N-1 once each.
+  replicas' ISOSERVE_SHARD K/N cover 0..N-1 once each;
+- Debian's podman-compose substitutes every variable of compose.yaml (an empty default
+  it would leave as it is), and every service has a compose healthcheck.
 Prints PASS/FAIL/SKIP lines; exit status 1 on failure."""
 
 import os
@@ -212,12 +214,35 @@ def ring_agrees():
         assert peers[k].split(":")[0] in (name, s.get("hostname")), (name, "is not", peers[k])
 
 
+def compose_substitutions():
+    """Every ${...} of compose.yaml substituted as Debian 12's podman-compose does it (its
+    own rec_subs, with none of the variables set): nothing is left unsubstituted, and the
+    catalog and volumes variables come out blank, which isoserve takes as unset."""
+    try:
+        import podman_compose
+    except ImportError:
+        raise Skip("Debian's podman-compose is not installed")
+    compose = load_compose()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("ISOSERVE_")}
+    out = podman_compose.rec_subs(compose, env)
+    left = [(name, k, v) for name, svc in out["services"].items() for k, v in (svc.get("environment") or {}).items()
+            if "${" in str(v)]
+    assert not left, left
+    for name, svc in out["services"].items():
+        e = svc.get("environment") or {}
+        for k in ("ISOSERVE_CATALOG", "ISOSERVE_VOLUMES"):
+            assert k not in e or not str(e[k]).strip(), (name, k, e.get(k))
+    healthy = [n for n, svc in out["services"].items() if svc.get("healthcheck")]
+    assert sorted(healthy) == sorted(out["services"]), f"services without a healthcheck: {healthy}"
+
+
 def main():
     RESULTS.check("compose_yaml_paths_and_targets", compose_paths)
     RESULTS.check("dockerfile_copy_sources_and_make_targets", dockerfile_sources)
     RESULTS.check("server_image_nonroot_healthcheck", server_stage)
     RESULTS.check("server_image_has_every_shared_library", runtime_libraries)
     RESULTS.check("shard_peers_match_nginx_upstreams", ring_agrees)
+    RESULTS.check("compose_substituted_by_podman_compose", compose_substitutions)
     return 1 if RESULTS.failures else 0
 
 
