@@ -4,7 +4,9 @@
  *   1. keep: the exact surface's positions and triangles become level 0;
  *   2. simplify: level k (k = 1..ISO_CHAIN_LEVELS) is level k - 1 simplified to half its
  *      triangles (iso_simplify, borders locked, unused vertices kept so that every level
- *      indexes the one position array);
+ *      indexes the one position array): on a large level, first (2a) in slabs across one
+ *      axis, one per thread, each with its cut locked (the cut's edges are open in the
+ *      slab), then (2b) the joined mesh with the cuts free, which has little left to do;
  *   3. measure: each level's distance from level 0 (iso_mesh_distance_compute, samples three
  *      voxels apart), so the answers below rest on measurements, not on estimates. */
 #include "mesh.h"
@@ -47,6 +49,130 @@ static size_t used_vertices(const iso_mesh *m, unsigned char *seen)
     return n;
 }
 
+/* One slab of a level being simplified on several threads (PASS 2a). */
+typedef struct slab {
+    iso_mesh mesh;          /* its triangles over its own vertices */
+    uint32_t *global;       /* its vertex i is the chain's vertex global[i] */
+    size_t target;
+    iso_simplify_result result;
+    int rc;
+    iso_error err;
+} slab;
+
+typedef struct slab_job {
+    const iso_mesh_chain *chain;
+    const iso_mesh *source;
+    int axis;
+    float cut[ISO_CHAIN_SLABS_MAX + 1]; /* slab s: cut[s] <= centre < cut[s + 1] */
+    slab *slabs;
+    int count;
+    size_t target;
+} slab_job;
+
+static int slab_of(const slab_job *job, const iso_mesh *m, size_t t)
+{
+    float c = 0;
+    for (int k = 0; k < 3; k++)
+        c += m->positions[3 * (size_t)m->indices[3 * t + k] + (size_t)job->axis];
+    c /= 3;
+    int s = 0;
+    while (s + 1 < job->count && c >= job->cut[s + 1])
+        s++;
+    return s;
+}
+
+/* PASS 2a on one thread: gathers slab `part`'s triangles over compact vertices, then
+ * simplifies them with every vertex on the slab's cut (an open edge there) locked. */
+static void simplify_slab(void *context, int part, int parts)
+{
+    slab_job *job = context;
+    const iso_mesh *m = job->source;
+    for (int s = part; s < job->count; s += parts) {
+        slab *sl = &job->slabs[s];
+        size_t n = 0;
+        for (size_t t = 0; t < m->triangle_count; t++)
+            n += slab_of(job, m, t) == s;
+        uint32_t *local = malloc((m->vertex_count ? m->vertex_count : 1) * sizeof *local);
+        iso_mesh_init(&sl->mesh);
+        if (!local || iso_mesh_reserve(&sl->mesh, 3 * n, n) ||
+            !(sl->global = malloc((3 * n + 1) * sizeof *sl->global))) {
+            free(local);
+            sl->rc = iso_error_set(&sl->err, ISO_E_NOMEM, "chain: no memory for a slab of %zu triangles", n);
+            continue;
+        }
+        memset(local, 0xff, m->vertex_count * sizeof *local);
+        size_t v = 0, i = 0;
+        for (size_t t = 0; t < m->triangle_count; t++) {
+            if (slab_of(job, m, t) != s)
+                continue;
+            for (int k = 0; k < 3; k++) {
+                uint32_t g = m->indices[3 * t + k];
+                if (local[g] == UINT32_MAX) {
+                    local[g] = (uint32_t)v;
+                    sl->global[v] = g;
+                    memcpy(sl->mesh.positions + 3 * v++, m->positions + 3 * (size_t)g, 3 * sizeof(float));
+                }
+                sl->mesh.indices[i++] = local[g];
+            }
+        }
+        free(local);
+        sl->mesh.vertex_count = v;
+        sl->mesh.triangle_count = n;
+        sl->target = (size_t)((double)job->target * (double)n / (double)m->triangle_count) + 1;
+        iso_simplify_params sp = {.target_triangles = sl->target, .target_error = INFINITY,
+                                  .voxel_size = job->chain->voxel_size, .lock_border = 1,
+                                  .keep_vertices = 1};
+        sl->rc = iso_simplify(&sl->mesh, &sp, &sl->result, &sl->err);
+    }
+}
+
+/* PASS 2a: level k - 1 (in m) cut into slabs across an axis (the longest side on even
+ * levels, the next on odd ones, so that one level's cuts are simplified by the next),
+ * simplified on all threads, and joined back into m. */
+static int simplify_slabs(const iso_mesh_chain *chain, iso_mesh *m, int k, size_t target,
+                          int threads, iso_simplify_result *r, iso_error *err)
+{
+    slab_job job = {.chain = chain, .source = m, .target = target};
+    job.count = threads < ISO_CHAIN_SLABS_MAX ? threads : ISO_CHAIN_SLABS_MAX;
+    float lo[3], hi[3];
+    iso_mesh_bounds(m, lo, hi);
+    int order[3] = {0, 1, 2};
+    for (int a = 0; a < 3; a++)
+        for (int b = a + 1; b < 3; b++)
+            if (hi[order[b]] - lo[order[b]] > hi[order[a]] - lo[order[a]]) {
+                int swap = order[a];
+                order[a] = order[b], order[b] = swap;
+            }
+    job.axis = order[k % 2];
+    for (int s = 0; s <= job.count; s++)
+        job.cut[s] = lo[job.axis] + (hi[job.axis] - lo[job.axis]) * (float)s / (float)job.count;
+    if (!(job.slabs = calloc((size_t)job.count, sizeof *job.slabs)))
+        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for slabs");
+    iso_parallel_run(threads, simplify_slab, &job);
+    int rc = 0;
+    size_t joined = 0;
+    *r = (iso_simplify_result){.triangles_in = m->triangle_count, .vertices_in = m->vertex_count};
+    for (int s = 0; s < job.count; s++) {
+        slab *sl = &job.slabs[s];
+        if (sl->rc && !rc) {
+            rc = sl->rc;
+            if (err)
+                *err = sl->err;
+        }
+        for (size_t i = 0; !rc && i < 3 * sl->mesh.triangle_count; i++)
+            m->indices[joined++] = sl->global[sl->mesh.indices[i]];
+        r->error = fmax(r->error, sl->result.error);
+        r->nonmanifold_edges += sl->result.nonmanifold_edges;
+        r->folds_dropped += sl->result.folds_dropped;
+        iso_mesh_free(&sl->mesh);
+        free(sl->global);
+    }
+    free(job.slabs);
+    if (!rc)
+        m->triangle_count = joined / 3;
+    return rc;
+}
+
 /* PASS 2 and 3 for level k. */
 static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *seen, iso_error *err)
 {
@@ -57,15 +183,31 @@ static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *s
         return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for level %d", k);
     memcpy(m.indices, prev->indices, 3 * prev->triangle_count * sizeof *m.indices);
     size_t target = chain->level[0].triangle_count >> k;
-    iso_simplify_params sp = {.target_triangles = target ? target : 1, .target_error = INFINITY,
+    target = target ? target : 1;
+    iso_simplify_params sp = {.target_triangles = target, .target_error = INFINITY,
                               .voxel_size = chain->voxel_size, .lock_border = 1,
                               .keep_vertices = 1};
-    iso_simplify_result r;
-    int rc = iso_simplify(&m, &sp, &r, err);
+    iso_simplify_result r, slabs = {0};
+    double start = iso_clock_ms();
+    int workers = iso_parallel_threads(threads), rc = 0;
+    /* PASS 2a, on large levels: slabs on all threads, to a little under the target so that
+     * the cuts' unsimplified strips still fit; PASS 2b, the joined mesh with the cuts free,
+     * which has little left to do. */
+    if (workers > 1 && prev->triangle_count >= (size_t)workers * ISO_CHAIN_SLAB_MIN)
+        rc = simplify_slabs(chain, &m, k, target - target / 64, workers, &slabs, err);
+    if (!rc)
+        rc = iso_simplify(&m, &sp, &r, err);
     if (rc) {
         free(m.indices);
         return rc;
     }
+    if (slabs.triangles_in) {
+        r.error = fmax(r.error, slabs.error);
+        r.folds_dropped += slabs.folds_dropped;
+        if (r.triangles == r.triangles_in) /* PASS 2b had nothing to do: the slabs' count */
+            r.nonmanifold_edges = slabs.nonmanifold_edges;
+    }
+    r.ms = iso_clock_ms() - start;
     uint32_t *shrunk = realloc(m.indices, (3 * m.triangle_count + 1) * sizeof *m.indices);
     lv->indices = m.indices = shrunk ? shrunk : m.indices;
     lv->triangle_count = m.triangle_count;
@@ -75,10 +217,11 @@ static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *s
     lv->folds_dropped = r.folds_dropped;
     chain->levels = k + 1;
     iso_mesh exact = view_of(chain, 0), level = view_of(chain, k);
-    double start = iso_clock_ms();
-    rc = iso_mesh_distance_compute(&exact, &level, ISO_CHAIN_SPACING_VOXELS * chain->voxel_size, threads, &lv->distance, err);
+    double measure_start = iso_clock_ms();
+    rc = iso_mesh_distance_compute(&exact, &level, ISO_CHAIN_SPACING_VOXELS * chain->voxel_size,
+                                   threads, &lv->distance, err);
     lv->simplify_ms = r.ms;
-    lv->measure_ms = iso_clock_ms() - start;
+    lv->measure_ms = iso_clock_ms() - measure_start;
     chain->bytes += 3 * lv->triangle_count * sizeof *lv->indices;
     return rc;
 }

@@ -239,10 +239,10 @@ static double nearest(const grid *g, const iso_mesh *m, const double p[3])
                         }
                         break;
                     }
-                    int cell[3] = {i, j, k};
-                    if (cell_gap_sq(g, p, cell) >= best)
-                        continue;
                     size_t at = cell_index(g, i, j, k);
+                    int cell[3] = {i, j, k};
+                    if (g->start[at] == g->start[at + 1] || cell_gap_sq(g, p, cell) >= best)
+                        continue;
                     for (uint32_t e = g->start[at]; e < g->start[at + 1]; e++) {
                         /* A triangle whose box is no nearer than the best is skipped. */
                         const float *box = g->boxes + 6 * (size_t)g->items[e];

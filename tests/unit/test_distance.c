@@ -392,6 +392,65 @@ static void test_chain_levels_are_measured_and_closed(void)
     iso_vol_destroy(vol);
 }
 
+/* A sphere large enough for slabs (two threads, 2 x ISO_CHAIN_SLAB_MIN triangles and
+ * more): every level is still closed and within its share of the triangles, every vertex
+ * is an exact vertex, and each level's stored distance is what a fresh measure gives; the
+ * one-thread chain beside it gives the same counts to within the slabs' cut. */
+static void test_chain_in_slabs_stays_closed(void)
+{
+    iso_volume *vol = NULL;
+    iso_error err;
+    CHECK_OK(iso_field_load("field:sphere:96", NULL, &vol, &err), &err);
+    if (!vol)
+        return;
+    iso_vol_update_stats(vol);
+    iso_tree *tree = surface_build(vol);
+    iso_mesh exact, m;
+    iso_mesh_init(&exact);
+    iso_mesh_init(&m);
+    iso_extract_stats st;
+    iso_extract_params xp = {.level = 3.0, .space = ISO_SPACE_INDEX};
+    CHECK_OK(iso_extract(tree, &xp, &exact, &st, &err), &err);
+    CHECKF(exact.triangle_count >= 2 * ISO_CHAIN_SLAB_MIN, "%zu triangles", exact.triangle_count);
+    iso_mesh_chain *two = NULL, *one = NULL;
+    CHECK_OK(iso_mesh_chain_build(&exact, 1, 2, &two, &err), &err);
+    CHECK_OK(iso_mesh_chain_build(&exact, 1, 1, &one, &err), &err);
+    if (!two || !one)
+        return;
+    float *sorted = malloc(3 * exact.vertex_count * sizeof *sorted);
+    memcpy(sorted, exact.positions, 3 * exact.vertex_count * sizeof *sorted);
+    qsort(sorted, exact.vertex_count, 3 * sizeof(float), by_position);
+    for (int k = 1; k < two->levels && !check_failed(); k++) {
+        const iso_mesh_chain_level *lv = &two->level[k];
+        CHECK_OK(iso_mesh_chain_mesh(two, k, &m, &err), &err);
+        CHECKF(lv->triangle_count <= exact.triangle_count >> k &&
+               lv->triangle_count >= (exact.triangle_count >> k) * 9 / 10,
+               "level %d: %zu triangles of %zu", k, lv->triangle_count, exact.triangle_count);
+        CHECKF(lv->triangle_count * 10 >= one->level[k].triangle_count * 9, "level %d: %zu and %zu", k,
+               lv->triangle_count, one->level[k].triangle_count);
+        iso_census c;
+        CHECK_OK(iso_census_compute(vol, &m, ISO_SPACE_INDEX, &c, &err), &err);
+        CHECKF(c.closed, "level %d: open %zu, non-manifold %zu, misoriented %zu", k, c.open_edges,
+               c.nonmanifold_edges, c.misoriented_edges);
+        CHECK_EQ(euler_of(&m), 2);
+        for (size_t v = 0; v < m.vertex_count; v++)
+            CHECKF(bsearch(m.positions + 3 * v, sorted, exact.vertex_count, 3 * sizeof(float), by_position),
+                   "level %d: vertex %zu is not an exact vertex", k, v);
+        iso_mesh_distance d;
+        CHECK_OK(iso_mesh_distance_compute(&exact, &m, ISO_CHAIN_SPACING_VOXELS, 1, &d, &err), &err);
+        CHECK(d.p99 == lv->distance.p99 && d.max == lv->distance.max);
+        CHECKF(lv->distance.p99 <= 2 * one->level[k].distance.p99 + 0.01, "level %d: p99 %g against %g", k,
+               lv->distance.p99, one->level[k].distance.p99);
+    }
+    free(sorted);
+    iso_mesh_chain_destroy(two);
+    iso_mesh_chain_destroy(one);
+    iso_mesh_free(&m);
+    iso_mesh_free(&exact);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_parallel_squares_are_a_quarter_apart);
@@ -399,5 +458,6 @@ int main(void)
     CHECK_RUN(test_point_against_each_feature);
     CHECK_RUN(test_simplified_sphere_matches_brute_force);
     CHECK_RUN(test_chain_levels_are_measured_and_closed);
+    CHECK_RUN(test_chain_in_slabs_stays_closed);
     return check_finish();
 }

@@ -1,0 +1,91 @@
+"""The simplification chain (distance=) against one meshopt_simplify, side by side.
+
+For each case, in one run on the same exact surface (world mm):
+  single   `extract --simplify T/4 --threads 1`: one single-threaded meshopt_simplify of
+           the exact mesh to 25% of its triangles, its time without the measure that
+           follows it, and that measure (p99 both ways and max, mm);
+  chain    `extract --distance 0`: the whole chain (levels of 50% .. 1.6%, each simplified
+           from the one before and measured against the exact surface), its build time
+           split into simplification and measurement, and its 25% level's measured p99;
+  answer   `extract --distance D` with D = half the smallest spacing: the level chosen,
+           its share of the exact triangles and its measured distance.
+Ratios are chain time / single time, measured in the same run. Prints a table, writes
+bench/results/chain.json. Needs ../shared/volumes (prints SKIP otherwise)."""
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", "build/isoserve"))
+SHARED = os.environ.get("ISO_SHARED_VOLUMES", "../shared/volumes")
+CASES = [  # file, level, label, smallest spacing (mm)
+    ("CThead_256x256x113_u16be.nhdr", 700.5, "CThead skin", 1.0),
+    ("CThead_256x256x113_u16be.nhdr", 1500.5, "CThead bone", 1.0),
+    ("cranium_256x256x108_i16le.nhdr", 250, "cranium bone", 0.957),
+    ("ch2better_301x370x316_u8.nhdr", 30, "ch2better", 0.5),
+    ("bunny_512x512x361_i16le.nhdr", 1700, "bunny 512x512x361", 0.338),
+]
+
+
+def extract(path, level, *args):
+    p = subprocess.run([BIN, "extract", path, "--level", str(level), "--normals", "none", "--json", *args],
+                       check=True, capture_output=True, text=True)
+    return json.loads(p.stdout)
+
+
+def main():
+    if not os.path.isdir(SHARED):
+        print(f"SKIP bench_chain: {SHARED} is absent")
+        return 0
+    only = os.environ.get("ISO_BENCH_CASES")  # e.g. "CThead skin,ch2better"
+    rows = []
+    head = (f"{'case':<20} {'exact':>8} {'single ms':>9} {'p99 mm':>7} {'chain ms':>9} {'simpl.':>7} "
+            f"{'meas.':>7} {'ratio':>6} {'s.ratio':>7} {'25% p99':>7} {'D mm':>5} {'level':>5} {'share':>6} "
+            f"{'p99':>6} {'max':>6} {'vol %':>6}")
+    print(head)
+    for name, level, label, spacing in CASES:
+        if only and label not in only.split(","):
+            continue
+        path = os.path.join(SHARED, name)
+        exact = extract(path, level, "--threads", "1")
+        quarter = max(1, exact["triangles"] // 4)
+        single = extract(path, level, "--threads", "1", "--simplify", str(quarter))
+        s = single["simplify"]
+        single_ms = s["ms"] - s["distance"]["ms"]
+        chain = extract(path, level, "--distance", "0")["chain"]
+        built = chain["built"]
+        simplify_ms = sum(b["simplify_ms"] for b in built)
+        measure_ms = sum(b["measure_ms"] for b in built)
+        d = 0.5 * spacing
+        answer = extract(path, level, "--distance", str(d), "--cap")
+        k = answer["chain"]["level"]
+        vol = None
+        capped_exact = extract(path, level, "--cap")
+        if answer["closed"] and capped_exact["closed"]:
+            vol = 100 * (answer["enclosed_volume_mm3"] - capped_exact["enclosed_volume_mm3"]) / capped_exact["enclosed_volume_mm3"]
+        row = {"case": label, "level": level, "exact_triangles": exact["triangles"],
+               "single_ms": single_ms, "single_p99_mm": s["distance"]["p99"], "single_max_mm": s["distance"]["max"],
+               "single_triangles": single["triangles"], "chain_ms": chain["build_ms"],
+               "chain_simplify_ms": simplify_ms, "chain_measure_ms": measure_ms,
+               "ratio": chain["build_ms"] / single_ms, "simplify_ratio": simplify_ms / single_ms,
+               "chain_levels": built, "quarter_p99_mm": built[2]["p99"], "quarter_triangles": built[2]["triangles"],
+               "distance_mm": d, "answer_level": k, "answer_triangles": answer["triangles"],
+               "answer_share": answer["triangles"] / answer["chain"]["exact_triangles"], "answer_p99_mm": answer["distance"]["p99"],
+               "answer_max_mm": answer["distance"]["max"], "answer_nonmanifold_edges": answer["nonmanifold_edges"],
+               "answer_edges_closed": answer["closed"], "answer_volume_change_percent": vol}
+        rows.append(row)
+        print(f"{label:<20} {exact['triangles']:>8} {single_ms:>9.0f} {s['distance']['p99']:>7.3f} "
+              f"{chain['build_ms']:>9.0f} {simplify_ms:>7.0f} {measure_ms:>7.0f} {row['ratio']:>6.2f} "
+              f"{row['simplify_ratio']:>7.2f} {built[2]['p99']:>7.3f} {d:>5.2f} {k:>5} "
+              f"{100 * row['answer_share']:>5.1f}% {answer['distance']['p99']:>6.3f} {answer['distance']['max']:>6.2f} "
+              f"{'' if vol is None else f'{vol:+.2f}':>6}", flush=True)
+    os.makedirs("bench/results", exist_ok=True)
+    with open("bench/results/chain.json", "w") as f:
+        json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "rows": rows}, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
