@@ -119,7 +119,8 @@ fuzz-build: $(FUZZ_BIN)
 fuzz: setup fuzz-build
 	bash tests/fuzz/run.sh $(FUZZ_SECONDS)
 
-# npm packages (three.js, draco3d), pinned by web/package-lock.json: installed with npm ci
+# npm packages (three.js; draco3d and playwright-core for the tests), pinned by
+# web/package-lock.json: installed with npm ci
 # when missing or older than the lockfile. No network, no packages: the build says so.
 web/node_modules/.package-lock.json: web/package-lock.json web/package.json
 	cd web && npm ci --no-audit --no-fund || { echo "npm ci failed in web/ (no network?)"; exit 1; }
@@ -165,21 +166,6 @@ test-asan: setup
 bench: setup all
 	bash tests/bench/run.sh
 
-# The container images (docker/Dockerfile): isoserve:latest and isoserve-front:latest, with
-# docker or else podman (with --format docker: OCI images would lose the HEALTHCHECKs).
-CONTAINER ?= $(shell command -v docker 2>/dev/null || command -v podman 2>/dev/null)
-IMAGE_FORMAT = $(if $(findstring podman,$(notdir $(CONTAINER))),--format docker)
-image:
-	@test -n "$(CONTAINER)" || { echo "make image: neither docker nor podman is installed"; exit 1; }
-	$(CONTAINER) build $(IMAGE_FORMAT) -f docker/Dockerfile --target isoserve -t isoserve:latest .
-	$(CONTAINER) build $(IMAGE_FORMAT) -f docker/Dockerfile --target front -t isoserve-front:latest .
-
-# Builds the images, runs one replica and the compose stack, checks /healthz, a mesh and a
-# failover (tests/image/run_image.sh; minutes, so not part of `make test`). Says SKIP,
-# and why, where nothing can run containers.
-test-image:
-	CONTAINER="$(CONTAINER)" bash tests/image/run_image.sh
-
 # The README's run command: the server on the default collection (scripts/run.sh).
 run: setup all
 	bash scripts/run.sh
@@ -188,3 +174,13 @@ clean:
 	rm -rf build
 
 -include $(shell find build -name '*.d' 2>/dev/null)
+
+# The container images (isoserve, isoserve-front) with docker or podman, whichever can run
+# them here (docker/image.sh); test-image builds them, runs one replica and the compose
+# stack and checks them (slow, so not part of `make test`; it says SKIP where nothing can
+# run containers).
+image:
+	bash docker/image.sh
+
+test-image:
+	bash tests/image/check_image.sh

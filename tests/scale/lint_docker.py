@@ -6,6 +6,8 @@ would trip on first, checked from the files.
 - every COPY source of the Dockerfile exists in the build context, every `--from` names an
   earlier stage, every `make X` it runs is a Makefile target (`make -n X` succeeds);
 - the server stage runs as a non-root user, exposes its port and checks /healthz;
+- the image gets no test tool (no npm in the build, .dockerignore admits only runtime
+  packages);
 - the shard ring's three copies agree: ISOSERVE_SHARD_PEERS in compose, the `server` lines
   of both upstream blocks in nginx.conf (same names, same order, weight 1), and the
   replicas' ISOSERVE_SHARD K/N cover 0..N-1 once each;
@@ -33,16 +35,22 @@ def default_of(value):
 
 
 def dockerfile_instructions(path):
-    """(stage, instruction, arguments) per instruction, continuation lines joined."""
+    """(stage, instruction, arguments) per instruction, continuation lines joined. The ARGs
+    before the first FROM (stage None) are substituted into the FROM lines with their
+    defaults, as a build without --build-arg sees them."""
     text = open(path).read().replace("\\\n", " ")
-    stage, out = None, []
+    stage, out, defaults = None, [], {}
     for line in text.splitlines():
         line = line.strip()
         if not line or line.startswith("#"):
             continue
         word, _, rest = line.partition(" ")
         word = word.upper()
+        if word == "ARG" and stage is None and "=" in rest:
+            name, _, value = rest.strip().partition("=")
+            defaults[name] = value
         if word == "FROM":
+            rest = re.sub(r"\$\{(\w+)\}", lambda m: defaults.get(m.group(1), m.group(0)), rest)
             m = re.search(r"\bAS\s+(\S+)", rest, re.I)
             stage = m.group(1) if m else None
         out.append((stage, word, rest.strip()))
@@ -167,7 +175,7 @@ def runtime_libraries():
     steps = dockerfile_instructions(os.path.join(DOCKER, "Dockerfile"))
     stages = []
     for stage, _, _ in steps:
-        if stage not in stages:
+        if stage is not None and stage not in stages:
             stages.append(stage)
     build = apt_packages([(w, r) for st, w, r in steps if st == stages[0]])
     server = apt_packages([(w, r) for st, w, r in steps if st == stages[-1]])
@@ -217,7 +225,12 @@ def ring_agrees():
 def compose_substitutions():
     """Every ${...} of compose.yaml substituted as Debian 12's podman-compose does it (its
     own rec_subs, with none of the variables set): nothing is left unsubstituted, and the
-    catalog and volumes variables come out blank, which isoserve takes as unset."""
+    catalog and volumes variables have no value (compose passes them from its caller's
+    environment when set there) or a blank one, which isoserve takes as unset. Without
+    podman-compose installed, what it is known to leave: an empty default "${X:-}"."""
+    text = "\n".join(line.split("#")[0] for line in open(os.path.join(DOCKER, "compose.yaml")))
+    empty = re.findall(r"\$\{[A-Za-z_][A-Za-z0-9_]*:?-\}", text)
+    assert not empty, f"empty compose defaults {empty}: podman-compose leaves them unsubstituted"
     try:
         import podman_compose
     except ImportError:
@@ -231,9 +244,26 @@ def compose_substitutions():
     for name, svc in out["services"].items():
         e = svc.get("environment") or {}
         for k in ("ISOSERVE_CATALOG", "ISOSERVE_VOLUMES"):
-            assert k not in e or not str(e[k]).strip(), (name, k, e.get(k))
+            assert k not in e or e[k] is None or not str(e[k]).strip(), (name, k, e.get(k))
     healthy = [n for n, svc in out["services"].items() if svc.get("healthcheck")]
     assert sorted(healthy) == sorted(out["services"]), f"services without a healthcheck: {healthy}"
+
+
+def no_test_tools_in_image():
+    """The build runs no npm; of web/node_modules, .dockerignore lets through only the
+    runtime dependencies of web/package.json, and every test tool is a devDependency."""
+    import json
+    package = json.load(open(os.path.join(ROOT, "web", "package.json")))
+    runtime, dev = set(package.get("dependencies", {})), set(package.get("devDependencies", {}))
+    assert {"playwright-core", "draco3d"} <= dev, f"test tools missing from devDependencies: {dev}"
+    runs = [r for _, w, r in dockerfile_instructions(os.path.join(DOCKER, "Dockerfile")) if w == "RUN"]
+    assert not [r for r in runs if re.search(r"\bnpm\b|node-deps", r)], "the image build runs npm"
+    ignore = [line.strip() for line in open(os.path.join(ROOT, ".dockerignore")) if line.strip()
+              and not line.startswith("#")]
+    assert "web/node_modules" in ignore, ".dockerignore lets every npm package in"
+    admitted = {line[len("!web/node_modules/"):] for line in ignore if line.startswith("!web/node_modules/")}
+    admitted.discard(".package-lock.json")
+    assert admitted <= runtime, f".dockerignore lets in {admitted - runtime}, not runtime dependencies"
 
 
 def main():
@@ -243,6 +273,7 @@ def main():
     RESULTS.check("server_image_has_every_shared_library", runtime_libraries)
     RESULTS.check("shard_peers_match_nginx_upstreams", ring_agrees)
     RESULTS.check("compose_substituted_by_podman_compose", compose_substitutions)
+    RESULTS.check("image_installs_no_test_tools", no_test_tools_in_image)
     return 1 if RESULTS.failures else 0
 
 
