@@ -8,3 +8,6 @@ for b in tests/bench/bench_*.py; do
     echo "== $(basename "$b")"
     /usr/bin/python3 "$b"
 done
+# The web client in headless Chromium: request to drawn, per codec and link, and dragging.
+echo "== bench_browser.mjs"
+node tests/bench/bench_browser.mjs

@@ -32,9 +32,10 @@ const state = {
 // Per surface: the generation (bumped by every full request), the controllers of its
 // requests, the preview pump's state.
 const live = state.surfaces.map(() => ({ generation: 0, controller: null, inFlight: false, want: null }));
-// What the page has drawn, for the browser tests and the benchmark: one record per mesh shown.
+// What the page has drawn, for the browser tests and the benchmark: one record per mesh
+// shown; the benchmark also asks for one surface's full mesh and times it to the screen.
 const shown = [];
-window.isoViewer = { state, shown };
+window.isoViewer = { state, shown, refresh: (i, coarse) => refresh(i, coarse) };
 let info = null;        // the current volume's document
 let bounds = null;      // the volume's LPS box in mm: [[x0, y0, z0], [x1, y1, z1]]
 let framedVolume = null;
@@ -133,6 +134,11 @@ function applyClip() {
 async function fetchAndShow(i, params, mine, signal, kind) {
   const started = performance.now();
   const mesh = await getMesh(state.volume, { ...params, format: format() }, signal);
+  return display(i, mesh, params, mine, kind, started);
+}
+
+// Decodes and shows a fetched mesh unless a newer request of surface i superseded it.
+async function display(i, mesh, params, mine, kind, started) {
   if (mine !== live[i].generation) return false;
   const start = performance.now();
   const decoded = await view.decode(mesh.bytes, state.codec);
@@ -145,7 +151,7 @@ async function fetchAndShow(i, params, mine, signal, kind) {
   view.show(i, decoded, frame);
   if (frame && mesh.triangles > 0) framedVolume = state.volume;
   shown.push({ surface: i, level: params.level, tolerance: params.tolerance, kind, triangles: mesh.triangles,
-    bytes: mesh.size, ms: performance.now() - started, at: performance.now() });
+    bytes: mesh.size, decodeMs, ms: performance.now() - started, at: performance.now() });
   if (i === 0) showStats($('stats'), mesh, decodeMs, state.codec);
   if (i === 0) $('status').textContent = mesh.triangles === 0 ? 'no surface at this level' : '';
   return true;
@@ -189,7 +195,9 @@ async function refresh(i, coarse = true) {
 const refreshAll = () => state.surfaces.forEach((_, i) => refresh(i));
 
 // While the slider moves: ask for a preview at the latest level once the previous answer
-// is in. A full request (refresh) bumps the generation and aborts the preview in flight.
+// is in, and decode and draw that answer while the next one is on its way (still one
+// request in flight). A full request (refresh) bumps the generation and aborts the preview
+// in flight.
 async function drag(i, level) {
   const l = live[i];
   l.want = level;
@@ -197,18 +205,25 @@ async function drag(i, level) {
   if (l.inFlight) return;
   l.inFlight = true;
   const mine = l.generation;
+  let showing = Promise.resolve();
   while (l.want !== null && mine === l.generation) {
-    const at = l.want;
+    const params = { level: l.want, tolerance: previewTolerance(), normals: 'none' };
     l.want = null;
     l.controller?.abort();
     l.controller = new AbortController();
+    const started = performance.now();
+    let mesh;
     try {
-      await fetchAndShow(i, { level: at, tolerance: previewTolerance(), normals: 'none' }, mine, l.controller.signal, 'preview');
+      mesh = await getMesh(state.volume, { ...params, format: format() }, l.controller.signal);
     } catch (error) {
       if (mine === l.generation) reportError(error);
       break;
     }
+    await showing; // previews are drawn in the order they were asked
+    showing = display(i, mesh, params, mine, 'preview', started).catch(reportError);
+    if (l.want === null) await showing; // nothing newer yet: draw, then look again
   }
+  await showing;
   l.inFlight = false;
 }
 

@@ -1,0 +1,199 @@
+// bench_browser.mjs: the web client in headless Chromium against a real isoserve: for each
+// volume, codec and link, the time from asking for a full mesh (uncached: a new level each
+// time) to it being drawn, and its bytes on the wire; then the mesh updates per second
+// while the level slider is dragged across CThead's range. Links are Chrome DevTools
+// Protocol network emulation (Network.emulateNetworkConditions): loopback as is, 100 Mbit/s
+// and 20 Mbit/s with 2 ms and 10 ms of latency. Prints tables, writes bench/results/browser.json.
+//
+// Volumes: CThead, ch2 (ch2bet) and ch2better from ../shared/volumes (ISO_SHARED_VOLUMES);
+// without them Debian's ch2bet NIfTI alone. ISO_BENCH_REPEAT sets the loads per cell
+// (default 3; the median is reported); ISO_BENCH_ONLY=drag runs the dragging alone.
+import { spawn } from 'node:child_process';
+import { existsSync, mkdirSync, mkdtempSync, rmSync, writeFileSync } from 'node:fs';
+import { createRequire } from 'node:module';
+import { tmpdir } from 'node:os';
+import { join, resolve } from 'node:path';
+
+const require = createRequire(resolve('web/node_modules') + '/');
+const { chromium } = require('playwright-core');
+const shared = process.env.ISO_SHARED_VOLUMES ?? '../shared/volumes';
+const REPEAT = Number(process.env.ISO_BENCH_REPEAT ?? 3);
+const CODECS = ['draco', 'meshopt'];
+const LINKS = [
+  { name: 'loopback', conditions: null },
+  { name: '100 Mbit/s', conditions: { offline: false, latency: 2, downloadThroughput: 100e6 / 8, uploadThroughput: 100e6 / 8 } },
+  { name: '20 Mbit/s', conditions: { offline: false, latency: 10, downloadThroughput: 20e6 / 8, uploadThroughput: 20e6 / 8 } },
+];
+
+function volumes() {
+  const at = (f) => resolve(shared, f);
+  if (existsSync(at('CThead_256x256x113_u16be.nhdr')))
+    return [
+      { id: 'cthead', label: 'CThead skin', path: at('CThead_256x256x113_u16be.nhdr'), level: 700.5, levels: [700.5, 1500.5] },
+      { id: 'ch2', label: 'ch2 brain', path: at('ch2bet_181x217x181_u8.nhdr'), level: 30.5, levels: [30.5, 90.5] },
+      { id: 'ch2better', label: 'ch2better brain', path: at('ch2better_301x370x316_u8.nhdr'), level: 30.5, levels: [30.5, 95.5] },
+    ];
+  console.log(`SKIP bench_browser shared volumes: ${shared} is absent; Debian's ch2bet alone`);
+  return [{ id: 'ch2', label: 'ch2 brain', path: '/usr/share/mricron/templates/ch2bet.nii.gz', level: 30.5, levels: [30.5, 90.5] }];
+}
+
+function startServer(catalog) {
+  return new Promise((ok, fail) => {
+    const proc = spawn(resolve(process.env.ISOSERVE_BIN || 'build/isoserve'), ['serve', '--catalog', catalog,
+      '--listen', '127.0.0.1:0', '--cache-mb', '2048'], { stdio: ['ignore', 'ignore', 'pipe'] });
+    let log = '';
+    proc.stderr.on('data', (d) => {
+      log += d;
+      const m = /listening on http:\/\/127\.0\.0\.1:(\d+)\//.exec(log);
+      if (m && !proc.port) { proc.port = Number(m[1]); ok(proc); }
+    });
+    proc.on('exit', (code) => { if (!proc.port) fail(new Error(`server exited ${code}: ${log}`)); });
+  });
+}
+
+const median = (xs) => { const s = [...xs].sort((a, b) => a - b); return s[Math.floor((s.length - 1) / 2)]; };
+
+// One full mesh of surface 0 at `level`, timed from the request to the frame after it is
+// drawn; the wire bytes from the resource timing entry (the encoded body: gzip when sent).
+async function timedLoad(page, level, codec) {
+  return page.evaluate(async ({ level, codec }) => {
+    const v = window.isoViewer;
+    v.state.codec = codec;
+    v.state.surfaces[0].level = level;
+    performance.clearResourceTimings();
+    const start = performance.now();
+    await v.refresh(0, false);
+    await new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r)));
+    const ms = performance.now() - start;
+    const last = v.shown.at(-1);
+    const e = performance.getEntriesByType('resource').filter((x) => x.name.includes('/mesh?')).at(-1);
+    // The split: until the first byte (the server's work, uncached), the transfer, and
+    // decoding and drawing after the last byte.
+    return { ms, level: last.level, kind: last.kind, triangles: last.triangles, bytes: e?.encodedBodySize ?? null,
+      decoded: last.bytes, decodeMs: last.decodeMs, firstByteMs: e.responseStart - start, transferMs: e.responseEnd - e.responseStart,
+      afterMs: start + ms - e.responseEnd };
+  }, { level, codec });
+}
+
+// Drags surface 0's slider across the value range between the volume's two levels for
+// `ms`; returns the previews drawn per second and the drag's last mesh.
+async function dragRate(page, codec, ms) {
+  return page.evaluate(async ({ codec, ms }) => {
+    const v = window.isoViewer;
+    v.state.codec = codec;
+    const el = document.getElementById('level');
+    const n = v.shown.length, start = performance.now();
+    const [from, to] = [100, 700];
+    while (performance.now() - start < ms) {
+      const k = (performance.now() - start) / ms;
+      el.value = String(Math.round(from + (to - from) * k));
+      el.dispatchEvent(new Event('input'));
+      await new Promise((r) => setTimeout(r, 16));
+    }
+    const previews = v.shown.slice(n).filter((m) => m.kind === 'preview');
+    el.dispatchEvent(new Event('change'));
+    const spent = (performance.now() - start) / 1000;
+    return { perSecond: previews.length / spent, previews: previews.length,
+      triangles: median(previews.map((m) => m.triangles)), bytes: median(previews.map((m) => m.bytes)) };
+    function median(xs) { const s = [...xs].sort((a, b) => a - b); return s[Math.floor((s.length - 1) / 2)] ?? 0; }
+  }, { codec, ms });
+}
+
+async function main() {
+  const vols = volumes();
+  const tmp = mkdtempSync(join(tmpdir(), 'isoserve-bench-browser-'));
+  writeFileSync(join(tmp, 'catalog.json'), JSON.stringify({ volumes: vols.map((v) => ({ id: v.id, path: v.path, name: v.label, levels: v.levels })) }));
+  const server = await startServer(join(tmp, 'catalog.json'));
+  const base = `http://127.0.0.1:${server.port}/`;
+  for (let i = 0; i < 1200 && (await fetch(`${base}healthz`).catch(() => ({}))).status !== 200; i++)
+    await new Promise((r) => setTimeout(r, 100));
+  const profile = mkdtempSync(join(tmpdir(), 'isoserve-chromium-'));
+  const context = await chromium.launchPersistentContext(profile, {
+    executablePath: '/usr/bin/chromium', headless: true, viewport: { width: 1100, height: 760 },
+    args: ['--headless', '--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
+      '--disable-background-networking', '--disable-component-update', '--disable-sync', '--no-first-run'],
+  });
+  const results = { loads: [], drags: [] };
+  try {
+    const page = context.pages()[0] ?? await context.newPage();
+    const cdp = await context.newCDPSession(page);
+    await cdp.send('Network.enable');
+    let bump = 0;
+    for (const vol of process.env.ISO_BENCH_ONLY === 'drag' ? [] : vols) {
+      await page.goto(`${base}?volume=${vol.id}&level=${vol.level}&tolerance=0&codec=draco`);
+      await page.waitForFunction(() => window.isoViewer?.shown.some((m) => m.kind === 'final'), null, { timeout: 300000 });
+      for (const link of LINKS) {
+        await cdp.send('Network.emulateNetworkConditions', link.conditions ??
+          { offline: false, latency: 0, downloadThroughput: -1, uploadThroughput: -1 });
+        // The codecs alternate, each repetition starting with the other: the machine's
+        // load moves, and side by side is what makes a ratio.
+        const runs = Object.fromEntries(CODECS.map((c) => [c, []]));
+        for (let r = 0; r < REPEAT; r++)
+          for (const codec of r % 2 ? [...CODECS].reverse() : CODECS) {
+            // A level not asked before: the server extracts and encodes (uncached).
+            const level = vol.level + 0.001 * ++bump;
+            const run = await timedLoad(page, level, codec);
+            if (run.kind !== 'final' || Math.abs(run.level - level) > 1e-9) throw new Error(`${vol.id}: drew ${JSON.stringify(run)}`);
+            runs[codec].push(run);
+          }
+        for (const codec of CODECS) {
+          const rs = runs[codec];
+          const row = { volume: vol.label, link: link.name, codec, ms: median(rs.map((x) => x.ms)),
+            firstByteMs: median(rs.map((x) => x.firstByteMs)), transferMs: median(rs.map((x) => x.transferMs)),
+            afterMs: median(rs.map((x) => x.afterMs)), decodeMs: median(rs.map((x) => x.decodeMs)), runs: rs.map((x) => Math.round(x.ms)),
+            bytes: median(rs.map((x) => x.bytes)), triangles: rs[0].triangles };
+          results.loads.push(row);
+          console.log(`  ${row.volume} | ${row.link} | ${row.codec}: ${row.ms.toFixed(0)} ms (${row.runs.join(', ')}; ` +
+            `first byte ${row.firstByteMs.toFixed(0)}, transfer ${row.transferMs.toFixed(0)}, decode+draw ${row.afterMs.toFixed(0)}, decode ${row.decodeMs.toFixed(0)}), ` +
+            `${(row.bytes / 1e6).toFixed(2)} MB, ${row.triangles} triangles`);
+        }
+      }
+    }
+    // Dragging across CThead's range (the first volume), loopback and 20 Mbit/s.
+    const vol = vols[0];
+    for (const link of [LINKS[0], LINKS[2]]) {
+      await cdp.send('Network.emulateNetworkConditions', link.conditions ??
+        { offline: false, latency: 0, downloadThroughput: -1, uploadThroughput: -1 });
+      for (const codec of CODECS) {
+        await page.goto(`${base}?volume=${vol.id}&level=${vol.level}&tolerance=0&codec=${codec}`);
+        await page.waitForFunction(() => window.isoViewer?.shown.some((m) => m.kind === 'final'), null, { timeout: 300000 });
+        const d = await dragRate(page, codec, 4000);
+        const row = { volume: vol.label, link: link.name, codec, ...d };
+        results.drags.push(row);
+        console.log(`  drag ${row.volume} | ${row.link} | ${codec}: ${d.perSecond.toFixed(1)} updates/s ` +
+          `(${d.previews} previews, median ${d.triangles} triangles, ${(d.bytes / 1e3).toFixed(0)} kB decoded)`);
+      }
+    }
+  } finally {
+    await context.close();
+    server.kill('SIGTERM');
+    rmSync(profile, { recursive: true, force: true });
+    rmSync(tmp, { recursive: true, force: true });
+  }
+  printTables(results);
+  mkdirSync('bench/results', { recursive: true });
+  writeFileSync('bench/results/browser.json', JSON.stringify(results, null, 1));
+  console.log('wrote bench/results/browser.json');
+}
+
+function printTables({ loads, drags }) {
+  if (!loads.length) return printDrags(drags);
+  console.log('\n| volume | triangles | link | Draco ms (first byte / transfer / decode+draw; decode) | meshopt ms (same) | meshopt / Draco | Draco MB | meshopt MB |');
+  console.log('|---|---:|---|---:|---:|---:|---:|---:|');
+  const split = (r) => `${r.ms.toFixed(0)} (${r.firstByteMs.toFixed(0)} / ${r.transferMs.toFixed(0)} / ${r.afterMs.toFixed(0)}; ${r.decodeMs.toFixed(0)})`;
+  const key = (r) => `${r.volume}|${r.link}`;
+  for (const k of [...new Set(loads.map(key))]) {
+    const [d, m] = CODECS.map((c) => loads.find((r) => key(r) === k && r.codec === c));
+    console.log(`| ${d.volume} | ${d.triangles.toLocaleString('en-US')} | ${d.link} | ${split(d)} | ${split(m)} | ` +
+      `${(m.ms / d.ms).toFixed(2)} | ${(d.bytes / 1e6).toFixed(2)} | ${(m.bytes / 1e6).toFixed(2)} |`);
+  }
+  printDrags(drags);
+}
+
+function printDrags(drags) {
+  console.log('\n| drag across CThead | link | codec | updates/s | median preview triangles |');
+  console.log('|---|---|---|---:|---:|');
+  for (const r of drags) console.log(`| ${r.volume} | ${r.link} | ${r.codec} | ${r.perSecond.toFixed(1)} | ${r.triangles.toLocaleString('en-US')} |`);
+}
+
+main().catch((e) => { console.error(e.stack || String(e)); process.exit(1); });
