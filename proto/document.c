@@ -4,6 +4,8 @@
 #include <jansson.h>
 #include <string.h>
 
+#include "extract/extract.h"
+
 const char *proto_status_phrase(int status)
 {
     switch (status) {
@@ -90,6 +92,7 @@ static json_t *volume_object(const proto_volume_doc *doc, int detail)
         json_array_append_new(counts, json_integer((json_int_t)doc->histogram[b]));
     json_object_set_new(o, "histogram", json_pack("{s:f, s:f, s:o}", "min", vol->value_min,
                                                   "max", vol->value_max, "counts", counts));
+    json_object_set_new(o, "preview_tolerance", json_real(iso_preview_tolerance(vol)));
     json_object_set_new(o, "hierarchy",
                         json_pack("{s:I, s:I, s:f, s:b, s:f}", "nodes",
                                   (json_int_t)doc->hierarchy_nodes, "bytes",

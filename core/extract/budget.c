@@ -71,6 +71,11 @@ int iso_extract_budget(const iso_tree *tree, const iso_extract_params *params, s
     return climb(tree, params, budget, INFINITY, mesh, stats, result, err);
 }
 
+double iso_preview_tolerance(const iso_volume *vol)
+{
+    return ldexp(vol->value_max - vol->value_min, -ISO_PREVIEW_SHIFT);
+}
+
 double iso_budget_faithful_tolerance(const iso_volume *vol, double requested)
 {
     double faithful = ldexp(vol->value_max - vol->value_min, -ISO_BUDGET_FAITHFUL_SHIFT);

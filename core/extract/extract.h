@@ -102,6 +102,14 @@ int iso_extract_budget(const iso_tree *tree, const iso_extract_params *params,
                        size_t budget, iso_mesh *mesh, iso_extract_stats *stats, iso_budget_result *result,
                        iso_error *err);
 
+/* The preview tolerance: value range / 2^ISO_PREVIEW_SHIFT, half the range. A client that
+ * shows a coarse mesh while the full one comes (or while a level slider drags) asks for
+ * this: most bricks then take their coarsest level, and the mesh keeps 8-9% of the exact
+ * triangles on CThead's skin and bone (docs/performance.md), every vertex still within it
+ * of the level. */
+#define ISO_PREVIEW_SHIFT 1
+double iso_preview_tolerance(const iso_volume *vol);
+
 /* The faithful tolerance of a volume: max(requested, value range / 2^ISO_BUDGET_FAITHFUL_SHIFT). */
 double iso_budget_faithful_tolerance(const iso_volume *vol, double requested);
 

@@ -213,6 +213,7 @@ def main_tests(s, tmp, blob):
         assert v["hierarchy"]["nodes"] >= 1 and v["hierarchy"]["bytes"] == 16 * v["hierarchy"]["nodes"] + 20 * bricks, \
             (v["hierarchy"], bricks)
         assert v["hierarchy"]["share_of_volume"] < 0.1, v["hierarchy"]
+        assert v["preview_tolerance"] == (v["value_range"][1] - v["value_range"][0]) / 2, v["preview_tolerance"]
     check("volume_document", one_volume)
 
     # The mesh, uncompressed (PLY) and in Draco: counts agree with the headers, Draco's

@@ -629,9 +629,18 @@ static void test_cthead_guarantee_and_trend(void)
             last_cells = st.cells_visited;
         }
         CHECKF(last_tri < fs.triangles, "tolerance 200 should shed triangles: %zu of %zu", last_tri, fs.triangles);
-        /* Cells visited count whole active bricks (the kernel classifies 8 cells at a
-         * time), less those fans cover; a coarse tolerance must cut them. */
+        /* Cells visited: at 0 the kernel's whole active bricks, above it each brick's cells
+         * at its own stride; a coarse tolerance must cut them. */
         CHECKF(last_cells < first_cells, "tolerance 200 visits %zu cells, tolerance 0 %zu", last_cells, first_cells);
+        /* The preview (half the range, extract.h) keeps at most 12% of the triangles, within
+         * its tolerance of the level. */
+        double preview = iso_preview_tolerance(vol);
+        extract(tree, levels[l], preview, &m, &st);
+        CHECKF(st.triangles * 100 <= fs.triangles * 12, "level %g preview %g: %zu of %zu triangles", levels[l],
+               preview, st.triangles, fs.triangles);
+        CHECK(st.error_bound <= preview);
+        CHECKF(surface_worst_vertex_error(vol, &m, levels[l]) <= st.error_bound + surface_rounding_slack(vol),
+               "level %g preview: vertex past the bound %g", levels[l], st.error_bound);
         iso_mesh_free(&full);
         iso_mesh_free(&m);
     }
