@@ -260,6 +260,31 @@ async function main() {
     report('meshopt_codec_draws', fast.headers()['x-iso-triangles'] === triangles && (await page.textContent('#stat-codec')) === 'meshopt' &&
       await drawnShare(page) > 0.02, `meshopt ${fast.headers()['x-iso-triangles']} triangles, draco ${triangles}`);
 
+    // 4. The detail control: one voxel (position 60) asks the final mesh with distance= in
+    // mm; the server's answer is within it, comes from its chain with fewer triangles than
+    // the surface itself, and the control shows millimetres and the voxel size.
+    const exactTriangles = Number(fast.headers()['x-iso-triangles']);
+    await page.evaluate(() => {
+      const el = document.getElementById('distance');
+      el.value = '60';
+      el.dispatchEvent(new Event('input'));
+      el.dispatchEvent(new Event('change'));
+    });
+    const detailed = await page.waitForResponse((r) => r.url().includes('/mesh?') && r.url().includes('&distance='), { timeout: 120000 });
+    const asked = Number(new URL(detailed.url()).searchParams.get('distance'));
+    const h = detailed.headers();
+    await page.waitForFunction((t) => document.getElementById('stat-triangles')?.textContent.replace(/,/g, '') === t,
+      h['x-iso-triangles'], { timeout: 60000 });
+    const label = await page.textContent('#distance-value');
+    const voxelMm = Math.min(...(await (await fetch(`${base}v1/volumes/${volume.id}`)).json()).spacing);
+    report('detail_control_distance', Math.abs(asked - voxelMm) <= 0.01 * voxelMm && Number(h['x-iso-distance-mm']) <= asked &&
+      Number(h['x-iso-chain-level']) >= 1 && Number(h['x-iso-triangles']) < exactTriangles &&
+      label.includes(' mm') && label.includes(`voxel ${voxelMm} mm`) && page.url().includes(`distance=${asked}`) &&
+      (await page.textContent('#stat-distance')).includes('mm') && await drawnShare(page) > 0.02,
+      `asked ${asked} mm (voxel ${voxelMm}), got ${h['x-iso-distance-mm']} mm at chain level ${h['x-iso-chain-level']}, ` +
+      `${h['x-iso-triangles']} of ${exactTriangles} triangles; label "${label}"; ${page.url()}`);
+    await page.goto(`${base}?volume=${volume.id}&${wanted}`);
+
     await dragTests(page, base);
     await twoSurfaceTests(page, base);
 

@@ -21,8 +21,9 @@ export async function getJson(url, signal) {
 // The viewer's codecs and the API formats that carry them.
 export const CODEC_FORMATS = { draco: 'draco', meshopt: 'glb-meshopt' };
 
-export function meshUrl(volume, { level, tolerance, normals, format = 'draco', measures = false, cap = false }) {
+export function meshUrl(volume, { level, tolerance, normals, format = 'draco', measures = false, cap = false, distance = 0 }) {
   const q = new URLSearchParams({ level: String(level), tolerance: String(tolerance), normals, format });
+  if (distance > 0) q.set('distance', String(distance));
   if (cap) q.set('cap', 'true');
   if (measures) q.set('measures', 'true');
   return `v1/volumes/${encodeURIComponent(volume)}/mesh?${q}`;
@@ -58,6 +59,8 @@ function facts(h) {
     dracoSpeed: number(h, 'X-Iso-Draco-Speed'),
     errorBound: number(h, 'X-Iso-Error-Bound'),
     tolerance: number(h, 'X-Iso-Tolerance'),
+    distanceMm: number(h, 'X-Iso-Distance-Mm'),
+    chainLevel: number(h, 'X-Iso-Chain-Level'),
     areaMm2: number(h, 'X-Iso-Area-Mm2'),
     volumeMm3: number(h, 'X-Iso-Volume-Mm3'),
     closed: h.get('X-Iso-Closed'),

@@ -1,5 +1,5 @@
 // main.js: the viewer's state and its life. The URL holds the view (volume, tolerance,
-// normals, codec; per surface its level, colour and opacity; the clipping plane), so a link
+// detail, normals, codec; per surface its level, colour and opacity; the clipping plane), so a link
 // restores it.
 //
 // Each surface has at most one mesh request in flight. While its level slider moves, it
@@ -22,7 +22,7 @@ const DEFAULT_CODEC = 'meshopt';
 const DEFAULT_COLORS = ['#e8dccb', '#6fa8dc'];
 
 const state = {
-  volume: null, tolerance: 0, normals: 'tricubic', codec: DEFAULT_CODEC, cap: true,
+  volume: null, tolerance: 0, distance: 0, normals: 'tricubic', codec: DEFAULT_CODEC, cap: true,
   surfaces: [
     { level: null, color: DEFAULT_COLORS[0], opacity: 1, on: true },
     { level: null, color: DEFAULT_COLORS[1], opacity: 1, on: false },
@@ -44,6 +44,13 @@ let framedVolume = null;
 const range = () => (info ? info.value_range[1] - info.value_range[0] : 1) || 1;
 const toleranceFromSlider = (s) => (s <= 0 ? 0 : range() * 10 ** ((s - 100) / 25));
 const sliderFromTolerance = (t) => (t <= 0 ? 0 : Math.max(1, Math.min(100, 100 + 25 * Math.log10(t / range()))));
+// Detail: distance= in mm, log over voxels of the smallest spacing (position 60 is one
+// voxel); position 0 is 0, the surface itself (no distance asked).
+const voxel = () => (info ? Math.min(...info.spacing) : 1);
+const distanceFromSlider = (s) => (s <= 0 ? 0 : Number((voxel() * 10 ** ((s - 60) / 30)).toPrecision(2)));
+const sliderFromDistance = (d) => (d <= 0 ? 0 : Math.max(1, Math.min(100, Math.round(60 + 30 * Math.log10(d / voxel())))));
+const distanceText = (d) => (d <= 0 ? 'exact' : `${formatNumber(d, 3)} mm = ${formatNumber(d / voxel(), 2)} voxel`) +
+  ` (voxel ${formatNumber(voxel(), 3)} mm)`;
 const levelFromSlider = (s) => Number((info.value_range[0] + (s / 1000) * range()).toPrecision(6));
 const sliderFromLevel = (l) => Math.round(((l - info.value_range[0]) / range()) * 1000);
 // Previews: the volume's own suggestion when it has one, else half the value range; never
@@ -68,6 +75,7 @@ function volumeBounds(doc) {
 function writeUrl() {
   const q = new URLSearchParams({ volume: state.volume, level: String(state.surfaces[0].level),
     tolerance: String(state.tolerance), normals: state.normals, codec: state.codec });
+  if (state.distance > 0) q.set('distance', String(state.distance));
   state.surfaces.forEach((s, i) => {
     const n = i ? String(i + 1) : '';
     if (i && !s.on) return;
@@ -89,6 +97,7 @@ function readUrl(q) {
     if (finite(q.get(`opacity${n}`))) s.opacity = Math.min(1, Math.max(0.05, Number(q.get(`opacity${n}`))));
   });
   if (finite(q.get('tolerance')) && Number(q.get('tolerance')) >= 0) state.tolerance = Number(q.get('tolerance'));
+  if (finite(q.get('distance')) && Number(q.get('distance')) >= 0) state.distance = Number(q.get('distance'));
   if (q.has('normals')) state.normals = q.get('normals');
   if (q.get('codec') in CODEC_FORMATS) state.codec = q.get('codec');
   if (q.get('cap') === 'false') state.cap = false;
@@ -109,6 +118,8 @@ function syncControls() {
   $('surface-2-controls').hidden = !state.surfaces[1].on;
   $('tolerance').value = sliderFromTolerance(state.tolerance);
   $('tolerance-value').textContent = state.tolerance === 0 ? '0 (exact)' : formatNumber(state.tolerance, 3);
+  $('distance').value = sliderFromDistance(state.distance);
+  $('distance-value').textContent = distanceText(state.distance);
   $('normals').value = state.normals;
   $('codec').value = state.codec;
   $('clip').checked = state.clip.on;
@@ -116,7 +127,8 @@ function syncControls() {
   $('clip-at').value = Math.round(state.clip.at * 1000);
   $('clip-flip').checked = state.clip.flip;
   $('cap').checked = state.cap;
-  const params = { level: state.surfaces[0].level, tolerance: state.tolerance, normals: state.normals };
+  const params = { level: state.surfaces[0].level, tolerance: state.tolerance, normals: state.normals,
+    distance: state.distance };
   $('download-glb').href = meshUrl(state.volume, { ...params, format: 'glb' });
   $('download-glb').download = `${state.volume}-${params.level}.glb`;
   $('download-ply').href = meshUrl(state.volume, { ...params, format: 'ply' });
@@ -150,8 +162,8 @@ async function display(i, mesh, params, mine, kind, started) {
   const frame = i === 0 && framedVolume !== state.volume;
   view.show(i, decoded, frame);
   if (frame && mesh.triangles > 0) framedVolume = state.volume;
-  shown.push({ surface: i, level: params.level, tolerance: params.tolerance, kind, triangles: mesh.triangles,
-    bytes: mesh.size, decodeMs, ms: performance.now() - started, at: performance.now() });
+  shown.push({ surface: i, level: params.level, tolerance: params.tolerance, distance: params.distance ?? 0, kind,
+    triangles: mesh.triangles, bytes: mesh.size, decodeMs, ms: performance.now() - started, at: performance.now() });
   if (i === 0) showStats($('stats'), mesh, decodeMs, state.codec);
   if (i === 0) $('status').textContent = mesh.triangles === 0 ? 'no surface at this level' : '';
   return true;
@@ -186,7 +198,8 @@ async function refresh(i, coarse = true) {
   const rough = Math.max(state.tolerance, range() / 50);
   try {
     if (coarse && rough > state.tolerance) await fetchAndShow(i, { ...params, tolerance: rough }, mine, signal, 'coarse');
-    if (mine === l.generation) await fetchAndShow(i, params, mine, signal, 'final');
+    // The final mesh at the detail asked for (distance=), from the server's chain.
+    if (mine === l.generation) await fetchAndShow(i, { ...params, distance: state.distance }, mine, signal, 'final');
   } catch (error) {
     if (mine === l.generation) reportError(error);
   }
@@ -301,6 +314,8 @@ function wire() {
   $('surface-2').addEventListener('change', (e) => { state.surfaces[1].on = e.target.checked; refresh(1); });
   $('tolerance').addEventListener('input', (e) => { $('tolerance-value').textContent = formatNumber(toleranceFromSlider(+e.target.value), 3); });
   $('tolerance').addEventListener('change', (e) => { state.tolerance = Number(toleranceFromSlider(+e.target.value).toPrecision(3)); refreshAll(); });
+  $('distance').addEventListener('input', (e) => { $('distance-value').textContent = distanceText(distanceFromSlider(+e.target.value)); });
+  $('distance').addEventListener('change', (e) => { state.distance = distanceFromSlider(+e.target.value); refreshAll(); });
   $('normals').addEventListener('change', (e) => { state.normals = e.target.value; refreshAll(); });
   $('codec').addEventListener('change', (e) => { state.codec = e.target.value; refreshAll(); });
   const clipChanged = () => {

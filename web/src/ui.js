@@ -65,6 +65,7 @@ export function showStats(table, mesh, decodeMs, codec) {
     ['cells visited', integer(mesh.cellsVisited)],
     ['error bound', formatNumber(mesh.errorBound)],
     ['tolerance used', formatNumber(mesh.tolerance)],
+    ['distance (p99)', mesh.distanceMm === null ? '–' : `${formatNumber(mesh.distanceMm, 3)} mm`, 'stat-distance'],
     ['server cache', mesh.cache ?? '–'],
   ]);
 }
