@@ -10,7 +10,7 @@
 typedef struct levels_job {
     const iso_volume *vol;
     const iso_bricks *bricks;
-    float *error;
+    uint16_t *error;
 } levels_job;
 
 /* Lemma 1 over every cell of the brick's stride grid: the largest |p(s) - T(s)| of the
@@ -35,7 +35,7 @@ static double stride_error(const iso_fit_block *block, unsigned stride)
     return worst;
 }
 
-static void brick_levels(const levels_job *job, const uint32_t brick[3], double *samples, float *out)
+static void brick_levels(const levels_job *job, const uint32_t brick[3], double *samples, uint16_t *out)
 {
     size_t lo[3], hi[3];
     iso_bricks_box(job->vol, brick, lo, hi);
@@ -46,7 +46,7 @@ static void brick_levels(const levels_job *job, const uint32_t brick[3], double 
     }
     iso_vol_read_box(job->vol, lo, hi, samples);
     for (int l = 1; l <= ISO_TREE_LEVELS; l++)
-        out[l - 1] = iso_float_up(stride_error(&block, 1u << l));
+        out[l - 1] = iso_tree_level_encode(iso_float_up(stride_error(&block, 1u << l)));
 }
 
 /* Thread t takes the brick slabs z = t, t + threads, ...: slabs are equal in size. */
@@ -60,7 +60,7 @@ static void level_slabs(void *context, int t, int threads)
             for (uint32_t i = 0; i < b->count[0]; i++) {
                 size_t at = ((size_t)k * b->count[1] + j) * b->count[0] + i;
                 uint32_t brick[3] = {i, j, k};
-                float *out = job->error + at * ISO_TREE_LEVELS;
+                uint16_t *out = job->error + at * ISO_TREE_LEVELS;
                 if (b->min[at] == b->max[at]) {
                     /* A constant brick holds no level; its trilinears are exact anyway. */
                     for (int l = 0; l < ISO_TREE_LEVELS; l++)
@@ -71,11 +71,11 @@ static void level_slabs(void *context, int t, int threads)
             }
 }
 
-int iso_levels_build(const iso_volume *vol, const iso_bricks *bricks, int threads, float **out,
+int iso_levels_build(const iso_volume *vol, const iso_bricks *bricks, int threads, uint16_t **out,
                      iso_error *err)
 {
     size_t total = iso_bricks_total(bricks);
-    levels_job job = {vol, bricks, malloc((total ? total : 1) * ISO_TREE_LEVELS * sizeof(float))};
+    levels_job job = {vol, bricks, malloc((total ? total : 1) * ISO_TREE_LEVELS * sizeof(uint16_t))};
     *out = NULL;
     if (!job.error)
         return iso_error_set(err, ISO_E_NOMEM, "out of memory for %zu bricks' level errors", total);

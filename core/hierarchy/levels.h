@@ -7,9 +7,9 @@
 #include "volume/volume.h"
 
 /* Per brick of bricks (x fastest), ISO_TREE_LEVELS fit errors (iso_tree_level_error),
- * rounded up to floats. O(N) per level on `threads` threads (0 = all cores); *out is
- * malloc'd. Returns 0 or ISO_E_NOMEM. */
-int iso_levels_build(const iso_volume *vol, const iso_bricks *bricks, int threads, float **out,
+ * rounded up as stored (iso_tree_level_encode). O(N) per level on `threads` threads
+ * (0 = all cores); *out is malloc'd. Returns 0 or ISO_E_NOMEM. */
+int iso_levels_build(const iso_volume *vol, const iso_bricks *bricks, int threads, uint16_t **out,
                      iso_error *err);
 
 #endif

@@ -305,7 +305,8 @@ size_t iso_tree_bytes(const iso_tree *tree)
 
 size_t iso_tree_memory(const iso_tree *tree)
 {
-    return iso_tree_bytes(tree) + iso_bricks_total(&tree->bricks) * (2 + ISO_TREE_LEVELS) * sizeof(float);
+    return iso_tree_bytes(tree) +
+           iso_bricks_total(&tree->bricks) * (2 * sizeof(float) + ISO_TREE_LEVELS * sizeof(uint16_t));
 }
 
 uint32_t iso_tree_volume_crc(const iso_volume *vol)
@@ -328,8 +329,9 @@ uint32_t iso_tree_volume_crc(const iso_volume *vol)
 #define TREE_MAGIC "ISOTREE"
 /* 2: splits above brick size aligned to the brick grid; 3: the bricks' fan floors after
  * the nodes; 4: the bricks' level errors instead (tree.h), so that loading need not
- * compute them again. An older file is refused as stale, and the caller rebuilds it. */
-#define TREE_VERSION 4
+ * compute them again; 5: those errors in 2 bytes each. An older file is refused as
+ * stale, and the caller rebuilds it. */
+#define TREE_VERSION 5
 
 typedef struct tree_header {
     char magic[8];          /* "ISOTREE\0" */
@@ -379,7 +381,7 @@ int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err)
     h.type = (uint32_t)tree->vol->type;
     h.volume_crc = tree->volume_crc;
     h.node_count = tree->node_count;
-    size_t floor_bytes = iso_bricks_total(&tree->bricks) * ISO_TREE_LEVELS * sizeof(float);
+    size_t floor_bytes = iso_bricks_total(&tree->bricks) * ISO_TREE_LEVELS * sizeof(uint16_t);
     uLong crc = crc32(0L, (const Bytef *)tree->nodes, (uInt)iso_tree_bytes(tree));
     h.node_crc = (uint32_t)crc32(crc, (const Bytef *)tree->level_error, (uInt)floor_bytes);
     h.header_crc = header_crc(h);
@@ -481,7 +483,7 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
                            path, (unsigned long long)h.dims[0], (unsigned long long)h.dims[1],
                            (unsigned long long)h.dims[2]);
     else if (h.node_count > (bytes - sizeof h) / sizeof(iso_tree_node) ||
-             sizeof h + h.node_count * sizeof(iso_tree_node) + floors * sizeof(float) != bytes)
+             sizeof h + h.node_count * sizeof(iso_tree_node) + floors * sizeof(uint16_t) != bytes)
         rc = iso_error_set(err, ISO_E_CORRUPT,
                            "%s: %zu bytes do not hold the %llu nodes the header announces and %zu level errors",
                            path, bytes, (unsigned long long)h.node_count, floors);
@@ -491,13 +493,14 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
         rc = iso_error_set(err, ISO_E_STALE, "%s: built from different samples than this volume", path);
     else
         rc = check_structure(vol, (const iso_tree_node *)((const char *)map + sizeof h), h.node_count, path, err);
-    const float *floor = NULL;
+    const uint16_t *floor = NULL;
     if (rc == 0) {
-        floor = (const float *)((const char *)map + sizeof h + h.node_count * sizeof(iso_tree_node));
+        floor = (const uint16_t *)((const char *)map + sizeof h + h.node_count * sizeof(iso_tree_node));
         for (size_t b = 0; rc == 0 && b < floors; b++)
-            if (!(floor[b] >= 0))
+            if (!(iso_tree_level_decode(floor[b]) >= 0))
                 rc = iso_error_set(err, ISO_E_CORRUPT, "%s: brick %zu's level %zu error is %g", path,
-                                   b / ISO_TREE_LEVELS, b % ISO_TREE_LEVELS + 1, (double)floor[b]);
+                                   b / ISO_TREE_LEVELS, b % ISO_TREE_LEVELS + 1,
+                                   (double)iso_tree_level_decode(floor[b]));
     }
     if (rc) {
         munmap(map, bytes);
@@ -514,12 +517,12 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
     tree->volume_crc = h.volume_crc;
     tree->mapping = map;
     tree->mapping_bytes = bytes;
-    tree->level_error = malloc(floors * sizeof(float));
+    tree->level_error = malloc(floors * sizeof(uint16_t));
     if (!tree->level_error) {
         iso_tree_destroy(tree);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory loading %s", path);
     }
-    memcpy(tree->level_error, floor, floors * sizeof(float));
+    memcpy(tree->level_error, floor, floors * sizeof(uint16_t));
     if ((rc = iso_bricks_build(vol, 0, &tree->bricks, err))) {
         iso_tree_destroy(tree);
         return rc;

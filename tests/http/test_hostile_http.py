@@ -654,8 +654,8 @@ def truncated_file_rebuilt(tmp):
         f.truncate(size - 7)
     s = test_http.Server(["--catalog", cat, "--cache-dir", cache])
     try:
-        bricks = (-(-(48 - 1) // 8)) ** 3  # three 4-byte level errors per brick of 8^3 cells after the nodes
-        nodes = (size - 64 - 12 * bricks) // 16
+        bricks = (-(-(48 - 1) // 8)) ** 3  # three 2-byte level errors per brick of 8^3 cells after the nodes
+        nodes = (size - 64 - 6 * bricks) // 16
         want = (f"isoserve: ml: {path}: {size - 7} bytes do not hold the {nodes} nodes the header announces "
                 f"and {3 * bricks} level errors; rebuilding")
         assert want in s.log(), s.log()

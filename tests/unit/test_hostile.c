@@ -314,7 +314,8 @@ static void level_forged_copy(const char *src, const char *dst, size_t nodes, si
     unsigned char *bytes = read_all(src, &n);
     if (!bytes)
         return;
-    memcpy(bytes + 64 + 16 * nodes + 4 * b, &value, sizeof value);
+    uint16_t stored = iso_tree_level_encode(value);
+    memcpy(bytes + 64 + 16 * nodes + 2 * b, &stored, sizeof stored);
     uint32_t crc = (uint32_t)crc32(0L, bytes + 64, (uInt)(n - 64));
     memcpy(bytes + 56, &crc, sizeof crc);
     memset(bytes + 60, 0, 4);
@@ -353,12 +354,12 @@ static void test_tree_file_damage_exact(void)
     CHECK_OK(iso_tree_save(tree, good, &err), &err);
     long size = file_size(good);
     size_t bricks = iso_bricks_total(&tree->bricks);
-    long levels = 12 * (long)bricks; /* 3 level errors per brick */
+    long levels = 6 * (long)bricks; /* 3 level errors of 2 bytes per brick */
     CHECK_EQ(size, 64 + 16 * (long)tree->node_count + levels); /* nodes, then level errors */
     char format[256];
     const char *bad = temp_path("bad.isotree");
 
-    damaged_copy(good, bad, size - 16, -1); /* the last four level errors missing */
+    damaged_copy(good, bad, size - 16, -1); /* the last eight level errors missing */
     snprintf(format, sizeof format,
              "%%s: %ld bytes do not hold the %zu nodes the header announces and %zu level errors", size - 16,
              tree->node_count, 3 * bricks);
