@@ -65,6 +65,18 @@ check_refusal bad_level "--level" $bin extract field:sphere:16 --level abc
 check_refusal nan_level "--level" $bin extract field:sphere:16 --level nan
 check_refusal negative_tolerance "--tolerance" $bin extract field:sphere:16 --level 1 --tolerance -1
 check_refusal unknown_field "sphere" $bin info field:nosuchfield
+# -o NAME.meshopt.glb: the fast codec's glb; three's GLTFLoader with MeshoptDecoder reads
+# back exactly the CLI's triangles and vertices, with normals.
+if [ -d web/node_modules/three ]; then
+    if $bin extract field:sphere:40 --level 4 -o "$tmp/s.meshopt.glb" --json > "$tmp/m.json" &&
+       got=$(node tests/http/gltf_load.mjs "$tmp/s.meshopt.glb" "$PWD/web" | cut -d' ' -f1-3) &&
+       want=$("$py" -c "import json; d=json.load(open('$tmp/m.json')); print(d['triangles'], d['vertices'], 'true')") &&
+       [ "$got" = "$want" ] && grep -aq EXT_meshopt_compression "$tmp/s.meshopt.glb"; then
+        pass extract_meshopt_glb
+    else fail extract_meshopt_glb "loaded '${got:-}', CLI says '${want:-}'"; fi
+else
+    echo "SKIP cli.extract_meshopt_glb: web/node_modules/three not installed (make node-deps)"
+fi
 check_refusal unknown_format "unknown output format" $bin extract field:sphere:16 --level 1 -o "$tmp/x.xyz"
 check_refusal cap_full_scan "--cap needs the hierarchy" $bin extract field:sphere:16 --level 1 --cap --full-scan
 check_refusal budget_zero "whole number of triangles from 1" $bin extract field:sphere:16 --level 1 --budget 0
