@@ -94,6 +94,18 @@ if $bin extract field:sphere:40 --level 3 --budget 300 --normals none --json > "
 else
     fail budget_simplifies "$(cat "$tmp/bs.json" "$tmp/bl.json")"
 fi
+# --distance: the coarsest chain level whose measured p99 is within D (levels' p99 grow with
+# k on a sphere), its distance the level's, closed; 0 is the exact mesh itself.
+check_refusal distance_with_budget "--distance chooses the mesh itself" $bin extract field:sphere:16 --level 1 --distance 1 --budget 9
+if $bin extract field:sphere:40 --level 3 --distance 0.3 --normals none --json > "$tmp/dd.json" &&
+   $bin extract field:sphere:40 --level 3 --distance 0 --normals none --json > "$tmp/d0.json" &&
+   $bin extract field:sphere:40 --level 3 --normals none --json > "$tmp/dx.json" &&
+   [ "$(json "$tmp/dd.json" "(d['chain']['level'] == max(k for k, b in enumerate(d['chain']['built']) if b['p99'] <= 0.3), d['chain']['level'] >= 2, d['distance']['p99'] == d['chain']['built'][d['chain']['level']]['p99'], d['triangles'] == d['chain']['built'][d['chain']['level']]['triangles'], d['closed'])")" = "(True, True, True, True, True)" ] &&
+   [ "$(json "$tmp/d0.json" "(d['chain']['level'], d['distance']['max'], d['triangles'])")" = "(0, 0.0, $(json "$tmp/dx.json" "d['triangles']"))" ]; then
+    pass distance_from_chain
+else
+    fail distance_from_chain "$(cat "$tmp/dd.json" "$tmp/d0.json")"
+fi
 printf 'NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n\nshort' > "$tmp/short.nrrd"
 check_refusal truncated_nrrd "short.nrrd" $bin extract "$tmp/short.nrrd" --level 1
 
