@@ -29,6 +29,7 @@ typedef struct serve_options {
     char host[256];
     unsigned port;
     long threads, queue, cache_mb, drain_seconds, max_connections, max_volume_mb;
+    long max_resident_mb;             /* 0: no limit */
     long connection_timeout, max_triangles;
     const char *token_file;
     const char *origins[MAX_ORIGINS];
@@ -117,6 +118,7 @@ static int set_option(serve_options *o, const char *a, const char *v, int from_e
     else if (!strcmp(a, "--drain-seconds")) return parse_count(a, v, 0, 3600, &o->drain_seconds);
     else if (!strcmp(a, "--max-connections")) return parse_count(a, v, 1, 65536, &o->max_connections);
     else if (!strcmp(a, "--max-volume-mb")) return parse_count(a, v, 1, 1 << 24, &o->max_volume_mb);
+    else if (!strcmp(a, "--max-resident-mb")) return parse_count(a, v, 0, 1L << 30, &o->max_resident_mb);
     else if (!strcmp(a, "--cors-origin")) {
         if (o->origin_count == MAX_ORIGINS)
             return srv_fail("--cors-origin: at most %d origins", MAX_ORIGINS);
@@ -131,7 +133,7 @@ static const char *const option_names[] = {
     "--catalog", "--volumes", "--cache-dir", "--web-root", "--listen", "--threads", "--queue",
     "--cache-mb", "--drain-seconds", "--max-connections", "--max-volume-mb", "--cors-origin",
     "--shard", "--shard-peers", "--replica-name", "--token-file", "--connection-timeout",
-    "--max-triangles"};
+    "--max-triangles", "--max-resident-mb"};
 
 static int options_from_env(serve_options *o)
 {
@@ -167,6 +169,9 @@ static int parse_options(int argc, char **argv, serve_options *o)
     }
     if (o->catalog && o->volumes)
         return srv_fail("serve: give --catalog or --volumes, not both");
+    if (o->max_resident_mb && !o->cache_dir)
+        return srv_fail("serve: --max-resident-mb needs --cache-dir: an evicted volume's "
+                        "hierarchy is read back from there, not built again");
     if (!o->shard_count != !o->shard_peers)
         return srv_fail("serve: --shard K/N and --shard-peers HOST:PORT,... go together");
     return 0;
@@ -305,7 +310,8 @@ static int serve(const serve_options *o, srv_catalog *catalog)
     }
     char *root = web_root(o->web_root);
     srv_preload_options preload = {.cache_dir = o->cache_dir, .skip = skip,
-                                   .max_volume_bytes = (uint64_t)o->max_volume_mb << 20};
+                                   .max_volume_bytes = (uint64_t)o->max_volume_mb << 20,
+                                   .max_resident_bytes = (uint64_t)o->max_resident_mb << 20};
     if (srv_collection_init(&collection, catalog, &preload) ||
         srv_cache_init(&cache, (size_t)o->cache_mb << 20) ||
         srv_pool_init(&pool, (size_t)o->threads, (size_t)o->queue)) {

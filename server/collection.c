@@ -5,6 +5,9 @@
 #include <dirent.h>
 #include <errno.h>
 #include <inttypes.h>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -34,10 +37,9 @@ int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
     c->state = calloc(catalog->count ? catalog->count : 1, 1);
     c->upstream = calloc(catalog->count ? catalog->count : 1, 1);
     c->failure = calloc(catalog->count ? catalog->count : 1, sizeof *c->failure);
-    c->published = calloc(catalog->count ? catalog->count : 1, sizeof *c->published);
     c->retry_at = calloc(catalog->count ? catalog->count : 1, sizeof *c->retry_at);
     c->attempts = calloc(catalog->count ? catalog->count : 1, sizeof *c->attempts);
-    if (!c->volumes || !c->state || !c->upstream || !c->failure || !c->published ||
+    if (!c->volumes || !c->state || !c->upstream || !c->failure ||
         !c->retry_at || !c->attempts ||
         pthread_mutex_init(&c->lock, NULL))
         goto err;
@@ -51,7 +53,6 @@ err:
     free(c->state);
     free(c->upstream);
     free(c->failure);
-    free(c->published);
     free(c->retry_at);
     free(c->attempts);
     memset(c, 0, sizeof *c);
@@ -62,8 +63,9 @@ void srv_collection_free(srv_collection *c)
 {
     if (!c->volumes)
         return;
-    size_t n = atomic_load(&c->count);
-    for (size_t i = 0; i < n; i++) {
+    for (size_t i = 0; i < c->total; i++) {
+        if (c->state[i] != SRV_ENTRY_LOADED)
+            continue;
         iso_tree_destroy(c->volumes[i].tree);
         iso_vol_destroy(c->volumes[i].vol);
     }
@@ -71,7 +73,6 @@ void srv_collection_free(srv_collection *c)
     free(c->state);
     free(c->upstream);
     free(c->failure);
-    free(c->published);
     free(c->retry_at);
     free(c->attempts);
     pthread_cond_destroy(&c->changed);
@@ -79,19 +80,39 @@ void srv_collection_free(srv_collection *c)
     memset(c, 0, sizeof *c);
 }
 
-const srv_volume *srv_collection_find(const srv_collection *c, const char *id)
+void srv_collection_lock(srv_collection *c)
 {
-    size_t i = srv_catalog_find(c->catalog, id);
-    size_t at = i < c->total ? atomic_load_explicit(&c->published[i], memory_order_acquire) : 0;
-    return at ? &c->volumes[at - 1] : NULL;
+    pthread_mutex_lock(&c->lock);
 }
 
-size_t srv_collection_hierarchy_bytes(const srv_collection *c)
+void srv_collection_unlock(srv_collection *c)
 {
-    size_t n = atomic_load_explicit(&c->count, memory_order_acquire), bytes = 0;
-    for (size_t i = 0; i < n; i++)
-        bytes += iso_tree_memory(c->volumes[i].tree);
-    return bytes;
+    pthread_mutex_unlock(&c->lock);
+}
+
+const srv_volume *srv_collection_loaded(const srv_collection *c, size_t i)
+{
+    return i < c->total && c->state[i] == SRV_ENTRY_LOADED ? &c->volumes[i] : NULL;
+}
+
+void srv_collection_retain(srv_collection *c, const srv_volume *v)
+{
+    pthread_mutex_lock(&c->lock);
+    c->volumes[v - c->volumes].refs++;
+    pthread_mutex_unlock(&c->lock);
+}
+
+static void evict_over_cap(srv_collection *c);
+
+/* The last holder of a volume lets the cap be met again, if volumes in use exceeded it. */
+void srv_collection_release(srv_collection *c, const srv_volume *v)
+{
+    if (!v)
+        return;
+    pthread_mutex_lock(&c->lock);
+    if (--c->volumes[v - c->volumes].refs == 0)
+        evict_over_cap(c);
+    pthread_mutex_unlock(&c->lock);
 }
 
 /* FNV-1a over the geometry: spacing, origin and direction move every vertex. */
@@ -179,6 +200,7 @@ static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload
         iso_vol_destroy(v->vol);
         return rc;
     }
+    v->bytes = iso_vol_count(v->vol) * iso_vol_type_size(v->vol->type) + iso_tree_memory(v->tree);
     snprintf(v->version, sizeof v->version, "%08x%08x-%d", (unsigned)v->tree->volume_crc,
              (unsigned)geometry_hash(v->vol), SRV_MESH_ALGORITHM_VERSION);
     iso_hist_compute(v->vol, SRV_HISTOGRAM_BINS, v->histogram);
@@ -206,15 +228,11 @@ static unsigned backoff_s(unsigned n)
     return s < SRV_RETRY_MAX_S ? s : SRV_RETRY_MAX_S;
 }
 
-/* Loads catalog entry i unless another thread has it or had it: claims it, loads it
- * without the lock, then publishes it (or marks it failed) and wakes the waiters. */
-static void load_entry(srv_collection *c, size_t i, int on_demand)
+/* Loads catalog entry i, idle and claimed by the caller, who holds the lock: marks it
+ * loading, loads it without the lock, then publishes it in its slot (or marks it failed)
+ * and wakes the waiters. Returns with the lock held. */
+static void load_locked(srv_collection *c, size_t i, int on_demand)
 {
-    pthread_mutex_lock(&c->lock);
-    if (c->state[i] != SRV_ENTRY_IDLE) {
-        pthread_mutex_unlock(&c->lock);
-        return;
-    }
     c->state[i] = SRV_ENTRY_LOADING;
     pthread_mutex_unlock(&c->lock);
 
@@ -226,10 +244,12 @@ static void load_entry(srv_collection *c, size_t i, int on_demand)
 
     pthread_mutex_lock(&c->lock);
     if (!failed) {
-        size_t n = atomic_load(&c->count);
-        c->volumes[n] = v;
-        atomic_store_explicit(&c->count, n + 1, memory_order_release);
-        atomic_store_explicit(&c->published[i], n + 1, memory_order_release);
+        v.last_used = ++c->uses;
+        c->volumes[i] = v;
+        atomic_fetch_add(&c->count, 1);
+        atomic_fetch_add(&c->resident, v.bytes);
+        atomic_fetch_add(&c->hierarchy_bytes, iso_tree_memory(v.tree));
+        atomic_fetch_add(v.tree_from_file ? &c->trees_read : &c->trees_built, 1);
         if (on_demand)
             atomic_fetch_add(&c->on_demand, 1);
         if (v.tree_unsaved)
@@ -246,7 +266,68 @@ static void load_entry(srv_collection *c, size_t i, int on_demand)
         c->attempts[i] = 0;
     }
     pthread_cond_broadcast(&c->changed);
+}
+
+/* Preloading's load of entry i, unless a request has it or had it already. */
+static void load_entry(srv_collection *c, size_t i)
+{
+    pthread_mutex_lock(&c->lock);
+    if (c->state[i] == SRV_ENTRY_IDLE)
+        load_locked(c, i, 0);
     pthread_mutex_unlock(&c->lock);
+}
+
+/* The least recently used loaded volume that nobody holds and whose hierarchy is on file
+ * (an unsaved one would have to be built again), or total. Lock held. */
+static size_t eviction_victim(const srv_collection *c)
+{
+    size_t victim = c->total;
+    for (size_t i = 0; i < c->total; i++) {
+        const srv_volume *v = &c->volumes[i];
+        if (c->state[i] == SRV_ENTRY_LOADED && !v->refs && !v->tree_unsaved &&
+            (victim == c->total || v->last_used < c->volumes[victim].last_used))
+            victim = i;
+    }
+    return victim;
+}
+
+/* glibc keeps freed blocks in its arenas (one per thread that allocated, and volumes are
+ * loaded by request threads) instead of unmapping them once its mmap threshold has grown
+ * past a volume's size: malloc_trim hands those pages back, so that the process's RSS
+ * follows the resident bytes down after an eviction. */
+static void give_back_freed_memory(void)
+{
+#ifdef __GLIBC__
+    malloc_trim(0);
+#endif
+}
+
+/* While the resident bytes exceed the cap, evicts the least recently used volume nobody
+ * holds; its memory is freed without the lock. Lock held on entry and on return. */
+static void evict_over_cap(srv_collection *c)
+{
+    const uint64_t cap = c->options.max_resident_bytes;
+    while (cap && atomic_load(&c->resident) > cap) {
+        size_t i = eviction_victim(c);
+        if (i == c->total)
+            return; /* all in use: the cap is exceeded until they are released */
+        srv_volume v = c->volumes[i];
+        memset(&c->volumes[i], 0, sizeof c->volumes[i]);
+        c->state[i] = SRV_ENTRY_IDLE;
+        atomic_fetch_sub(&c->count, 1);
+        atomic_fetch_sub(&c->resident, v.bytes);
+        atomic_fetch_sub(&c->hierarchy_bytes, iso_tree_memory(v.tree));
+        atomic_fetch_add(&c->evictions, 1);
+        if (v.on_demand)
+            atomic_fetch_sub(&c->on_demand, 1);
+        pthread_mutex_unlock(&c->lock);
+        fprintf(stderr, "isoserve: %s: evicted (%zu KB; resident %zu KB, cap %" PRIu64 " KB)\n",
+                v.entry->id, v.bytes / 1024, atomic_load(&c->resident) / 1024, cap / 1024);
+        iso_tree_destroy(v.tree);
+        iso_vol_destroy(v.vol);
+        give_back_freed_memory();
+        pthread_mutex_lock(&c->lock);
+    }
 }
 
 /* A temporary file of iso_tree_save for a catalog id: "ID.isotree.tmp." and mkstemp's six
@@ -311,11 +392,18 @@ void srv_collection_preload(srv_collection *c)
                 strerror(errno));
     if (dir)
         remove_stale_temporaries(c, started);
+    const uint64_t cap = c->options.max_resident_bytes;
     for (size_t i = 0; i < c->total && !atomic_load(&c->stop); i++) {
+        if (cap && atomic_load(&c->resident) >= cap) {
+            fprintf(stderr, "isoserve: %zu volumes preloaded fill --max-resident-mb; the other "
+                    "%zu load on demand\n", atomic_load(&c->count), c->total - i);
+            break;
+        }
         if (!c->options.skip || !c->options.skip[i])
-            load_entry(c, i, 0);
+            load_entry(c, i);
         atomic_store(&c->attempted, i + 1);
     }
+    atomic_store(&c->attempted, c->total);
     atomic_store(&c->ready, 1);
 }
 
@@ -353,18 +441,32 @@ static void rearm_if_due(srv_collection *c, size_t i)
 
 srv_volume_state srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out)
 {
-    if ((*out = srv_collection_find(c, id)))
-        return SRV_VOLUME_READY;
+    *out = NULL;
     size_t i = srv_catalog_find(c->catalog, id);
     if (i == c->total)
         return SRV_VOLUME_UNKNOWN;
     rearm_if_due(c, i);
-    load_entry(c, i, 1);
     pthread_mutex_lock(&c->lock);
-    while (c->state[i] == SRV_ENTRY_LOADING) /* another request's load of the same entry */
-        pthread_cond_wait(&c->changed, &c->lock);
-    int loaded = c->state[i] == SRV_ENTRY_LOADED, upstream = c->upstream[i];
+    int loaded_here = 0;
+    for (;;) {
+        if (c->state[i] == SRV_ENTRY_LOADED) {
+            c->volumes[i].refs++;
+            c->volumes[i].last_used = ++c->uses;
+            *out = &c->volumes[i];
+            break;
+        }
+        if (c->state[i] == SRV_ENTRY_FAILED)
+            break;
+        if (c->state[i] == SRV_ENTRY_LOADING) /* another request's load of the same entry */
+            pthread_cond_wait(&c->changed, &c->lock);
+        else { /* idle: never loaded, or evicted */
+            load_locked(c, i, 1);
+            loaded_here = 1;
+        }
+    }
+    if (loaded_here) /* held now, so the new volume is not its own victim */
+        evict_over_cap(c);
+    int upstream = c->upstream[i];
     pthread_mutex_unlock(&c->lock);
-    *out = loaded ? srv_collection_find(c, id) : NULL;
     return *out ? SRV_VOLUME_READY : upstream ? SRV_VOLUME_UPSTREAM_FAILED : SRV_VOLUME_FAILED;
 }

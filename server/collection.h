@@ -1,11 +1,18 @@
 /* collection.h: the volumes the daemon serves, loaded with their hierarchies.
  *
  * Preloading runs in its own thread while the HTTP server already answers (healthz says
- * 503 until it is done). Volumes are published one by one: readers see a prefix of the
- * array that is complete and never changes again, so lookups need no lock. A replica of a
- * sharded deployment preloads only its share of the catalog and loads any other entry on
- * demand, at its first request (so that failover works), through the same loader and
- * hierarchy cache; loads are serialised per entry by a lock, publication by the same lock. */
+ * 503 until it is done). Each catalog entry has one slot (its index in the catalog) with a
+ * state, a reference count and a last-used stamp, all under the collection's lock. A
+ * replica of a sharded deployment preloads only its share of the catalog and loads any
+ * other entry on demand, at its first request (so that failover works), through the same
+ * loader and hierarchy cache; loads are serialised per entry by the same lock.
+ *
+ * Bounded memory (max_resident_bytes): a request holds a reference to its volume from
+ * srv_collection_acquire to srv_collection_release, a mesh job its own. After each load on
+ * demand, while the resident bytes (samples and hierarchies) exceed the cap, the least
+ * recently used volume nobody holds is evicted: its memory freed, its slot idle again. Its
+ * hierarchy file stays in the cache dir, so the next request reads it back instead of
+ * building it. Volumes in use are never evicted, so the cap is a target they may exceed. */
 #ifndef SRV_COLLECTION_H
 #define SRV_COLLECTION_H
 
@@ -40,7 +47,11 @@ typedef struct srv_volume {
     int tree_from_file;               /* 1: read from the cache dir */
     int on_demand;                    /* 1: loaded at a request, not preloaded */
     int tree_unsaved;                 /* 1: built, but the cache dir refused the file (disk
-                                         full, read-only): served from memory only */
+                                         full, read-only): served from memory only, and so
+                                         never evicted */
+    size_t bytes;                     /* resident: samples and hierarchy */
+    unsigned refs;                    /* requests and jobs holding it (under the lock) */
+    unsigned long long last_used;     /* the collection's use counter at its last acquire */
 } srv_volume;
 
 typedef struct srv_preload_options {
@@ -48,30 +59,37 @@ typedef struct srv_preload_options {
     uint64_t max_volume_bytes;        /* 0: the core's default */
     const unsigned char *skip;        /* per catalog entry, 1: not preloaded here (another
                                          replica's shard); NULL: preload every entry */
+    uint64_t max_resident_bytes;      /* 0: no limit; else loaded volumes are evicted least
+                                         recently used above it (needs cache_dir) */
 } srv_preload_options;
 
 typedef struct srv_collection {
-    srv_volume *volumes;              /* capacity: the catalog's count */
-    _Atomic size_t count;             /* published (loaded) volumes */
+    srv_volume *volumes;              /* one slot per catalog entry, valid when LOADED */
+    _Atomic size_t count;             /* loaded volumes */
     _Atomic size_t attempted;         /* catalog entries tried so far */
     size_t total;                     /* catalog entries */
     _Atomic int ready;                /* every entry tried */
     _Atomic int stop;                 /* set on shutdown: preloading ends after the volume at hand */
     _Atomic size_t on_demand;         /* volumes loaded at a request */
     _Atomic size_t unsaved;           /* hierarchies the cache dir refused (tree_unsaved) */
+    _Atomic size_t resident;          /* bytes of the loaded volumes (srv_volume.bytes) */
+    _Atomic size_t hierarchy_bytes;   /* of those, the hierarchies' */
+    _Atomic unsigned long long evictions, trees_built, trees_read;
+    unsigned long long uses;          /* acquires so far: the LRU clock (under the lock) */
     const srv_catalog *catalog;
     srv_preload_options options;      /* also for loads on demand */
-    pthread_mutex_t lock;             /* guards state and publication */
+    pthread_mutex_t lock;             /* guards the slots: state, volumes, refs */
     pthread_cond_t changed;           /* an entry's state changed */
     unsigned char *state;             /* per catalog entry: SRV_ENTRY_* */
     iso_error *failure;               /* per catalog entry: why it failed (SRV_ENTRY_FAILED) */
     unsigned char *upstream;          /* per catalog entry: 1 if its source server failed */
-    _Atomic size_t *published;        /* per catalog entry: its index in volumes + 1, 0 none */
     double *retry_at;                 /* per catalog entry: when a failed source may be asked
                                          again (iso_clock_ms), after upstream failures */
     unsigned *attempts;               /* per catalog entry: upstream failures in a row */
 } srv_collection;
 
+/* An entry's life: IDLE -> LOADING -> LOADED or FAILED; LOADED -> IDLE when evicted;
+ * FAILED -> IDLE when its source is asked again. */
 enum { SRV_ENTRY_IDLE, SRV_ENTRY_LOADING, SRV_ENTRY_LOADED, SRV_ENTRY_FAILED };
 
 /* Prepares an empty collection for the catalog (which must outlive it); options are
@@ -83,11 +101,10 @@ int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
  * the younger ones it keeps). Then loads every entry of the catalog in order (but those
  * the options skip): the volume, then its hierarchy from the cache dir when that file is
  * valid and newer than the volume, else built (progress on the terminal) and written there
- * atomically. A volume that fails to load is reported and skipped. Sets ready at the end.
- * Blocking: run it in a thread; setting c->stop ends it after the volume at hand. */
+ * atomically. A volume that fails to load is reported and skipped. With a cap on resident
+ * bytes, preloading stops once they reach it (the rest load on demand). Sets ready at the
+ * end. Blocking: run it in a thread; setting c->stop ends it after the volume at hand. */
 void srv_collection_preload(srv_collection *c);
-/* The published volume with this id, or NULL. Lock-free: one catalog hash lookup. */
-const srv_volume *srv_collection_find(const srv_collection *c, const char *id);
 /* What srv_collection_acquire found; server/status.c maps it to an HTTP status. */
 typedef enum srv_volume_state {
     SRV_VOLUME_READY,           /* loaded: *out is set */
@@ -98,16 +115,24 @@ typedef enum srv_volume_state {
 } srv_volume_state;
 
 /* The volume with this id, loaded now (as preloading would) if the catalog names it and
- * it is not loaded yet; concurrent callers for one id wait for one load. Blocking for as
+ * it is not loaded yet, with a reference the caller gives back with srv_collection_release
+ * (it is not evicted until then); concurrent callers for one id wait for one load. Blocking for as
  * long as the load takes. A failure is reported on stderr; later calls fail at once, and
  * srv_collection_failure says why. An upstream failure is retried by the first call after
  * its backoff has passed; other failures are final (the files came and are bad). */
 srv_volume_state srv_collection_acquire(srv_collection *c, const char *id, const srv_volume **out);
+/* Another reference to a volume the caller holds (a job that may outlive its request). */
+void srv_collection_retain(srv_collection *c, const srv_volume *v);
+/* Gives back a reference of srv_collection_acquire or srv_collection_retain; NULL is a no-op. */
+void srv_collection_release(srv_collection *c, const srv_volume *v);
+/* The listing's view of the slots: between lock and unlock, srv_collection_loaded gives
+ * the volume of catalog entry i if it is loaded (else NULL); it is not evicted meanwhile. */
+void srv_collection_lock(srv_collection *c);
+const srv_volume *srv_collection_loaded(const srv_collection *c, size_t i);
+void srv_collection_unlock(srv_collection *c);
 /* Copies why the entry with this id failed to load into why ("" if it did not fail).
  * Returns the seconds until it is tried again (at least 1), 0 when it will not be. */
 unsigned srv_collection_failure(srv_collection *c, const char *id, char *why, size_t size);
-/* Bytes of all published hierarchies. */
-size_t srv_collection_hierarchy_bytes(const srv_collection *c);
 void srv_collection_free(srv_collection *c);
 
 #endif

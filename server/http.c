@@ -208,10 +208,11 @@ typedef struct srv_page {
     size_t first, count, total;
 } srv_page;
 
-/* Reads limit and after; the position of after comes from position_of (total when it is
- * not listed). 0, or ISO_E_ARGUMENT with detail saying what is wrong. */
-static int read_page(struct MHD_Connection *c, const srv_collection *col, size_t total,
-                     size_t (*position_of)(const srv_collection *, const char *), srv_page *page,
+/* Reads limit and after; the position just after the id of after comes from position_of
+ * (SIZE_MAX when the catalog has no such id). 0, or ISO_E_ARGUMENT with detail saying what
+ * is wrong. */
+static int read_page(struct MHD_Connection *c, const void *listing, size_t total,
+                     size_t (*position_after)(const void *, const char *), srv_page *page,
                      char *detail, size_t size)
 {
     const char *limit = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "limit");
@@ -227,12 +228,12 @@ static int read_page(struct MHD_Connection *c, const srv_collection *col, size_t
         page->count = (size_t)n;
     }
     if (after) {
-        size_t at = srv_catalog_id_valid(after) ? position_of(col, after) : total;
-        if (at >= total) {
-            snprintf(detail, size, "after: \"%.64s\" is not a listed volume id", after);
+        size_t first = srv_catalog_id_valid(after) ? position_after(listing, after) : SIZE_MAX;
+        if (first > total) {
+            snprintf(detail, size, "after: \"%.64s\" is not a volume id", after);
             return ISO_E_ARGUMENT;
         }
-        page->first = at + 1;
+        page->first = first;
     }
     if (page->count > total - page->first)
         page->count = total - page->first;
@@ -259,15 +260,35 @@ static enum MHD_Result send_page(srv_server *s, struct MHD_Connection *c, srv_re
     return send_response(s, c, req, 200, r, size);
 }
 
-static size_t catalog_position(const srv_collection *col, const char *id)
+static size_t catalog_position_after(const void *listing, const char *id)
 {
-    return srv_catalog_find(col->catalog, id);
+    const srv_catalog *catalog = listing;
+    size_t i = srv_catalog_find(catalog, id);
+    return i < catalog->count ? i + 1 : SIZE_MAX;
 }
 
-static size_t loaded_position(const srv_collection *col, const char *id)
+/* The loaded volumes at one moment, in catalog order: their catalog indices. */
+typedef struct srv_loaded_list {
+    const srv_catalog *catalog;
+    size_t *at, count;
+} srv_loaded_list;
+
+/* How many loaded volumes come up to and with catalog entry id (loaded or not: a volume
+ * evicted between two pages leaves the paging where it was). */
+static size_t loaded_position_after(const void *listing, const char *id)
 {
-    const srv_volume *v = srv_collection_find(col, id);
-    return v ? (size_t)(v - col->volumes) : atomic_load(&col->count);
+    const srv_loaded_list *l = listing;
+    size_t i = srv_catalog_find(l->catalog, id), lo = 0, hi = l->count;
+    if (i == l->catalog->count)
+        return SIZE_MAX;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (l->at[mid] <= i)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
 }
 
 /* Sharded: the catalog, the same on every replica whatever it has loaded; each entry
@@ -278,7 +299,7 @@ static enum MHD_Result route_catalog(srv_server *s, struct MHD_Connection *c, sr
     const srv_shard_ring *ring = s->config.shard_ring;
     srv_page page;
     char detail[160];
-    if (read_page(c, s->collection, catalog->count, catalog_position, &page, detail, sizeof detail))
+    if (read_page(c, catalog, catalog->count, catalog_position_after, &page, detail, sizeof detail))
         return fail(s, c, req, "/v1/volumes", 400, "%s", detail);
     proto_volume_doc *docs = calloc(page.count ? page.count : 1, sizeof *docs);
     if (!docs)
@@ -294,23 +315,38 @@ static enum MHD_Result route_catalog(srv_server *s, struct MHD_Connection *c, sr
     return ok;
 }
 
-/* The loaded volumes in the order they were loaded (an order that only ever grows). */
+/* The volumes loaded now, in catalog order. The collection stays locked while their
+ * documents are written, so none is evicted meanwhile. */
 static enum MHD_Result route_volumes(srv_server *s, struct MHD_Connection *c, srv_request *req)
 {
     if (s->config.shard_ring)
         return route_catalog(s, c, req);
-    size_t n = atomic_load(&s->collection->count);
+    srv_collection *col = s->collection;
+    srv_loaded_list list = {.catalog = col->catalog, .at = malloc((col->total ? col->total : 1) * sizeof *list.at)};
+    proto_volume_doc *docs = NULL;
+    if (!list.at)
+        return send_out_of_memory(s, c, req);
+    srv_collection_lock(col);
+    for (size_t i = 0; i < col->total; i++)
+        if (srv_collection_loaded(col, i))
+            list.at[list.count++] = i;
     srv_page page;
     char detail[160];
-    if (read_page(c, s->collection, n, loaded_position, &page, detail, sizeof detail))
-        return fail(s, c, req, "/v1/volumes", 400, "%s", detail);
-    proto_volume_doc *docs = calloc(page.count ? page.count : 1, sizeof *docs);
-    if (!docs)
-        return send_out_of_memory(s, c, req);
-    for (size_t i = 0; i < page.count; i++)
-        docs[i] = doc_of(s, &s->collection->volumes[page.first + i]);
-    enum MHD_Result ok = send_page(s, c, req, docs, &page);
+    enum MHD_Result ok;
+    if (read_page(c, &list, list.count, loaded_position_after, &page, detail, sizeof detail)) {
+        srv_collection_unlock(col);
+        ok = fail(s, c, req, "/v1/volumes", 400, "%s", detail);
+    } else if (!(docs = calloc(page.count ? page.count : 1, sizeof *docs))) {
+        srv_collection_unlock(col);
+        ok = send_out_of_memory(s, c, req);
+    } else {
+        for (size_t i = 0; i < page.count; i++)
+            docs[i] = doc_of(s, srv_collection_loaded(col, list.at[page.first + i]));
+        ok = send_page(s, c, req, docs, &page);
+        srv_collection_unlock(col);
+    }
     free(docs);
+    free(list.at);
     return ok;
 }
 
@@ -351,7 +387,12 @@ static enum MHD_Result route_metrics(srv_server *s, struct MHD_Connection *c, sr
     g.extractions_total = atomic_load(&s->pool->completed);
     g.coalesced_total = atomic_load(&s->pool->coalesced);
     g.rejected_total = atomic_load(&s->pool->rejected);
-    g.hierarchy_bytes = srv_collection_hierarchy_bytes(s->collection);
+    g.hierarchy_bytes = atomic_load(&s->collection->hierarchy_bytes);
+    g.resident_bytes = atomic_load(&s->collection->resident);
+    g.resident_limit = s->collection->options.max_resident_bytes;
+    g.volume_evictions = atomic_load(&s->collection->evictions);
+    g.hierarchies_built = atomic_load(&s->collection->trees_built);
+    g.hierarchies_read = atomic_load(&s->collection->trees_read);
     g.hierarchies_unsaved = atomic_load(&s->collection->unsaved);
     g.volumes = atomic_load(&s->collection->count);
     g.volumes_on_demand = atomic_load(&s->collection->on_demand);
@@ -562,6 +603,8 @@ static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_r
         return fail(s, c, req, path, 503, "%s: out of memory starting the extraction", v->entry->id);
     }
     work->volume = v;
+    work->collection = s->collection;
+    srv_collection_retain(s->collection, v); /* the job may outlive this request */
     work->request = mr;
     work->cache = s->cache;
     work->max_triangles = s->config.max_triangles;
@@ -826,6 +869,7 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **req_cls,
         req->status = 499; /* the client left, or the connection failed, before an answer */
     log_request(req, ms);
     srv_metrics_request(&s->metrics, req->route, req->status, ms, req->bytes);
+    srv_collection_release(s->collection, req->volume);
     free(req);
     *req_cls = NULL;
     atomic_fetch_sub(&s->in_flight, 1);

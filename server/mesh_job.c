@@ -12,8 +12,11 @@
 void srv_mesh_job_free(void *arg)
 {
     srv_mesh_job *job = arg;
-    if (job)
-        free(job->key);
+    if (!job)
+        return;
+    if (job->collection)
+        srv_collection_release(job->collection, job->volume);
+    free(job->key);
     free(job);
 }
 

@@ -10,6 +10,7 @@
 
 typedef struct srv_mesh_job {
     const srv_volume *volume;
+    srv_collection *collection; /* holds a reference to volume, given back when freed */
     proto_mesh_request request;
     srv_cache *cache;       /* where the body goes when done; may be NULL */
     char *key;              /* the cache key (owned) */
@@ -18,7 +19,7 @@ typedef struct srv_mesh_job {
 
 /* A job for the pool (see pool.h's srv_job_fn): arg is a srv_mesh_job. */
 srv_body *srv_mesh_job_run(void *arg, proto_problem *problem);
-/* Frees a srv_mesh_job made with malloc. */
+/* Frees a srv_mesh_job made with malloc, releasing its volume. */
 void srv_mesh_job_free(void *arg);
 
 #endif

@@ -124,6 +124,18 @@ char *srv_metrics_render(srv_metrics *m, const srv_metrics_gauges *g, size_t *si
     metric(f, "isoserve_hierarchies_unsaved", "gauge",
            "Hierarchies built but not written to --cache-dir (disk full, read-only): served "
            "from memory, rebuilt at the next start.", (double)g->hierarchies_unsaved);
+    metric(f, "isoserve_hierarchies_built_total", "counter",
+           "Hierarchies built from a volume's samples.", (double)g->hierarchies_built);
+    metric(f, "isoserve_hierarchies_read_total", "counter",
+           "Hierarchies read back from --cache-dir (at a start, or after an eviction).",
+           (double)g->hierarchies_read);
+    metric(f, "isoserve_resident_bytes", "gauge",
+           "Bytes of the loaded volumes: samples and hierarchies.", (double)g->resident_bytes);
+    metric(f, "isoserve_resident_limit_bytes", "gauge", "Their bound (--max-resident-mb); 0: none.",
+           (double)g->resident_limit);
+    metric(f, "isoserve_volume_evictions_total", "counter",
+           "Loaded volumes evicted, least recently used, to stay under --max-resident-mb.",
+           (double)g->volume_evictions);
     metric(f, "isoserve_volumes_loaded", "gauge", "Volumes being served.", (double)g->volumes);
     metric(f, "isoserve_volumes_loaded_on_demand", "gauge",
            "Of those, volumes of another shard loaded at a request.", (double)g->volumes_on_demand);

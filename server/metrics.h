@@ -29,6 +29,8 @@ typedef struct srv_metrics_gauges {
     size_t queue_length, queue_capacity, extractions_running, workers;
     unsigned long long extractions_total, coalesced_total, rejected_total;
     size_t hierarchy_bytes, hierarchies_unsaved, volumes, volumes_on_demand, volumes_total;
+    size_t resident_bytes, resident_limit;
+    unsigned long long volume_evictions, hierarchies_built, hierarchies_read;
     int ready;
 } srv_metrics_gauges;
 
