@@ -20,6 +20,7 @@ static const struct {
      "serve [--catalog FILE | --volumes DIR] [--listen 127.0.0.1:8080] [--cache-dir DIR]\n"
      "                 [--threads N] [--queue N] [--cache-mb N] [--cors-origin ORIGIN]...\n"
      "                 [--web-root DIR] [--drain-seconds N] [--max-connections N] [--max-volume-mb N]\n"
+     "                 [--max-resident-mb N (needs --cache-dir; 0: no limit)]\n"
      "                 [--shard K/N --shard-peers HOST:PORT,...] [--replica-name NAME]\n"
      "                 (each option also from ISOSERVE_<OPTION>, e.g. ISOSERVE_CACHE_DIR)"},
     {"bench", srv_cmd_bench,
