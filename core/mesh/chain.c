@@ -252,8 +252,10 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
         return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for %zu triangles", exact->triangle_count);
     }
     /* PASS 1 */
-    memcpy(c->positions, exact->positions, 3 * exact->vertex_count * sizeof *c->positions);
-    memcpy(c->level[0].indices, exact->indices, 3 * exact->triangle_count * sizeof *exact->indices);
+    if (exact->vertex_count) /* an empty mesh may have no arrays at all */
+        memcpy(c->positions, exact->positions, 3 * exact->vertex_count * sizeof *c->positions);
+    if (exact->triangle_count)
+        memcpy(c->level[0].indices, exact->indices, 3 * exact->triangle_count * sizeof *exact->indices);
     c->level[0].triangle_count = exact->triangle_count;
     c->levels = 1;
     iso_mesh level0 = view_of(c, 0);

@@ -384,6 +384,16 @@ static void test_chain_levels_are_measured_and_closed(void)
     CHECK_EQ(iso_mesh_chain_pick_distance(chain, 1e9), chain->levels - 1);
     CHECK_EQ(iso_mesh_chain_pick_budget(chain, exact.triangle_count), 0);
     CHECK_EQ(iso_mesh_chain_mesh(chain, chain->levels, &m, &err), ISO_E_ARGUMENT);
+    /* An empty surface (a level outside the values) has a chain of its level 0 alone. */
+    iso_mesh empty;
+    iso_mesh_init(&empty);
+    iso_mesh_chain *none = NULL;
+    CHECK_OK(iso_mesh_chain_build(&empty, 1, 0, &none, &err), &err);
+    CHECK(none && none->levels == 1 && iso_mesh_chain_pick_distance(none, 1) == 0 &&
+          iso_mesh_chain_pick_budget(none, 1) == 0);
+    CHECK_OK(iso_mesh_chain_mesh(none, 0, &m, &err), &err);
+    CHECK(m.triangle_count == 0 && m.vertex_count == 0);
+    iso_mesh_chain_destroy(none);
     free(sorted);
     iso_mesh_chain_destroy(chain);
     iso_mesh_free(&m);
