@@ -99,13 +99,11 @@ static int march_and_finish(const iso_tree *tree, const iso_extract_params *para
 {
     /* With a cap the march stays in index space, so that the cap's vertices weld to it. */
     int world = params->space == ISO_SPACE_WORLD && !params->cap;
-    iso_march_options options = {.prune = !params->no_minmax, .world = world, .threads = params->threads};
-    iso_march *march;
     iso_march_stats ms;
-    int rc = iso_march_begin(tree->vol, &tree->bricks, params->level, &options, mesh, &march, &ms, err);
+    int rc = iso_march_bricks(tree->vol, &tree->bricks, params->level, !params->no_minmax, world,
+                              params->threads, mesh, &ms, err);
     if (rc)
         return rc;
-    iso_march_end(march);
     stats->nodes_visited += ms.bricks_active;
     stats->cells_visited = ms.cells_visited;
     stats->error_bound = ms.error_bound;

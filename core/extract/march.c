@@ -19,11 +19,7 @@
  *
  * Layout: a brick has at most 9x9x9 samples; row r = z * 9 + y of the brick holds bit x
  * for sample (x, y, z), brick-local; a row of cells is named by the sample row of its
- * low corners. Only bricks with triangles are touched in PASS 4.
- *
- * With a tolerance (iso_march_begin), PASS 2 also hands each brick to the caller's cover
- * function, which may take cells out of marching cubes (it fans them itself), and skipped
- * bricks are classified for their crossing ids only. */
+ * low corners. Only bricks with triangles are touched in PASS 4. */
 #include "march.h"
 
 #include <assert.h>
@@ -52,13 +48,11 @@ typedef struct active_brick {
     uint8_t owned[3];                    /* corners 0..owned-1 per axis are this brick's */
     uint32_t vertices, triangles;        /* counted in PASS 2 */
     size_t first_vertex, first_triangle; /* PASS 3 */
-    int skip;                            /* number the crossings, march no cell */
-    uint8_t covered[ISO_BRICK_CELLS][ISO_BRICK_CELLS]; /* [z][y] bit x: a cover's cell */
     /* Per row r = z * 9 + y; rows past the 81 are padding that SSE2 reads 8 at a time. */
     uint16_t inside[INSIDE_ROWS];        /* bit x: sample (x, y, z) above the level */
     uint16_t cross[3][PADDED_ROWS];      /* bit x: owned edge from (x, y, z) along axis crosses */
     uint16_t before[3][PADDED_ROWS];     /* owned crossings numbered before; rows with some only */
-    uint8_t marching[PADDED_ROWS];       /* bit x: cell (x, y, z) to march: mixed, not covered */
+    uint8_t marching[PADDED_ROWS];       /* bit x: cell (x, y, z) to march: mixed */
     /* Which rows PASS 4 has work in, so that it visits only those (a brick the surface
      * crosses as a sheet has work in a third of its rows or so), bit r: the sample rows
      * with an owned crossing, the rows of cells to march. */
@@ -84,7 +78,7 @@ typedef struct threshold {
 /* Below the type's smallest value every sample is above; at or past its largest none is. */
 typedef enum { SOME_ABOVE, ALL_ABOVE, NONE_ABOVE } threshold_reach;
 
-typedef struct iso_march {
+typedef struct march_job {
     const iso_volume *vol;
     const iso_bricks *bricks;
     double level;
@@ -102,13 +96,8 @@ typedef struct iso_march {
      * its edge's coordinate. NULL otherwise. */
     float *plane[3];
     double offset[3], scale[3];
-    const uint8_t *skip;
-    iso_march_cover_fn cover;
-    void *cover_context;
     double error[MAX_THREADS];
-    size_t extra_vertices[MAX_THREADS], extra_triangles[MAX_THREADS];
     size_t cells[MAX_THREADS]; /* cells marched, per thread: counted where classified */
-    int cover_status[MAX_THREADS];
     atomic_size_t next_brick;  /* the next active brick a thread may take (PASS 2, 4) */
 } march_job;
 
@@ -264,12 +253,6 @@ static void brick_origin(const active_brick *ab, size_t lo[3])
         lo[d] = (size_t)ab->brick[d] * ISO_BRICK_CELLS;
 }
 
-static void brick_origin_u32(const active_brick *ab, uint32_t lo[3])
-{
-    for (int d = 0; d < 3; d++)
-        lo[d] = ab->brick[d] * ISO_BRICK_CELLS;
-}
-
 /* The four sample rows around the row of cells at (y, z): a, b at z (y and y + 1), c, d at
  * z + 1. A cell's case and the row's mixed cells are shifts of these, read once per row. */
 typedef struct cell_row {
@@ -304,24 +287,6 @@ static inline unsigned case_of(uint64_t cases, int x)
 }
 
 /* ---- PASS 2: classify ---- */
-
-/* Shows the classified brick to the caller's cover function and keeps what it covers. */
-static int cover_brick(march_job *job, int t, active_brick *ab)
-{
-    iso_march_brick view;
-    memset(&view, 0, sizeof view);
-    brick_origin_u32(ab, view.lo);
-    memcpy(view.n, ab->n, sizeof view.n);
-    view.inside = ab->inside;
-    for (int z = 0; z + 1 < ab->n[2]; z++)
-        for (int y = 0; y + 1 < ab->n[1]; y++)
-            view.mixed[z][y] = ab->marching[z * S + y];
-    int rc = job->cover(job->cover_context, t, &view);
-    memcpy(ab->covered, view.covered, sizeof ab->covered);
-    job->extra_vertices[t] += view.extra_vertices;
-    job->extra_triangles[t] += view.extra_triangles;
-    return rc;
-}
 
 /* Any brick: per row its owned crossing edges and its mixed cells, one row at a time. */
 static void scalar_rows(active_brick *ab)
@@ -418,18 +383,6 @@ static uint32_t number_crossings(active_brick *ab)
     return count;
 }
 
-/* Takes the cells a cover function fans out of the rows to march. */
-static void drop_covered(active_brick *ab)
-{
-    for (int word = 0; word < 2; word++)
-        for (uint64_t rows = ab->marching_rows[word]; rows; rows &= rows - 1) {
-            int r = 64 * word + __builtin_ctzll(rows);
-            ab->marching[r] &= (uint8_t)~ab->covered[r / S][r % S];
-            if (!ab->marching[r])
-                ab->marching_rows[word] &= ~(UINT64_C(1) << (r % 64));
-        }
-}
-
 static uint32_t count_triangles(const active_brick *ab)
 {
     const iso_mc_case *cases = iso_mc_cases();
@@ -444,8 +397,8 @@ static uint32_t count_triangles(const active_brick *ab)
     return triangles;
 }
 
-/* Returns the cells of the brick marching cubes visits: not skipped, not covered. */
-static size_t classify(march_job *job, int t, active_brick *ab)
+/* Returns the cells of the brick marching cubes visits. */
+static size_t classify(march_job *job, active_brick *ab)
 {
     size_t lo[3], hi[3];
     iso_bricks_box(job->vol, ab->brick, lo, hi);
@@ -463,22 +416,8 @@ static size_t classify(march_job *job, int t, active_brick *ab)
 #endif
         scalar_rows(ab);
     ab->vertices = number_crossings(ab);
-    memset(ab->covered, 0, sizeof ab->covered);
-    ab->triangles = 0;
-    if (ab->skip) {
-        ab->marching_rows[0] = ab->marching_rows[1] = 0;
-        return 0;
-    }
-    size_t cells = (size_t)(ab->n[0] - 1) * (size_t)(ab->n[1] - 1) * (size_t)(ab->n[2] - 1);
-    if (job->cover && !job->cover_status[t]) {
-        job->cover_status[t] = cover_brick(job, t, ab);
-        for (int z = 0; z < ISO_BRICK_CELLS; z++)
-            for (int y = 0; y < ISO_BRICK_CELLS; y++)
-                cells -= bit_count[ab->covered[z][y]];
-        drop_covered(ab);
-    }
     ab->triangles = count_triangles(ab);
-    return cells;
+    return (size_t)(ab->n[0] - 1) * (size_t)(ab->n[1] - 1) * (size_t)(ab->n[2] - 1);
 }
 
 typedef struct range {
@@ -502,8 +441,8 @@ static int next_chunk(march_job *job, range *r)
     return 1;
 }
 
-/* Chunks with a cover function too: its caller numbers the fans by brick afterwards
- * (extract.c), so the mesh does not depend on which thread took which brick. */
+/* Bricks in chunks from the shared counter; the mesh does not depend on which thread took
+ * which brick (PASS 3 lays the bricks out in grid order). */
 static void classify_share(void *context, int t, int threads)
 {
     march_job *job = context;
@@ -512,7 +451,7 @@ static void classify_share(void *context, int t, int threads)
     (void)threads;
     while (next_chunk(job, &r))
         for (size_t i = r.begin; i < r.end; i++)
-            cells += classify(job, t, &job->active[i]);
+            cells += classify(job, &job->active[i]);
     job->cells[t] = cells;
 }
 
@@ -903,11 +842,8 @@ static size_t number_selected(const march_job *job, int prune, int32_t *slot, ui
     const iso_bricks *g = job->bricks;
     size_t total = iso_bricks_total(g), n = 0;
     float level = float_at_or_below(job->level);
-    const uint8_t *skip = job->skip;
     for (size_t at = 0; at < total; at++) {
         int on = !prune || ((g->min[at] <= level) & (g->max[at] > level));
-        if (skip)
-            on &= skip[at] != ISO_MARCH_SKIP_UNREAD;
         slot[at] = on ? (int32_t)n : -1;
         order[n] = (uint32_t)at;
         n += (size_t)on;
@@ -934,7 +870,6 @@ static int select_bricks(march_job *job, int prune)
     for (size_t i = 0; i < n; i++) {
         active_brick *ab = &job->active[i];
         uint32_t at = order[i];
-        ab->skip = job->skip && job->skip[at];
         ab->brick[0] = at % g->count[0];
         ab->brick[1] = at / g->count[0] % g->count[1];
         ab->brick[2] = at / g->count[0] / g->count[1];
@@ -944,7 +879,7 @@ static int select_bricks(march_job *job, int prune)
     return 0;
 }
 
-static int lay_out_mesh(march_job *job, iso_mesh *mesh, size_t extra_vertices, size_t extra_triangles)
+static int lay_out_mesh(march_job *job, iso_mesh *mesh)
 {
     size_t vertices = 0, triangles = 0;
     for (size_t i = 0; i < job->active_count; i++) {
@@ -953,45 +888,29 @@ static int lay_out_mesh(march_job *job, iso_mesh *mesh, size_t extra_vertices, s
         vertices += job->active[i].vertices;
         triangles += job->active[i].triangles;
     }
-    if (vertices + extra_vertices > UINT32_MAX)
+    if (vertices > UINT32_MAX)
         return ISO_E_LIMIT;
     iso_mesh_clear(mesh);
-    if (iso_mesh_reserve(mesh, vertices + extra_vertices, triangles + extra_triangles))
+    if (iso_mesh_reserve(mesh, vertices, triangles))
         return ISO_E_NOMEM;
     mesh->vertex_count = vertices;
     mesh->triangle_count = triangles;
     return 0;
 }
 
-static void total_extras(const march_job *job, int used, const iso_march_options *o, size_t *vertices,
-                         size_t *triangles)
+static int run_passes(march_job *job, int prune, int threads, iso_march_stats *stats)
 {
-    *vertices = o->extra_vertices;
-    *triangles = o->extra_triangles;
-    for (int t = 0; t < used; t++) {
-        *vertices += job->extra_vertices[t];
-        *triangles += job->extra_triangles[t];
-    }
-}
-
-static int run_passes(march_job *job, const iso_march_options *o, iso_march_stats *stats)
-{
-    int threads = iso_parallel_threads(o->threads);
+    threads = iso_parallel_threads(threads);
     int rc = make_planes(job);
     if (rc)
         return rc;
-    rc = select_bricks(job, o->prune);
+    rc = select_bricks(job, prune);
     if (rc)
         return rc;
     int used = job->active_count < (size_t)threads ? (job->active_count ? (int)job->active_count : 1) : threads;
     atomic_store_explicit(&job->next_brick, 0, memory_order_relaxed);
     iso_parallel_run(used, classify_share, job);
-    for (int t = 0; t < used; t++)
-        if (job->cover_status[t])
-            return job->cover_status[t];
-    size_t extra_vertices, extra_triangles;
-    total_extras(job, used, o, &extra_vertices, &extra_triangles);
-    rc = lay_out_mesh(job, job->mesh, extra_vertices, extra_triangles);
+    rc = lay_out_mesh(job, job->mesh);
     if (rc)
         return rc;
     atomic_store_explicit(&job->next_brick, 0, memory_order_relaxed);
@@ -1005,86 +924,7 @@ static int run_passes(march_job *job, const iso_march_options *o, iso_march_stat
     return 0;
 }
 
-int iso_march_begin(const iso_volume *vol, const iso_bricks *bricks, double level,
-                    const iso_march_options *options, iso_mesh *mesh, iso_march **out,
-                    iso_march_stats *stats, iso_error *err)
-{
-    static pthread_once_t once = PTHREAD_ONCE_INIT;
-    assert(vol && bricks && options && mesh && out && stats);
-    pthread_once(&once, make_tables);
-    memset(stats, 0, sizeof *stats);
-    *out = NULL;
-    march_job *job = calloc(1, sizeof *job);
-    if (!job) {
-        iso_mesh_free(mesh);
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
-    }
-    job->vol = vol;
-    job->bricks = bricks;
-    job->level = level;
-    job->reach = make_threshold(vol->type, level, &job->threshold);
-    job->mesh = mesh;
-    job->world = options->world;
-    job->axis_aligned = 1;
-    for (int r = 0; r < 3; r++)
-        for (int c = 0; c < 3; c++)
-            job->axis_aligned &= vol->direction[r][c] == (r == c);
-    job->skip = options->skip;
-    job->cover = options->cover;
-    job->cover_context = options->cover_context;
-    int rc = run_passes(job, options, stats);
-    if (rc) {
-        iso_march_end(job);
-        iso_mesh_free(mesh);
-        if (rc == ISO_E_LIMIT)
-            return iso_error_set(err, rc, "the surface needs more than 2^32 - 1 vertices");
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
-    }
-    *out = job;
-    return 0;
-}
-
-uint32_t iso_march_vertex(const iso_march *job, const uint32_t corner[3], int axis)
-{
-    const iso_bricks *g = job->bricks;
-    uint32_t b[3];
-    for (int d = 0; d < 3; d++) {
-        b[d] = corner[d] / ISO_BRICK_CELLS;
-        if (b[d] >= g->count[d])
-            b[d] = g->count[d] - 1; /* the last sample plane belongs to the last brick */
-    }
-    int32_t slot = job->slot[((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0]];
-    assert(slot >= 0);
-    if (slot < 0)
-        return UINT32_MAX;
-    const active_brick *ab = &job->active[slot];
-    int x = (int)(corner[0] - b[0] * ISO_BRICK_CELLS), r = (int)(corner[2] - b[2] * ISO_BRICK_CELLS) * S +
-                                                       (int)(corner[1] - b[1] * ISO_BRICK_CELLS);
-    unsigned row = ab->cross[axis][r];
-    assert(row >> x & 1);
-    if (!(row >> x & 1))
-        return UINT32_MAX;
-    return (uint32_t)(ab->first_vertex + ab->before[axis][r] + bit_count[row & ((1u << x) - 1)]);
-}
-
-size_t iso_march_box_triangles(const iso_march_brick *brick, const uint32_t lo[3], const uint32_t hi[3])
-{
-    const iso_mc_case *cases = iso_mc_cases();
-    size_t count = 0;
-    unsigned span = ((1u << hi[0]) - 1) & ~((1u << lo[0]) - 1);
-    for (uint32_t z = lo[2]; z < hi[2]; z++)
-        for (uint32_t y = lo[1]; y < hi[1]; y++) {
-            unsigned m = brick->mixed[z][y] & span;
-            if (!m)
-                continue; /* most rows of a sub-box: no table loads for them */
-            uint64_t row = row_cases(cell_row_at(brick->inside, (int)y, (int)z));
-            for (; m; m &= m - 1)
-                count += cases[case_of(row, __builtin_ctz(m))].triangle_count;
-        }
-    return count;
-}
-
-void iso_march_end(iso_march *job)
+static void march_free(march_job *job)
 {
     if (!job)
         return;
@@ -1097,9 +937,32 @@ void iso_march_end(iso_march *job)
 int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double level, int prune,
                      int world, int threads, iso_mesh *mesh, iso_march_stats *stats, iso_error *err)
 {
-    iso_march_options options = {.prune = prune, .world = world, .threads = threads};
-    iso_march *job;
-    int rc = iso_march_begin(vol, bricks, level, &options, mesh, &job, stats, err);
-    iso_march_end(job);
-    return rc;
+    static pthread_once_t once = PTHREAD_ONCE_INIT;
+    assert(vol && bricks && mesh && stats);
+    pthread_once(&once, make_tables);
+    memset(stats, 0, sizeof *stats);
+    march_job *job = calloc(1, sizeof *job);
+    if (!job) {
+        iso_mesh_free(mesh);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    }
+    job->vol = vol;
+    job->bricks = bricks;
+    job->level = level;
+    job->reach = make_threshold(vol->type, level, &job->threshold);
+    job->mesh = mesh;
+    job->world = world;
+    job->axis_aligned = 1;
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++)
+            job->axis_aligned &= vol->direction[r][c] == (r == c);
+    int rc = run_passes(job, prune, threads, stats);
+    march_free(job);
+    if (rc) {
+        iso_mesh_free(mesh);
+        if (rc == ISO_E_LIMIT)
+            return iso_error_set(err, rc, "the surface needs more than 2^32 - 1 vertices");
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    }
+    return 0;
 }
