@@ -70,6 +70,11 @@ $(BUILD)/tests/test_http_oom: tests/unit/test_http_oom.c $(SUPPORT_OBJ) $(ALLOC_
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -Itests/support -Itests/support/alloc -Iserver -MMD -MP $< $(SUPPORT_OBJ) $(ALLOC_FAIL_OBJ) $(filter-out $(BUILD)/server/main.o,$(SERVER_OBJ)) $(BUILD)/libisoserve.a $(LIBS) -o $@
 
+# The collection's eviction, white-box, over the server's objects (all but main).
+$(BUILD)/tests/test_collection: tests/unit/test_collection.c $(SUPPORT_OBJ) $(filter-out $(BUILD)/server/main.o,$(SERVER_OBJ)) $(BUILD)/libisoserve.a
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) -Itests/support -Iserver -MMD -MP $< $(SUPPORT_OBJ) $(filter-out $(BUILD)/server/main.o,$(SERVER_OBJ)) $(BUILD)/libisoserve.a $(LIBS) -o $@
+
 # test_march again over the kernel built without SSE2 (as on a machine without it): the
 # row-by-row paths then classify every brick, full ones included.
 $(BUILD)/scalar/core/extract/march.o: core/extract/march.c
