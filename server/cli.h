@@ -29,7 +29,7 @@ typedef struct srv_open_options {
 /* "--threads N": N in 1..256 into *threads; 0, or prints the problem and returns 1. */
 int srv_parse_threads(const char *command, const char *text, int *threads);
 
-/* A mesh request allocates and frees tens of MB (the mesh, the fans, the edge census,
+/* A mesh request allocates and frees tens of MB (the mesh, the vertex map, the edge census,
  * Draco's corner tables). With glibc's defaults the large blocks are fresh mmaps and
  * freed memory above 128 KiB is handed back, so every request faults its pages in again
  * (docs/performance.md measures the cost). Blocks up to 32 MiB (glibc's limit) then come

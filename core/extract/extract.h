@@ -72,9 +72,9 @@ int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,
  * again and again (range / 2^20 .. range). The guarantee of extract.h holds for the
  * tolerance chosen.
  *
- * The ladder has a limit on CT: a node's fit error stays above any useful tolerance until
- * the node is one cell wide, so even large tolerances keep many of the triangles, and
- * faithful ones nearly all (docs/performance.md). So iso_extract_budget_faithful, the
+ * The ladder has a limit on CT: a brick's coarse levels fit only once the tolerance passes
+ * its sharpest cell's error, so faithful tolerances keep most of the triangles (half the
+ * range keeps under 12%, but not faithfully; docs/performance.md). So iso_extract_budget_faithful, the
  * policy the server uses, climbs the ladder only as far as a faithful tolerance and, when
  * that does not fit, simplifies the mesh of the requested tolerance with meshoptimizer
  * instead (iso_simplify): at the same triangle count the simplified mesh is the closer to
