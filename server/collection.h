@@ -9,8 +9,8 @@
  *
  * Bounded memory (max_resident_bytes): a request holds a reference to its volume from
  * srv_collection_acquire to srv_collection_release, a mesh job its own. After each load on
- * demand, while the resident bytes (samples and hierarchies) exceed the cap, the least
- * recently used volume nobody holds is evicted: its memory freed, its slot idle again. Its
+ * demand and each release of a volume's last holder, while the resident bytes (samples and
+ * hierarchies) exceed the cap, the least recently used volume nobody holds is evicted: its memory freed, its slot idle again. Its
  * hierarchy file stays in the cache dir, so the next request reads it back instead of
  * building it. Volumes in use are never evicted, so the cap is a target they may exceed. */
 #ifndef SRV_COLLECTION_H
