@@ -217,11 +217,11 @@ void number_in_order(const iso_mesh *mesh, draco::Mesh &dm, numbering &n)
 // Numbers vertices in the order triangles first use them, and starts each triangle at the
 // corner (of its three rotations, same winding) whose index deltas take the fewest bits.
 // The sequential coder entropy-codes the delta of each index from the one before it;
-// extraction appends fan centres after the kernel's vertices, so in the mesh's own order
-// those deltas span the whole mesh. On CThead skin at tolerance 654 this took the stream
-// from 2,364,596 to 1,561,382 bytes and the encode from 625 M to 461 M instructions (a
-// smaller alphabet of deltas shortens Draco's sort of symbol frequencies); at tolerance 0,
-// 2.29 to 2.22 MB at about the same time. Edgebreaker (speeds 0-9) renumbers anyway.
+// extraction numbers vertices as it makes them (brick by brick, a transition cell's centre
+// after the crossings around it, a chain level in meshoptimizer's order), so in the mesh's
+// own order those deltas can span far more ids than its neighbourhood, and small deltas
+// also make a smaller alphabet, which shortens Draco's sort of symbol frequencies.
+// Edgebreaker (speeds 0-9) renumbers anyway.
 void number_by_first_use(const iso_mesh *mesh, draco::Mesh &dm, numbering &n)
 {
     const uint32_t unused = UINT32_MAX;
