@@ -18,7 +18,6 @@ import os
 import re
 import threading
 import shutil
-import socket
 import subprocess
 import sys
 import tempfile
@@ -29,6 +28,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "support"))
 sys.path.insert(0, os.path.join(HERE, "..", "http"))
 from results import Results, Skip  # noqa: E402 - found through the path just set
+from ports import free_port  # noqa: E402
 from test_http import BIN, Server, problem  # noqa: E402 - the daemon driver, shared
 
 LABEL = "dicom" + os.environ.get("ISO_SAN_SUFFIX", "")  # tests/run.sh's asan pass says dicom-san
@@ -37,12 +37,6 @@ report, check = RESULTS.report, RESULTS.check
 HELPER = os.path.join(HERE, "..", "support", "dicom_series.py")
 ORTHANC = shutil.which("Orthanc")
 MESH = "/mesh?level=0&format=ply&normals=none"
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Orthanc:

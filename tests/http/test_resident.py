@@ -29,7 +29,6 @@ import os
 import random
 import re
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -38,6 +37,7 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
 from results import Results  # noqa: E402 - found through the path just set
+from ports import free_port  # noqa: E402
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", os.path.join(ROOT, "build/isoserve")))
@@ -55,14 +55,6 @@ SAN_OVERHEAD_MB = 256
 # (field, first level, step): the k-th volume of a field gets first + k * step.
 FIELDS = (("sphere", -4.0, 0.9), ("torus", -4.0, 0.4), ("ml", 0.3, 0.04),
           ("spike", 0.3, 0.04), ("ijk", 3000.0, 20000.0))
-
-
-def free_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def request(port, target, timeout=120):
