@@ -35,7 +35,8 @@ LABEL = "dicom" + os.environ.get("ISO_SAN_SUFFIX", "")  # tests/run.sh's asan pa
 RESULTS = Results(LABEL)
 report, check = RESULTS.report, RESULTS.check
 HELPER = os.path.join(HERE, "..", "support", "dicom_series.py")
-ORTHANC = shutil.which("Orthanc")
+# Debian installs Orthanc in /usr/sbin, which a normal user's PATH often lacks.
+ORTHANC = shutil.which("Orthanc") or shutil.which("Orthanc", path="/usr/sbin:/usr/local/sbin")
 MESH = "/mesh?level=0&format=ply&normals=none"
 
 
