@@ -431,6 +431,14 @@ draco3d.createDecoderModule({}).then(m => {
         faces = np.frombuffer(payload[nv * 12:], np.dtype([("n", "u1"), ("i", "<u4", 3)]))["i"]
         return pos, faces
 
+    def assert_closed(faces):
+        """Every directed edge used once, and its reverse once: closed and consistently oriented."""
+        edges = {}
+        for a, b, c in faces:
+            for e in ((a, b), (b, c), (c, a)):
+                edges[e] = edges.get(e, 0) + 1
+        assert all(n == 1 and edges.get((b, a)) == 1 for (a, b), n in edges.items())
+
     def budget_faithful():
         r = s.get(f"/v1/volumes/blob/mesh?level={level}&budget=3000&format=ply&normals=none")
         nt = int(r.getheader("X-Iso-Triangles"))
@@ -464,11 +472,7 @@ draco3d.createDecoderModule({}).then(m => {
         assert np.abs(trilinear(blob.astype(np.float64), index) - level).max() <= bound + 1e-3
         # Still closed: every edge once each way. The enclosed volume: 400 triangles' chords
         # cut 2.5% off the exact mesh's (measured), so within 4%.
-        edges = {}
-        for a, b, c in faces:
-            for e in ((a, b), (b, c), (c, a)):
-                edges[e] = edges.get(e, 0) + 1
-        assert all(n == 1 and edges.get((b, a)) == 1 for (a, b), n in edges.items())
+        assert_closed(faces)
         v, v0 = float(r.getheader("X-Iso-Volume-Mm3")), float(exact.getheader("X-Iso-Volume-Mm3"))
         assert abs(v - v0) <= 0.04 * v0, (v, v0)
     check("budget_simplified_with_error", budget_simplified)
@@ -522,11 +526,7 @@ draco3d.createDecoderModule({}).then(m => {
         assert from_exact.max() <= top + 1e-4 and to_exact.max() <= top + 1e-4, (from_exact.max(), top)
         assert max(from_exact.max(), to_exact.max()) >= 0.5 * top, (from_exact.max(), top)
         assert np.quantile(from_exact, 0.9) <= p99 + 1e-4, (np.quantile(from_exact, 0.9), p99)
-        edges = {}
-        for a, b, c in faces:
-            for e in ((a, b), (b, c), (c, a)):
-                edges[e] = edges.get(e, 0) + 1
-        assert all(n == 1 and edges.get((b, a)) == 1 for (a, b), n in edges.items())
+        assert_closed(faces)
         v, v0 = float(r.getheader("X-Iso-Volume-Mm3")), float(exact.getheader("X-Iso-Volume-Mm3"))
         print(f"distance_volume: chain level {k}: {nt} of 3004 triangles, p99 {p99:.4f} mm, "
                f"max {top:.4f} mm, enclosed volume {100 * (v - v0) / v0:+.3f}%", flush=True)

@@ -249,21 +249,34 @@ static void brute_one_way(const iso_mesh *src, const iso_mesh *dst, double spaci
     free(used);
 }
 
-static void test_simplified_sphere_matches_brute_force(void)
+/* Field `name` (loaded, its hierarchy built) and its exact surface at `level` in index
+ * space, into exact (initialised here). Returns the volume (the caller destroys it), or
+ * NULL when a CHECK failed. */
+static iso_volume *field_surface(const char *name, double level, iso_mesh *exact)
 {
     iso_volume *vol = NULL;
     iso_error err;
-    CHECK_OK(iso_field_load("field:sphere:24", NULL, &vol, &err), &err);
+    iso_mesh_init(exact);
+    CHECK_OK(iso_field_load(name, NULL, &vol, &err), &err);
     if (!vol)
-        return;
+        return NULL;
     iso_vol_update_stats(vol);
     iso_tree *tree = surface_build(vol);
-    iso_mesh exact, simple;
-    iso_mesh_init(&exact);
-    iso_mesh_init(&simple);
     iso_extract_stats st;
-    iso_extract_params xp = {.level = 3.0, .space = ISO_SPACE_INDEX};
-    CHECK_OK(iso_extract(tree, &xp, &exact, &st, &err), &err);
+    iso_extract_params xp = {.level = level, .space = ISO_SPACE_INDEX};
+    CHECK_OK(iso_extract(tree, &xp, exact, &st, &err), &err);
+    iso_tree_destroy(tree);
+    return vol;
+}
+
+static void test_simplified_sphere_matches_brute_force(void)
+{
+    iso_error err;
+    iso_mesh exact, simple;
+    iso_volume *vol = field_surface("field:sphere:24", 3.0, &exact);
+    if (!vol)
+        return;
+    iso_mesh_init(&simple);
     CHECK(iso_mesh_reserve(&simple, exact.vertex_count, exact.triangle_count) == 0);
     memcpy(simple.positions, exact.positions, 3 * exact.vertex_count * sizeof(float));
     memcpy(simple.indices, exact.indices, 3 * exact.triangle_count * sizeof(uint32_t));
@@ -293,7 +306,6 @@ static void test_simplified_sphere_matches_brute_force(void)
     CHECKF(all.p99 > 0.01 && all.max < 1, "p99 %g, max %g", all.p99, all.max);
     iso_mesh_free(&exact);
     iso_mesh_free(&simple);
-    iso_tree_destroy(tree);
     iso_vol_destroy(vol);
 }
 
@@ -315,19 +327,12 @@ static int by_position(const void *pa, const void *pb)
 
 static void test_chain_levels_are_measured_and_closed(void)
 {
-    iso_volume *vol = NULL;
     iso_error err;
-    CHECK_OK(iso_field_load("field:torus:32", NULL, &vol, &err), &err);
+    iso_mesh exact, m;
+    iso_volume *vol = field_surface("field:torus:32", 1.0, &exact);
     if (!vol)
         return;
-    iso_vol_update_stats(vol);
-    iso_tree *tree = surface_build(vol);
-    iso_mesh exact, m;
-    iso_mesh_init(&exact);
     iso_mesh_init(&m);
-    iso_extract_stats st;
-    iso_extract_params xp = {.level = 1.0, .space = ISO_SPACE_INDEX};
-    CHECK_OK(iso_extract(tree, &xp, &exact, &st, &err), &err);
     CHECKF(exact.triangle_count >= 2048, "%zu triangles", exact.triangle_count);
     iso_mesh_chain *chain = NULL;
     CHECK_EQ(iso_mesh_chain_build(&exact, 0, 0, &chain, &err), ISO_E_ARGUMENT);
@@ -398,7 +403,6 @@ static void test_chain_levels_are_measured_and_closed(void)
     iso_mesh_chain_destroy(chain);
     iso_mesh_free(&m);
     iso_mesh_free(&exact);
-    iso_tree_destroy(tree);
     iso_vol_destroy(vol);
 }
 
@@ -408,19 +412,12 @@ static void test_chain_levels_are_measured_and_closed(void)
  * one-thread chain beside it gives the same counts to within the slabs' cut. */
 static void test_chain_in_slabs_stays_closed(void)
 {
-    iso_volume *vol = NULL;
     iso_error err;
-    CHECK_OK(iso_field_load("field:sphere:96", NULL, &vol, &err), &err);
+    iso_mesh exact, m;
+    iso_volume *vol = field_surface("field:sphere:96", 3.0, &exact);
     if (!vol)
         return;
-    iso_vol_update_stats(vol);
-    iso_tree *tree = surface_build(vol);
-    iso_mesh exact, m;
-    iso_mesh_init(&exact);
     iso_mesh_init(&m);
-    iso_extract_stats st;
-    iso_extract_params xp = {.level = 3.0, .space = ISO_SPACE_INDEX};
-    CHECK_OK(iso_extract(tree, &xp, &exact, &st, &err), &err);
     CHECKF(exact.triangle_count >= 2 * ISO_CHAIN_SLAB_MIN, "%zu triangles", exact.triangle_count);
     iso_mesh_chain *two = NULL, *one = NULL;
     CHECK_OK(iso_mesh_chain_build(&exact, 1, 2, &two, &err), &err);
@@ -457,7 +454,6 @@ static void test_chain_in_slabs_stays_closed(void)
     iso_mesh_chain_destroy(one);
     iso_mesh_free(&m);
     iso_mesh_free(&exact);
-    iso_tree_destroy(tree);
     iso_vol_destroy(vol);
 }
 
