@@ -56,24 +56,21 @@ $(BUILD)/libisoserve.a: $(LIB_OBJ)
 $(BUILD)/isoserve: $(SERVER_OBJ) $(BUILD)/libisoserve.a
 	$(CC) $(CFLAGS) $^ $(LIBS) -o $@
 
+# TEST_EXTRA: what a unit test links beyond the library and the test support, named with
+# its prerequisites below.
 $(BUILD)/tests/%: tests/unit/%.c $(SUPPORT_OBJ) $(BUILD)/libisoserve.a
 	@mkdir -p $(dir $@)
-	$(CC) $(CFLAGS) -Itests/support -MMD -MP $< $(SUPPORT_OBJ) $(BUILD)/libisoserve.a $(LIBS) -o $@
+	$(CC) $(CFLAGS) -Itests/support -Itests/support/alloc -Iserver -MMD -MP $< $(SUPPORT_OBJ) $(TEST_EXTRA) $(BUILD)/libisoserve.a $(LIBS) -o $@
 
-# The allocation-failure sweeps: the failing allocator, and for the HTTP layer's sweep the
-# server's objects (all but main).
-$(BUILD)/tests/test_oom: tests/unit/test_oom.c $(SUPPORT_OBJ) $(ALLOC_FAIL_OBJ) $(BUILD)/libisoserve.a
-	@mkdir -p $(dir $@)
-	$(CC) $(CFLAGS) -Itests/support -Itests/support/alloc -MMD -MP $< $(SUPPORT_OBJ) $(ALLOC_FAIL_OBJ) $(BUILD)/libisoserve.a $(LIBS) -o $@
-
-$(BUILD)/tests/test_http_oom: tests/unit/test_http_oom.c $(SUPPORT_OBJ) $(ALLOC_FAIL_OBJ) $(filter-out $(BUILD)/server/main.o,$(SERVER_OBJ)) $(BUILD)/libisoserve.a
-	@mkdir -p $(dir $@)
-	$(CC) $(CFLAGS) -Itests/support -Itests/support/alloc -Iserver -MMD -MP $< $(SUPPORT_OBJ) $(ALLOC_FAIL_OBJ) $(filter-out $(BUILD)/server/main.o,$(SERVER_OBJ)) $(BUILD)/libisoserve.a $(LIBS) -o $@
-
-# The collection's eviction, white-box, over the server's objects (all but main).
-$(BUILD)/tests/test_collection: tests/unit/test_collection.c $(SUPPORT_OBJ) $(filter-out $(BUILD)/server/main.o,$(SERVER_OBJ)) $(BUILD)/libisoserve.a
-	@mkdir -p $(dir $@)
-	$(CC) $(CFLAGS) -Itests/support -Iserver -MMD -MP $< $(SUPPORT_OBJ) $(filter-out $(BUILD)/server/main.o,$(SERVER_OBJ)) $(BUILD)/libisoserve.a $(LIBS) -o $@
+# The allocation-failure sweeps link the failing allocator; the HTTP layer's sweep and the
+# collection's eviction test (white-box) the server's objects, all but main.
+SERVER_TEST_OBJ = $(filter-out $(BUILD)/server/main.o,$(SERVER_OBJ))
+$(BUILD)/tests/test_oom: TEST_EXTRA = $(ALLOC_FAIL_OBJ)
+$(BUILD)/tests/test_oom: $(ALLOC_FAIL_OBJ)
+$(BUILD)/tests/test_http_oom: TEST_EXTRA = $(ALLOC_FAIL_OBJ) $(SERVER_TEST_OBJ)
+$(BUILD)/tests/test_http_oom: $(ALLOC_FAIL_OBJ) $(SERVER_TEST_OBJ)
+$(BUILD)/tests/test_collection: TEST_EXTRA = $(SERVER_TEST_OBJ)
+$(BUILD)/tests/test_collection: $(SERVER_TEST_OBJ)
 
 # test_march again over the kernel built without SSE2 (as on a machine without it): the
 # row-by-row paths then classify every brick, full ones included.
