@@ -13,6 +13,7 @@ struct srv_cache_item {
     char *key;
     uint64_t hash;
     srv_body *body;
+    size_t bytes;                   /* what the cache counts for it (srv_body_bytes) */
     srv_cache_item *chain;          /* next in the bucket */
     srv_cache_item *newer, *older;  /* LRU list */
 };
@@ -25,6 +26,7 @@ srv_body *srv_body_create(unsigned char *data, size_t size)
         return NULL;
     }
     atomic_init(&body->refs, 1);
+    pthread_mutex_init(&body->gzip_lock, NULL);
     body->data = data;
     body->size = size;
     body->budget_fits = -1;
@@ -49,6 +51,7 @@ void srv_body_release(srv_body *body)
         iso_mesh_chain_destroy(body->chain);
         free(body->data);
         free(body->gzip_data);
+        pthread_mutex_destroy(&body->gzip_lock);
         free(body);
     }
 }
@@ -88,7 +91,7 @@ static void unlink_item(srv_cache *cache, srv_cache_item *item)
         item->older->newer = item->newer;
     else
         cache->oldest = item->newer;
-    cache->bytes -= srv_body_bytes(item->body);
+    cache->bytes -= item->bytes;
     cache->items--;
 }
 
@@ -133,6 +136,34 @@ static void push_newest(srv_cache *cache, srv_cache_item *item)
         cache->oldest = item;
 }
 
+/* Unlinks the least recently used items, never `keep`, until `more` bytes fit under the
+ * limit; returns them chained onto `evicted`, to be freed outside the lock. Lock held. */
+static srv_cache_item *evict(srv_cache *cache, size_t more, const srv_cache_item *keep,
+                             srv_cache_item *evicted)
+{
+    srv_cache_item *victim = cache->oldest;
+    while (victim && cache->bytes + more > cache->limit) {
+        srv_cache_item *next = victim->newer;
+        if (victim != keep) {
+            unlink_item(cache, victim);
+            victim->chain = evicted;
+            evicted = victim;
+            atomic_fetch_add(&cache->evictions, 1);
+        }
+        victim = next;
+    }
+    return evicted;
+}
+
+static void free_items(srv_cache_item *items)
+{
+    while (items) {
+        srv_cache_item *next = items->chain;
+        free_item(items);
+        items = next;
+    }
+}
+
 srv_body *srv_cache_get(srv_cache *cache, const char *key)
 {
     uint64_t hash = hash_key(key);
@@ -171,6 +202,7 @@ void srv_cache_put(srv_cache *cache, const char *key, srv_body *body)
     item->key = copy;
     item->hash = hash_key(key);
     item->body = body;
+    item->bytes = srv_body_bytes(body);
     srv_body_retain(body);
     srv_cache_item *evicted = NULL;
     pthread_mutex_lock(&cache->lock);
@@ -180,23 +212,29 @@ void srv_cache_put(srv_cache *cache, const char *key, srv_body *body)
         old->chain = evicted;
         evicted = old;
     }
-    while (cache->oldest && cache->bytes + srv_body_bytes(body) > cache->limit) {
-        srv_cache_item *victim = cache->oldest;
-        unlink_item(cache, victim);
-        victim->chain = evicted;
-        evicted = victim;
-        atomic_fetch_add(&cache->evictions, 1);
-    }
+    evicted = evict(cache, item->bytes, NULL, evicted);
     srv_cache_item **slot = &cache->buckets[item->hash % cache->bucket_count];
     item->chain = *slot;
     *slot = item;
     push_newest(cache, item);
-    cache->bytes += srv_body_bytes(body);
+    cache->bytes += item->bytes;
     cache->items++;
     pthread_mutex_unlock(&cache->lock);
-    while (evicted) { /* freed outside the lock */
-        srv_cache_item *next = evicted->chain;
-        free_item(evicted);
-        evicted = next;
+    free_items(evicted);
+}
+
+void srv_cache_grew(srv_cache *cache, const char *key, const srv_body *body)
+{
+    uint64_t hash = hash_key(key);
+    srv_cache_item *evicted = NULL;
+    pthread_mutex_lock(&cache->lock);
+    srv_cache_item *item = lookup(cache, key, hash);
+    if (item && item->body == body && srv_body_bytes(body) > item->bytes) {
+        size_t more = srv_body_bytes(body) - item->bytes;
+        evicted = evict(cache, more, item, NULL);
+        item->bytes += more;
+        cache->bytes += more;
     }
+    pthread_mutex_unlock(&cache->lock);
+    free_items(evicted);
 }

@@ -16,6 +16,10 @@ typedef struct srv_body {
     _Atomic int refs;
     unsigned char *data;
     size_t size;
+    int gzip_wanted;                /* the format gains from gzip: its responses vary by
+                                     * Accept-Encoding, the gzip form made on first demand */
+    pthread_mutex_t gzip_lock;      /* held while the gzip form is made */
+    int gzip_tried;                 /* under gzip_lock: the gzip form was made or refused */
     unsigned char *gzip_data;       /* the same bytes gzipped (malloc'd), or NULL */
     size_t gzip_size;
     const char *content_type;       /* static string */
@@ -69,5 +73,9 @@ srv_body *srv_cache_get(srv_cache *cache, const char *key);
  * key and evicting old ones until the total fits. A body larger than the whole limit is
  * not cached. */
 void srv_cache_put(srv_cache *cache, const char *key, srv_body *body);
+/* body, cached under key, has grown (its gzip form was made after it was cached): counts
+ * its new bytes and evicts older bodies until the total fits again. Nothing if key now
+ * holds another body or none. */
+void srv_cache_grew(srv_cache *cache, const char *key, const srv_body *body);
 
 #endif

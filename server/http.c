@@ -498,13 +498,16 @@ static void gzip_etag(const char *etag, char *out, size_t size)
     snprintf(out, size, "%.*s-gz\"", (int)strlen(etag) - 1, etag);
 }
 
-/* Sends a body, gzipped when the body has a gzip form and the client accepts it; takes
- * over the caller's reference. */
+/* Sends a body (cached under key), gzipped when its format gains from gzip and the client
+ * accepts it: the gzip form is made for the first such client and cached with the body.
+ * Takes over the caller's reference. */
 static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_request *req,
-                                 srv_body *body, const char *etag, const char *file_name,
-                                 int hit)
+                                 srv_body *body, const char *key, const char *etag,
+                                 const char *file_name, int hit)
 {
-    int gzip = body->gzip_data && accepts_gzip(c);
+    int gzip = body->gzip_wanted && accepts_gzip(c) ? srv_mesh_body_gzip(body) : 0;
+    if (gzip == 2)
+        srv_cache_grew(s->cache, key, body);
     char gz_etag[112];
     if (gzip) {
         gzip_etag(etag, gz_etag, sizeof gz_etag);
@@ -518,7 +521,7 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
     }
     add_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, body->content_type);
     add_cache_headers(r, etag);
-    if (body->gzip_data)
+    if (body->gzip_wanted)
         add_header(r, MHD_HTTP_HEADER_VARY, "Accept-Encoding");
     if (gzip)
         add_header(r, MHD_HTTP_HEADER_CONTENT_ENCODING, "gzip");
@@ -559,7 +562,7 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
         add_number(r, "X-Iso-Simplify-Error-Mm", "%.6g", body->simplify_error_mm);
         add_number(r, "X-Iso-Simplify-Error-Voxels", "%.6g", body->simplify_error_voxels);
     }
-    if (body->gzip_data)
+    if (gzip)
         add_number(r, "X-Iso-Gzip-Ms", "%.3f", body->gzip_ms);
     add_header(r, "X-Iso-Cache", hit ? "hit" : "miss");
     return send_response(s, c, req, 200, r, gzip ? body->gzip_size : body->size);
@@ -595,7 +598,7 @@ static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_r
     }
     srv_body *body = srv_cache_get(s->cache, key);
     if (body)
-        return send_body(s, c, req, body, etag, file_name, 1);
+        return send_body(s, c, req, body, key, etag, file_name, 1);
 
     srv_mesh_job *work = calloc(1, sizeof *work);
     if (!work || !(work->key = strdup(key))) {
@@ -618,7 +621,7 @@ static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_r
     srv_pool_release(s->pool, job);
     if (!body)
         return send_problem(s, c, req, &problem, path);
-    return send_body(s, c, req, body, etag, file_name, 0);
+    return send_body(s, c, req, body, key, etag, file_name, 0);
 }
 
 /* ---------------------------------------------------------------- routing */

@@ -62,24 +62,38 @@ static srv_body *failed(const srv_mesh_job *job, int rc, const iso_error *err,
 }
 
 /* A meshopt glb's bytes are not entropy coded, so gzip takes about a third off them
- * (Draco's are: gzip gains nothing there). The gzip form is kept beside the body when it
- * saves at least a twentieth; failing to make it only leaves it out. */
-static void keep_gzip(srv_body *body, proto_format format)
+ * (Draco's are: gzip gains nothing there). Only those vary by Accept-Encoding. */
+static int gzip_wanted(const srv_body *body, proto_format format)
 {
-    if (format != PROTO_FORMAT_GLB_MESHOPT || body->size < 1024)
-        return;
-    double start = iso_clock_ms();
-    unsigned char *gz;
-    size_t size;
-    if (proto_gzip(body->data, body->size, &gz, &size, NULL))
-        return;
-    if (size > body->size - body->size / 20) {
-        free(gz);
-        return;
+    return format == PROTO_FORMAT_GLB_MESHOPT && body->size >= 1024;
+}
+
+int srv_mesh_body_gzip(srv_body *body)
+{
+    if (!body->gzip_wanted)
+        return 0;
+    pthread_mutex_lock(&body->gzip_lock);
+    int made_now = 0;
+    if (!body->gzip_tried) {
+        body->gzip_tried = 1;
+        double start = iso_clock_ms();
+        unsigned char *gz;
+        size_t size;
+        /* Kept when it saves at least a twentieth; failing to make it only leaves it out. */
+        if (!proto_gzip(body->data, body->size, &gz, &size, NULL)) {
+            if (size > body->size - body->size / 20) {
+                free(gz);
+            } else {
+                body->gzip_data = gz;
+                body->gzip_size = size;
+                body->gzip_ms = iso_clock_ms() - start;
+                made_now = 1;
+            }
+        }
     }
-    body->gzip_data = gz;
-    body->gzip_size = size;
-    body->gzip_ms = iso_clock_ms() - start;
+    int made = body->gzip_data != NULL;
+    pthread_mutex_unlock(&body->gzip_lock);
+    return made ? 1 + made_now : 0;
 }
 
 /* The cache key of the simplification chain a request would use: one per (volume,
@@ -137,7 +151,7 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
                       &err, problem);
     }
     body->content_type = proto_format_content_type(req.format);
-    keep_gzip(body, req.format);
+    body->gzip_wanted = gzip_wanted(body, req.format);
     body->triangles = res.stats.triangles;
     body->vertices = res.stats.vertices;
     body->cells_visited = res.stats.cells_visited;

@@ -19,6 +19,10 @@ typedef struct srv_mesh_job {
 
 /* A job for the pool (see pool.h's srv_job_fn): arg is a srv_mesh_job. */
 srv_body *srv_mesh_job_run(void *arg, proto_problem *problem);
+/* The gzip form of a body whose format gains from it (gzip_wanted), made on the first
+ * call, by one caller at a time: 0 none (not wanted, or not worth it), 1 there, 2 made by
+ * this call (the body has grown: srv_cache_grew). */
+int srv_mesh_body_gzip(srv_body *body);
 /* Frees a srv_mesh_job made with malloc, releasing its volume. */
 void srv_mesh_job_free(void *arg);
 

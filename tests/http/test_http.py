@@ -352,14 +352,17 @@ draco3d.createDecoderModule({}).then(m => {
     # format=glb-meshopt: three's GLTFLoader with its MeshoptDecoder gets exactly the
     # mesh's triangles and vertices, and the PLY's bounding box within half a qp step.
     # Its gzip form goes to a client that accepts gzip: the same bytes inflated, its own
-    # ETag, and either ETag answers 304.
+    # ETag, and either ETag answers 304. The gzip form is made only when a client accepts
+    # it (none before), then cached beside the body (the cache's bytes grow by its size).
     def glb_meshopt():
         if not os.path.isdir("web/node_modules/three"):
             raise Skip("web/node_modules/three not installed (make node-deps)")
         url = f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=glb-meshopt"
         r = s.get(url)
         assert r.status == 200 and r.getheader("Content-Type") == "model/gltf-binary", r.status
-        assert r.getheader("Content-Encoding") is None
+        assert r.getheader("Content-Encoding") is None and r.getheader("Vary") == "Accept-Encoding"
+        assert r.getheader("X-Iso-Gzip-Ms") is None, "gzip made for a client that did not accept it"
+        cached_bytes = s.metric("isoserve_mesh_cache_bytes")
         assert r.getheader("X-Iso-Draco-Speed") is None
         assert 'filename="blob-' in r.getheader("Content-Disposition") and ".glb\"" in r.getheader("Content-Disposition")
         path = os.path.join(tmp, "blob.meshopt.glb")
@@ -380,8 +383,13 @@ draco3d.createDecoderModule({}).then(m => {
         assert g.getheader("Vary") == "Accept-Encoding" and g.getheader("X-Iso-Cache") == "hit"
         assert gzip.decompress(g.body) == r.body and len(g.body) <= 0.95 * len(r.body), (len(g.body), len(r.body))
         assert g.getheader("ETag") != r.getheader("ETag") and float(g.getheader("X-Iso-Gzip-Ms")) >= 0
+        grew = s.metric("isoserve_mesh_cache_bytes") - cached_bytes
+        assert grew == len(g.body), (grew, len(g.body))
+        again = s.get(url, {"Accept-Encoding": "gzip"})
+        assert again.body == g.body and s.metric("isoserve_mesh_cache_bytes") - cached_bytes == grew
         refused = s.get(url, {"Accept-Encoding": "gzip;q=0, identity"})
         assert refused.getheader("Content-Encoding") is None and refused.body == r.body
+        assert refused.getheader("Vary") == "Accept-Encoding"
         for etag in (r.getheader("ETag"), g.getheader("ETag")):
             assert s.get(url, {"If-None-Match": etag}).status == 304, etag
         # Draco is entropy coded already: never gzipped.
