@@ -11,7 +11,8 @@
  *      to triangle, in double), searching the grid's cells ring by ring around the sample's
  *      cell until no farther ring can hold anything nearer; samples are shared by threads;
  *   4. percentile: the smallest sample distance d such that samples of total weight at
- *      least 99% of all lie within d (a histogram finds d's bin, the bin is sorted). */
+ *      least 99% of all lie within d (a histogram finds d's bin, the bin is sorted), and
+ *      the weighted mean of the distances. */
 #include "mesh.h"
 
 #include <math.h>
@@ -339,16 +340,21 @@ static int compare_floats(const void *pa, const void *pb)
     return (a > b) - (a < b);
 }
 
-/* PASS 4: the weighted 99th percentile and the maximum. Returns 0 or ISO_E_NOMEM. */
-static int percentile(const float *dist, const float *weight, size_t n, double *p99, double *max)
+/* PASS 4: the weighted 99th percentile, the maximum, the weighted mean and the total
+ * weight (the source's area). Returns 0 or ISO_E_NOMEM. */
+static int percentile(const float *dist, const float *weight, size_t n, double *p99, double *max,
+                      double *mean, double *area)
 {
-    double total = 0, top = 0;
+    double total = 0, top = 0, sum = 0;
     for (size_t i = 0; i < n; i++) {
         total += weight[i];
+        sum += (double)dist[i] * weight[i];
         top = fmax(top, dist[i]);
     }
     *max = top;
     *p99 = 0;
+    *mean = total > 0 ? sum / total : 0;
+    *area = total;
     if (!(top > 0) || !(total > 0))
         return 0;
     double *bins = calloc(HISTOGRAM_BINS, sizeof *bins);
@@ -394,14 +400,15 @@ static int percentile(const float *dist, const float *weight, size_t n, double *
 
 /* One direction: from src's surface to dst's. */
 static int one_way(const iso_mesh *src, const iso_mesh *dst, const float lo[3], const float hi[3],
-                   double spacing, int threads, double *p99, double *max, size_t *samples)
+                   double spacing, int threads, double *p99, double *max, double *mean, double *area,
+                   size_t *samples)
 {
-    *p99 = *max = 0;
+    *p99 = *max = *mean = *area = 0;
     *samples = 0;
     if (!src->triangle_count)
         return 0;
     if (!dst->triangle_count) {
-        *p99 = *max = INFINITY;
+        *p99 = *max = *mean = INFINITY;
         return 0;
     }
     grid g;
@@ -435,7 +442,7 @@ static int one_way(const iso_mesh *src, const iso_mesh *dst, const float lo[3], 
     direction d = {.src = src, .dst = dst, .g = &g, .spacing = spacing, .first = first,
                    .vertices = vertices, .vertex_count = vertex_count, .dist = dist, .weight = weight};
     iso_parallel_run(iso_parallel_threads(threads), measure_part, &d);
-    rc = percentile(dist, weight, n, p99, max);
+    rc = percentile(dist, weight, n, p99, max, mean, area);
     *samples = n;
 done:
     grid_free(&g);
@@ -465,14 +472,22 @@ int iso_mesh_distance_compute(const iso_mesh *a, const iso_mesh *b, double spaci
         return iso_error_set(err, ISO_E_ARGUMENT, "distance: sample spacing %g must be > 0", spacing);
     float lo[3], hi[3];
     union_bounds(a, b, lo, hi);
-    int rc = one_way(a, b, lo, hi, spacing, threads, &out->p99_ab, &out->max_ab, &out->samples_a);
+    double area_a, area_b;
+    int rc = one_way(a, b, lo, hi, spacing, threads, &out->p99_ab, &out->max_ab, &out->mean_ab, &area_a,
+                     &out->samples_a);
     if (!rc)
-        rc = one_way(b, a, lo, hi, spacing, threads, &out->p99_ba, &out->max_ba, &out->samples_b);
+        rc = one_way(b, a, lo, hi, spacing, threads, &out->p99_ba, &out->max_ba, &out->mean_ba, &area_b,
+                     &out->samples_b);
     if (rc)
         return iso_error_set(err, rc, "distance: no memory for %zu and %zu triangles",
                              a->triangle_count, b->triangle_count);
     out->p99 = fmax(out->p99_ab, out->p99_ba);
     out->max = fmax(out->max_ab, out->max_ba);
+    /* Pooled by area, so the mean is over both surfaces alike; an empty side is INFINITY
+     * away from the other (above), and so is the mean. */
+    out->mean = area_a + area_b > 0 && isfinite(out->mean_ab) && isfinite(out->mean_ba)
+                    ? (out->mean_ab * area_a + out->mean_ba * area_b) / (area_a + area_b)
+                    : fmax(out->mean_ab, out->mean_ba);
     out->ms = iso_clock_ms() - start;
     return 0;
 }

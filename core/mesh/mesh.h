@@ -101,8 +101,9 @@ void iso_mesh_bounds(const iso_mesh *mesh, float min[3], float max[3]);
  * weighing its area, and every vertex a uses, weighing nothing), and each sample's exact
  * distance to the nearest point of b's triangles is found (a uniform grid of b's
  * triangles, searched ring by ring). p99_ab is the smallest distance within which
- * samples of 99% of a's area lie, max_ab the largest of all samples' distances; the same
- * from b to a. p99 and max are the larger of the two. Units: the positions'. A mesh
+ * samples of 99% of a's area lie, max_ab the largest of all samples' distances, mean_ab
+ * the samples' mean weighted by area; the same from b to a. p99 and max are the larger of
+ * the two, mean the two means pooled by the surfaces' areas. Units: the positions'. A mesh
  * without triangles is at distance 0 from anything and anything else is at INFINITY
  * from it. Cost: O(samples x triangles near each), samples about a's and b's triangle
  * counts plus area / spacing^2; `threads` share the samples (0 = all cores; the result
@@ -111,6 +112,7 @@ void iso_mesh_bounds(const iso_mesh *mesh, float min[3], float max[3]);
 typedef struct iso_mesh_distance {
     double p99_ab, max_ab, p99_ba, max_ba;
     double p99, max;
+    double mean_ab, mean_ba, mean;
     size_t samples_a, samples_b;
     double ms;
 } iso_mesh_distance;

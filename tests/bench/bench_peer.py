@@ -2,13 +2,21 @@
 VTK's vtkFlyingEdges3D (full scan, 1 and 2 threads) and vtkContourFilter with vtkSpanSpace
 (a preprocessed scalar tree), next to isoserve's exact path and its tolerance ladder.
 
-Per case: isoserve's hierarchy build time and bytes; extraction time, triangles and cells
-visited at tolerance 0 and along a ladder; for each tolerance the symmetric distance to the
-exact surface (mean, 99th percentile, maximum, in voxels, from every vertex of each mesh to
-the other surface); the ratios Flying Edges / isoserve with the same thread count. Then
-scaling: CThead and ch2better resampled to four sizes, time and cells visited against
-voxels with the fitted exponent. Prints tables, writes bench/results/peer.json and
+Per case: isoserve's hierarchy build on one thread (best of 3, seconds per 10^7 voxels;
+target <= 1) and its bytes against the volume's (target <= 10%); the exact path on 1 and 2
+threads against Flying Edges; then the ladder on one thread: 0, 2%, 5%, 10% and 20% of the
+value range and the client's preview tolerance (half of it), each rung's triangles (and
+share of the exact ones), time against the exact path and against Flying Edges, and its
+symmetric distance to the exact surface (mean, p99, max over both surfaces, measured by
+`isoserve bench --distances`, core/mesh/distance.c), in mm and in voxels of the smallest
+spacing. Then scaling: CThead and ch2better resampled to four sizes, time and cells visited
+against voxels with the fitted exponent. Prints tables, writes bench/results/peer.json and
 bench/results/scaling.png.
+
+Without ../shared/volumes it says so and runs what this machine has: Debian's
+mricron-data Colin27 brains (ch2better, ch2bet), no scaling. ISO_BENCH_CASES="CThead
+skin,aneurism" picks cases by label; ISO_BENCH_VOLUME=FILE:LEVEL runs one given volume
+(NRRD or NIfTI) instead; ISO_BENCH_OUT names the JSON written.
 
 Both sides get their best set-up: VTK's SMP backend Sequential for 1 thread and TBB for 2,
 glibc malloc tuned (no mmap, no trim) so output pages stay mapped between runs; isoserve's
@@ -44,10 +52,14 @@ CASES = [  # file, level, label
     ("aneurism_256x256x256_u8.nhdr", 120, "aneurism"),
     ("engine_256x256x128_u8.nhdr", 80, "engine"),
 ]
-# Tolerances as shares of the value range: the ladder the distances are measured on. It
-# climbs past 5% because on CT the surface stays within 0.5 voxel (p99) up to about 20%:
-# a ladder that stops early would call a smaller tolerance "the largest faithful one".
-LADDER = (0.0025, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.4)
+# Without the shared scans: Debian's mricron-data (README.md's default collection).
+DEBIAN = "/usr/share/mricron/templates"
+DEBIAN_CASES = [("ch2better.nii.gz", 30, "ch2better (Debian)"), ("ch2bet.nii.gz", 30, "ch2bet (Debian)")]
+# The ladder, as `isoserve bench --tolerances` reads it: shares of the value range and the
+# client's preview tolerance (iso_preview_tolerance, half the range).
+LADDER = "0,2%,5%,10%,20%,preview"
+TARGET_BUILD_S = 1.0      # per 10^7 voxels, one thread
+TARGET_HIERARCHY = 10.0   # % of the volume's bytes
 
 
 def tune_malloc():
@@ -72,6 +84,20 @@ def read_nrrd(path):
     array = np.frombuffer(raw, dtype=dtype).astype(np.dtype(dtype).newbyteorder("="))
     spacing = [float(v) for v in fields.get("spacings", "1 1 1").split()]
     return array, sizes, spacing
+
+
+def read_nifti(path):
+    """A NIfTI file through VTK's reader: its samples, sizes and spacing."""
+    r = vtk.vtkNIFTIImageReader()
+    r.SetFileName(path)
+    r.Update()
+    img = r.GetOutput()
+    array = numpy_support.vtk_to_numpy(img.GetPointData().GetScalars()).copy()
+    return array, list(img.GetDimensions()), list(img.GetSpacing())
+
+
+def read_volume(path):
+    return read_nifti(path) if path.endswith((".nii", ".nii.gz")) else read_nrrd(path)
 
 
 def image_data(array, sizes, spacing):
@@ -131,79 +157,53 @@ def span_space(img, level):
     return {"first_update_ms": first, "query_ms": min(queries), "triangles": triangles}
 
 
-def isoserve_bench(path, level, tolerances, threads, resample=None):
+def isoserve_bench(path, level, tolerances, threads, resample=None, distances=False):
+    """`isoserve bench` on the preloaded hierarchy; tolerances as its --tolerances reads them."""
     with tempfile.NamedTemporaryFile(suffix=".json") as out:
-        args = [BIN, "bench", path, "--level", str(level), "--tolerances",
-                ",".join(f"{t:g}" for t in tolerances), "--threads", str(threads),
-                "--repeat", str(REPEAT), "--no-baselines", "--json", out.name]
+        args = [BIN, "bench", path, "--level", str(level), "--tolerances", tolerances,
+                "--threads", str(threads), "--repeat", str(REPEAT), "--no-baselines", "--json", out.name]
         if resample:
             args += ["--resample", resample]
+        if distances:
+            args.append("--distances")
         subprocess.run(args, check=True, stdout=subprocess.DEVNULL)
         return json.load(open(out.name))
 
 
-def extract_ply(path, level, tolerance, out):
-    subprocess.run([BIN, "extract", path, "--level", str(level), "--tolerance", f"{tolerance:g}",
-                    "--normals", "none", "--index-space", "-o", out], check=True,
-                   stdout=subprocess.DEVNULL)
-    reader = vtk.vtkPLYReader()
-    reader.SetFileName(out)
-    reader.Update()
-    return reader.GetOutput()
-
-
-def distances(a, b):
-    """Unsigned distances from every vertex of a to surface b and of b to a, in voxels
-    (the meshes are in index space)."""
-    if a.GetNumberOfPoints() == 0 or b.GetNumberOfPoints() == 0:
-        return None
-    f = vtk.vtkDistancePolyDataFilter()
-    f.SetInputData(0, a)
-    f.SetInputData(1, b)
-    f.SignedDistanceOff()
-    f.ComputeSecondDistanceOn()
-    f.Update()
-    d0 = numpy_support.vtk_to_numpy(f.GetOutput().GetPointData().GetArray("Distance"))
-    d1 = numpy_support.vtk_to_numpy(f.GetSecondDistanceOutput().GetPointData().GetArray("Distance"))
-    d = np.abs(np.concatenate([d0, d1]))
-    return {"mean": float(d.mean()), "p99": float(np.percentile(d, 99)), "max": float(d.max())}
-
-
-def run_case(file, level, label, tmp):
-    path = os.path.abspath(os.path.join(SHARED, file))
-    array, sizes, spacing = read_nrrd(path)
+def run_case(path, level, label):
+    print(f"-- {label}", flush=True)
+    array, sizes, spacing = read_volume(path)
     img = image_data(array, sizes, spacing)
-    value_range = float(array.max()) - float(array.min())
-    ladder = [0] + [round(value_range * s, 3) for s in LADDER]
-    case = {"case": label, "file": file, "level": level, "dims": sizes, "voxels": int(array.size),
-            "volume_bytes": int(array.nbytes), "tolerances": ladder, "threads": {}}
+    case = {"case": label, "file": os.path.basename(path), "level": level, "dims": sizes,
+            "voxels": int(array.size), "volume_bytes": int(array.nbytes), "threads": {}}
     for n in THREADS:
         fe_ms, fe_tri = flying_edges(img, level, n)
-        iso = isoserve_bench(path, level, ladder, n)
+        # One thread: the ladder with its distances; two: the exact path only.
+        iso = isoserve_bench(path, level, LADDER if n == 1 else "0", n, distances=n == 1)
         fe_again, _ = flying_edges(img, level, n)  # alternate, keep the best of both
         fe_ms = min(fe_ms, fe_again)
-        rows = iso["rows"]
+        for row in iso["rows"]:
+            row["flying_edges_over_isoserve"] = fe_ms / row["extract_ms_with_minmax"]
         case["threads"][n] = {"flying_edges_ms": fe_ms, "flying_edges_triangles": fe_tri,
-                              "build_ms": iso["build_ms"], "rows": rows}
-        case["hierarchy_bytes"] = iso["hierarchy_bytes"]
+                              "build_ms": iso["build_ms"], "rows": iso["rows"]}
+        if n == 1:
+            for key in ("hierarchy_bytes", "hierarchy_percent", "build_ms", "build_s_per_1e7_voxels",
+                        "value_range", "voxel_mm", "preview_tolerance"):
+                case[key] = iso[key]
+    case["ladder"] = case["threads"][1]["rows"]
     case["span_space"] = span_space(img, level)
     # Ties: integer levels on integer data; at level + 0.5 both must give the same count.
     fe_half, fe_half_tri = flying_edges(img, level + 0.5, 1)
-    iso_half = isoserve_bench(path, level + 0.5, [0], 1)
+    iso_half = isoserve_bench(path, level + 0.5, "0", 1)
     case["half_level_triangles"] = {"flying_edges": fe_half_tri, "isoserve": iso_half["rows"][0]["polygons"]}
-    exact = extract_ply(path, level, 0, os.path.join(tmp, "exact.ply"))
-    case["distance"] = {}
-    for tol in ladder[1:]:
-        mesh = extract_ply(path, level, tol, os.path.join(tmp, "tol.ply"))
-        case["distance"][f"{tol:g}"] = distances(mesh, exact)
     return case
 
 
-def faithful(case, threads):
+def faithful(case):
     """The largest ladder tolerance within 0.5 voxel at the 99th percentile, its row."""
-    best = case["threads"][threads]["rows"][0]
-    for row in case["threads"][threads]["rows"][1:]:
-        d = case["distance"].get(f"{row['tolerance']:g}")
+    best = case["ladder"][0]
+    for row in case["ladder"][1:]:
+        d = row["distance_voxels"]
         if d and d["p99"] <= 0.5:
             best = row
     return best
@@ -227,7 +227,7 @@ def fit_exponent(xs, ys):
     return float(slope)
 
 
-def scaling(tmp):
+def scaling():
     out = []
     for file, level, factors in (("CThead_256x256x113_u16be.nhdr", 700, (0.5, 0.79, 1.26, 2.0)),
                                  ("ch2better_301x370x316_u8.nhdr", 30, (0.5, 0.71, 1.0, 1.41))):
@@ -236,7 +236,7 @@ def scaling(tmp):
         points = []
         for f in factors:
             size = "x".join(str(max(2, round(d * f))) for d in dims)
-            iso = isoserve_bench(path, level, [0, 50], 1, resample=size)
+            iso = isoserve_bench(path, level, "0,50", 1, resample=size)
             voxels = int(np.prod([int(v) for v in size.split("x")]))
             points.append({"size": size, "voxels": voxels,
                            "tolerance_0": {k: iso["rows"][0][k] for k in ("extract_ms_with_minmax", "cells_visited", "polygons")},
@@ -273,57 +273,67 @@ def plot(scale, png):
     fig.savefig(png, dpi=110)
 
 
-def main():
+def chosen_cases():
+    """(path, level, label) of the cases this run measures, and whether they are the
+    shared scans (the scaling part needs them)."""
+    one = os.environ.get("ISO_BENCH_VOLUME")  # FILE:LEVEL
+    if one:
+        path, level = one.rsplit(":", 1)
+        return [(os.path.abspath(path), float(level), os.path.basename(path))], False
     if not os.path.isdir(SHARED):
-        print(f"bench_peer: {SHARED} is absent; the peer benchmark needs the shared scans")
-        return 0
-    tune_malloc()
-    bandwidth = write_bandwidth()
-    tmp = tempfile.mkdtemp(prefix="isoserve-peer-")
+        print(f"bench_peer: {SHARED} is absent; measuring Debian's mricron-data brains instead")
+        return [(os.path.join(DEBIAN, f), lvl, label) for f, lvl, label in DEBIAN_CASES
+                if os.path.exists(os.path.join(DEBIAN, f))], False
     only = os.environ.get("ISO_BENCH_CASES")  # e.g. "CThead skin,aneurism" for a quick look
-    chosen = [c for c in CASES if not only or any(o.strip() == c[2] for o in only.split(","))]
-    cases = [run_case(f, lvl, label, tmp) for f, lvl, label in chosen]
+    return [(os.path.abspath(os.path.join(SHARED, f)), lvl, label) for f, lvl, label in CASES
+            if not only or any(o.strip() == label for o in only.split(","))], not only
 
-    for c in cases:  # float32 positions and uint32 indices; vertices ~ triangles / 2
-        r0 = c["threads"][1]["rows"][0]
-        c["output_bytes"] = r0["polygons"] * 12 + r0["polygons"] // 2 * 12
-        c["floor_ms"] = c["output_bytes"] / bandwidth * 1e3
-    print(f"memory write bandwidth {bandwidth / 1e9:.1f} GB/s")
-    print(f"{'case':14} {'thr':>3} {'FE ms':>7} {'iso ms':>7} {'FE/iso':>6} {'tri FE':>8} {'tri iso':>8} "
-          f"{'@L+.5 FE':>8} {'@L+.5 iso':>9} {'cells %':>7} {'tree KB':>7} {'tree %':>6} {'build ms':>8} "
-          f"{'SpanSpace first/query ms':>24} {'floor ms':>8}")
+
+def mark(ok):
+    return "ok" if ok else "OVER"
+
+
+def print_exact(cases):
+    print(f"{'case':18} {'thr':>3} {'FE ms':>7} {'iso ms':>7} {'FE/iso':>6} {'tri FE':>8} {'tri iso':>8} "
+          f"{'@L+.5 FE':>8} {'@L+.5 iso':>9} {'cells %':>7} {'SpanSpace first/query ms':>24} {'floor ms':>8}")
     for c in cases:
         for n in THREADS:
             t = c["threads"][n]
             r0 = t["rows"][0]
             cells = (c["dims"][0] - 1) * (c["dims"][1] - 1) * (c["dims"][2] - 1)
-            print(f"{c['case']:14} {n:>3} {t['flying_edges_ms']:>7.1f} {r0['extract_ms_with_minmax']:>7.1f} "
-                  f"{t['flying_edges_ms'] / r0['extract_ms_with_minmax']:>6.2f} {t['flying_edges_triangles']:>8} "
+            print(f"{c['case']:18} {n:>3} {t['flying_edges_ms']:>7.1f} {r0['extract_ms_with_minmax']:>7.1f} "
+                  f"{r0['flying_edges_over_isoserve']:>6.2f} {t['flying_edges_triangles']:>8} "
                   f"{r0['polygons']:>8} {c['half_level_triangles']['flying_edges']:>8} "
                   f"{c['half_level_triangles']['isoserve']:>9} {100 * r0['cells_visited'] / cells:>7.1f} "
-                  f"{c['hierarchy_bytes'] / 1024:>7.0f} {100 * c['hierarchy_bytes'] / c['volume_bytes']:>6.1f} "
-                  f"{t['build_ms']:>8.0f} "
                   f"{c['span_space']['first_update_ms']:>12.0f} / {c['span_space']['query_ms']:>9.0f} {c['floor_ms']:>8.2f}")
-    print()
-    print(f"{'case':14} {'tol':>7} {'tri':>8} {'tri %':>6} {'ms 1t':>7} {'FE/iso 1t':>9} {'ms 2t':>7} "
-          f"{'FE/iso 2t':>9} {'mean vx':>8} {'p99 vx':>7} {'max vx':>7}")
-    for c in cases:
-        exact = c["threads"][1]["rows"][0]["polygons"]
-        for i, tol in enumerate(c["tolerances"]):
-            r1, r2 = c["threads"][1]["rows"][i], c["threads"][2]["rows"][i]
-            d = c["distance"].get(f"{tol:g}") or {"mean": 0, "p99": 0, "max": 0}
-            fe1, fe2 = c["threads"][1]["flying_edges_ms"], c["threads"][2]["flying_edges_ms"]
-            print(f"{c['case']:14} {tol:>7g} {r1['polygons']:>8} {100 * r1['polygons'] / max(exact, 1):>6.1f} "
-                  f"{r1['extract_ms_with_minmax']:>7.1f} {fe1 / r1['extract_ms_with_minmax']:>9.2f} "
-                  f"{r2['extract_ms_with_minmax']:>7.1f} {fe2 / r2['extract_ms_with_minmax']:>9.2f} "
-                  f"{d['mean']:>8.3f} {d['p99']:>7.3f} {d['max']:>7.3f}")
-        for n in THREADS:
-            f = faithful(c, n)
-            c.setdefault("faithful", {})[n] = {"tolerance": f["tolerance"], "extract_ms": f["extract_ms_with_minmax"],
-                                                "flying_edges_over_isoserve": c["threads"][n]["flying_edges_ms"] / f["extract_ms_with_minmax"]}
 
-    scale = scaling(tmp) if not only else []
-    print()
+
+def print_build(cases):
+    print(f"{'case':18} {'voxels':>10} {'build ms 1t':>11} {'s/1e7 vox':>9} {'target':>6} "
+          f"{'tree KB':>8} {'tree %':>6} {'target':>6}")
+    for c in cases:
+        print(f"{c['case']:18} {c['voxels']:>10} {c['build_ms']:>11.0f} {c['build_s_per_1e7_voxels']:>9.2f} "
+              f"{mark(c['build_s_per_1e7_voxels'] <= TARGET_BUILD_S):>6} {c['hierarchy_bytes'] / 1024:>8.0f} "
+              f"{c['hierarchy_percent']:>6.1f} {mark(c['hierarchy_percent'] <= TARGET_HIERARCHY):>6}")
+
+
+def print_ladder(cases):
+    print(f"{'case':18} {'tol':>8} {'range':>6} {'tri':>8} {'tri %':>6} {'ms 1t':>7} {'exact/t':>7} "
+          f"{'FE/t':>6} {'mean mm':>8} {'p99 mm':>7} {'max mm':>7} {'mean vx':>8} {'p99 vx':>7} {'max vx':>7}")
+    for c in cases:
+        for r in c["ladder"]:
+            dm = r["distance_mm"] or {"mean": 0, "p99": 0, "max": 0}
+            dv = r["distance_voxels"] or {"mean": 0, "p99": 0, "max": 0}
+            share = "prev." if r["tolerance"] == c["preview_tolerance"] and r["tolerance"] > 0 else \
+                f"{100 * (r['share_of_range'] or 0):.0f}%"
+            print(f"{c['case']:18} {r['tolerance']:>8.4g} {share:>6} {r['polygons']:>8} "
+                  f"{100 * (r['share_of_exact_triangles'] or 0):>6.1f} {r['extract_ms_with_minmax']:>7.1f} "
+                  f"{r['exact_over_tolerance_time']:>7.2f} {r['flying_edges_over_isoserve']:>6.2f} "
+                  f"{dm['mean']:>8.3f} {dm['p99']:>7.3f} {dm['max']:>7.2f} {dv['mean']:>8.3f} {dv['p99']:>7.3f} "
+                  f"{dv['max']:>7.2f}")
+
+
+def print_scaling(scale):
     for s in scale:
         for p in s["points"]:
             print(f"{s['file'].split('_')[0]:10} {p['size']:>12} {p['voxels']:>10} "
@@ -332,15 +342,40 @@ def main():
         for tol, f in s["fit"].items():
             print(f"  {tol}: time ~ voxels^{f['time_exponent']:.2f}, cells ~ voxels^{f['cells_exponent']:.2f}, "
                   f"triangles ~ voxels^{f['triangles_exponent']:.2f}")
-    os.makedirs("bench/results", exist_ok=True)
-    out = "bench/results/peer.json"
+
+
+def main():
+    tune_malloc()
+    bandwidth = write_bandwidth()
+    chosen, shared = chosen_cases()
+    cases = [run_case(path, lvl, label) for path, lvl, label in chosen]
+    for c in cases:  # float32 positions and uint32 indices; vertices ~ triangles / 2
+        r0 = c["threads"][1]["rows"][0]
+        c["output_bytes"] = r0["polygons"] * 12 + r0["polygons"] // 2 * 12
+        c["floor_ms"] = c["output_bytes"] / bandwidth * 1e3
+        f = faithful(c)
+        c["faithful"] = {"tolerance": f["tolerance"], "extract_ms": f["extract_ms_with_minmax"],
+                         "flying_edges_over_isoserve": f["flying_edges_over_isoserve"]}
+    print(f"memory write bandwidth {bandwidth / 1e9:.1f} GB/s")
+    print("\nthe exact path (tolerance 0) against Flying Edges")
+    print_exact(cases)
+    print(f"\nthe hierarchy: build on one thread (target <= {TARGET_BUILD_S:g} s per 10^7 voxels), "
+          f"size (target <= {TARGET_HIERARCHY:g}% of the volume)")
+    print_build(cases)
+    print("\nthe ladder on one thread: distances to the exact surface, both ways (mm, and voxels of the smallest spacing)")
+    print_ladder(cases)
+    scale = scaling() if shared else []
+    print()
+    print_scaling(scale)
+    out = os.environ.get("ISO_BENCH_OUT", "bench/results/peer.json")
+    os.makedirs(os.path.dirname(out) or ".", exist_ok=True)
     json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "repeat": REPEAT,
-               "write_bandwidth_bytes_per_s": bandwidth,
+               "write_bandwidth_bytes_per_s": bandwidth, "ladder": LADDER,
                "vtk": vtk.vtkVersion.GetVTKVersion(), "cases": cases, "scaling": scale},
               open(out, "w"), indent=1)
     if scale:
         plot(scale, "bench/results/scaling.png")
-    print(f"written {out} and bench/results/scaling.png")
+    print(f"written {out}" + (" and bench/results/scaling.png" if scale else ""))
     return 0
 
 

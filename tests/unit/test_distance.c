@@ -43,6 +43,8 @@ static void test_parallel_squares_are_a_quarter_apart(void)
     CHECK_NEAR(d.p99_ba, 0.25, 1e-7);
     CHECK_NEAR(d.max_ab, 0.25, 1e-7);
     CHECK_NEAR(d.max, 0.25, 1e-7);
+    CHECK_NEAR(d.mean_ab, 0.25, 1e-7);
+    CHECK_NEAR(d.mean, 0.25, 1e-7);
     /* The diagonal, sqrt 2, makes 15 x 15 sub-triangles per triangle; and 4 vertices. */
     CHECK_EQ(d.samples_a, 2 * 15 * 15 + 4);
     CHECK_EQ(d.samples_b, 2 * 15 * 15 + 4);
@@ -52,8 +54,9 @@ static void test_parallel_squares_are_a_quarter_apart(void)
 }
 
 /* The unit square against its left half: from the half, 0 everywhere; from the square,
- * max(0, x - 1/2), whose 99th percentile by area is 0.49 (to the sampling's spacing) and
- * whose maximum is 1/2, at the right-hand corners. */
+ * max(0, x - 1/2), whose 99th percentile by area is 0.49 (to the sampling's spacing),
+ * whose maximum is 1/2, at the right-hand corners, and whose mean is the integral of
+ * x - 1/2 over [1/2, 1], 1/8. Pooled by area (1 and 1/2): (1/8 * 1 + 0) / 1.5 = 1/12. */
 static void test_square_against_its_half(void)
 {
     iso_mesh a, b;
@@ -68,10 +71,14 @@ static void test_square_against_its_half(void)
     CHECK_EQ(d.max_ba, 0);
     CHECK_EQ(d.p99_ba, 0);
     CHECK_NEAR(d.p99, d.p99_ab, 0);
+    CHECK_NEAR(d.mean_ab, 1.0 / 8, spacing / 4);
+    CHECK_EQ(d.mean_ba, 0);
+    CHECK_NEAR(d.mean, 1.0 / 12, spacing / 4);
     iso_mesh empty;
     iso_mesh_init(&empty);
     CHECK_OK(iso_mesh_distance_compute(&empty, &a, spacing, 0, &d, &err), &err);
     CHECK(d.max_ab == 0 && isinf(d.max_ba));
+    CHECK(isinf(d.mean));
     iso_mesh_free(&a);
     iso_mesh_free(&b);
 }
