@@ -8,12 +8,13 @@
 
 #include "base/base.h"
 #include "hierarchy/tree.h"
+#include "march.h"
 #include "mc.h"
 
 #define BRICK_SAMPLES (ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES)
-/* Bisection steps placing a loop's centre on the level: 2^-40 of a brick is far below a
- * float's resolution. */
-#define CENTRE_STEPS 40
+/* Bisection steps placing a loop's centre on the level: 2^-28 of a brick's diagonal is
+ * below a float's resolution at any index past 1. */
+#define CENTRE_STEPS 28
 
 /* Vertex ids by lattice segment, open addressing; key 0 marks a free slot. */
 typedef struct vertex_map {
@@ -37,19 +38,19 @@ typedef struct lod {
     int cap;
     uint32_t dims[3], count[3];
     uint8_t *shift;               /* per brick: log2 of its stride (PASS 1) */
+    const iso_march_part *fine;   /* PASS 2's stride-1 bricks, marched by march.c */
     iso_mesh *mesh;
     vertex_map map;
     double error;                 /* largest |f(v) - level| measured */
     size_t cells;
-    /* The brick at hand: its box, its samples (x fastest) and their sides of the level when
-     * it was read whole (stride 1), the strides around it (brick_around), and the vertices
-     * of the segments strictly inside it, valid where their stamp is the brick's. */
+    /* The brick at hand: its box, the strides around it (brick_around), the samples of its
+     * box read so far, and the vertices of the segments strictly inside it; the last two
+     * valid where their stamp is the brick's. */
     uint32_t lo[3], hi[3], n[3];
-    double samples[BRICK_SAMPLES];
-    uint8_t above[BRICK_SAMPLES];
-    int read;
     uint8_t around[27];
     uint32_t stamp;
+    double value[BRICK_SAMPLES];
+    uint32_t value_stamp[BRICK_SAMPLES];
     uint32_t inner_id[BRICK_SAMPLES * 3], inner_stamp[BRICK_SAMPLES * 3];
     loop_segment *segments;
     size_t segment_count, segment_capacity;
@@ -109,25 +110,27 @@ static unsigned set_shift(const lod *c, const uint32_t twice[3])
 
 /* ---- PASS 2: march ---- */
 
-/* Sample p of the brick at hand: from its copy when it was read whole (stride 1), else
- * straight from the volume, so that a coarse brick costs the samples its grid touches. */
-static double sample(const lod *c, const uint32_t p[3])
+/* Sample p of the brick at hand's box, read from the volume on first use: a coarse brick
+ * costs the samples its grid and its transition cells touch, each once. */
+static double sample(lod *c, const uint32_t p[3])
 {
-    if (c->read)
-        return c->samples[((size_t)(p[2] - c->lo[2]) * c->n[1] + (p[1] - c->lo[1])) * c->n[0] + (p[0] - c->lo[0])];
-    return iso_vol_sample(c->vol, ((size_t)p[2] * c->dims[1] + p[1]) * c->dims[0] + p[0]);
+    size_t local = ((size_t)(p[2] - c->lo[2]) * ISO_BRICK_SAMPLES + (p[1] - c->lo[1])) * ISO_BRICK_SAMPLES +
+                   (p[0] - c->lo[0]);
+    if (c->value_stamp[local] != c->stamp) {
+        c->value_stamp[local] = c->stamp;
+        c->value[local] = iso_vol_sample(c->vol, ((size_t)p[2] * c->dims[1] + p[1]) * c->dims[0] + p[0]);
+    }
+    return c->value[local];
 }
 
-/* 1 if sample p of the brick at hand is above the level. */
-static int above(const lod *c, const uint32_t p[3])
+/* 1 if sample p is above the level. */
+static int above(lod *c, const uint32_t p[3])
 {
-    if (c->read)
-        return c->above[((size_t)(p[2] - c->lo[2]) * c->n[1] + (p[1] - c->lo[1])) * c->n[0] + (p[0] - c->lo[0])];
     return sample(c, p) > c->level;
 }
 
 /* f, the data's trilinear interpolant, at x inside the brick at hand. */
-static double value_at(const lod *c, const double x[3])
+static double value_at(lod *c, const double x[3])
 {
     uint32_t cell[3];
     double u[3], corner[8];
@@ -211,6 +214,9 @@ static int crossing(lod *c, const uint32_t p[3], int axis, uint32_t length, uint
         *id = c->inner_id[local];
         return 0;
     }
+    /* A data edge a stride-1 brick holds (or its ghost owns): march.c made its vertex. */
+    if (!inner && length == 1 && c->fine && iso_march_part_vertex(c->fine, p, axis, id))
+        return 0;
     vertex_map *m = &c->map;
     size_t at = 0;
     if (!inner) {
@@ -408,7 +414,7 @@ static int square_segments(lod *c, const uint32_t corner[4][3])
  * samples strictly on the other side of the level. The root is then strictly inside too,
  * never on a face, so no fan triangle lies flat in one. A sample exactly on the level
  * (a tie) is approached only to ISO_MC_END_GAP of the way, as crossings are. */
-static void place_centre(const lod *c, const uint32_t *loop, size_t n, const loop_segment *const *ends,
+static void place_centre(lod *c, const uint32_t *loop, size_t n, const loop_segment *const *ends,
                          const double middle[3], double x[3])
 {
     const float *pos = c->mesh->positions;
@@ -576,12 +582,6 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
     }
     c->stamp++;
     brick_around(c, b);
-    c->read = shift == 0;
-    if (c->read) {
-        iso_vol_read_box(c->vol, lo, hi, c->samples);
-        for (size_t i = 0; i < (size_t)c->n[0] * c->n[1] * c->n[2]; i++)
-            c->above[i] = c->samples[i] > c->level;
-    }
     uint32_t s = 1u << shift;
     int regular = no_finer_neighbour(c, shift);
     for (uint32_t z = 0; z + 1 < c->n[2]; z += s)
@@ -610,6 +610,27 @@ int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, iso_
     return iso_lod_extract_planned(tree, params, NULL, mesh, stats, err);
 }
 
+/* PASS 2 for the stride-1 bricks: march.c's kernel on those (with no min/max, on the bricks
+ * the level cannot cross too: they are read and give nothing). marked is scratch, a byte
+ * per brick. */
+static int march_fine(lod *c, const iso_extract_params *params, uint8_t *marked, iso_march_part **fine,
+                      iso_error *err)
+{
+    const iso_bricks *g = &c->tree->bricks;
+    for (size_t b = 0; b < iso_bricks_total(g); b++) {
+        int active = g->min[b] <= c->level && c->level < g->max[b];
+        marked[b] = active ? c->shift[b] == 0 : params->no_minmax;
+    }
+    iso_march_stats ms;
+    int rc = iso_march_selected(c->vol, g, c->level, marked, params->threads, c->mesh, &ms, fine, err);
+    if (rc)
+        return rc;
+    c->fine = *fine;
+    c->cells += ms.cells_visited;
+    c->error = ms.error_bound;
+    return 0;
+}
+
 int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *params, const uint8_t *shift,
                             iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
 {
@@ -621,14 +642,15 @@ int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *para
     }
     iso_mesh_clear(mesh);
     size_t total = iso_bricks_total(g);
-    c.shift = malloc(total ? total : 1);
+    c.shift = malloc(2 * (total ? total : 1));
     if (!c.shift)
         return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
     if (shift)
         memcpy(c.shift, shift, total);
     else
         plan(&c, params->tolerance);
-    int rc = 0;
+    iso_march_part *fine = NULL;
+    int rc = march_fine(&c, params, c.shift + total, &fine, err);
     for (uint32_t k = 0; k < g->count[2] && !rc; k++)
         for (uint32_t j = 0; j < g->count[1] && !rc; j++)
             for (uint32_t i = 0; i < g->count[0] && !rc; i++) {
@@ -636,18 +658,18 @@ int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *para
                 int active = g->min[at] <= c.level && c.level < g->max[at];
                 if (!active && !params->no_minmax)
                     continue;
-                uint32_t b[3] = {i, j, k};
                 stats->nodes_visited++;
-                if (active && c.shift[at]) {
-                    stats->nodes_polygonized++;
-                    double fit = iso_tree_level_error(tree, at, c.shift[at]);
-                    stats->fit_error = fit > stats->fit_error ? fit : stats->fit_error;
-                }
-                /* Without pruning a brick the level cannot cross is still read, cell by cell. */
-                rc = march_brick(&c, b, active ? c.shift[at] : 0, err);
+                if (!active || !c.shift[at])
+                    continue; /* marched by march_fine */
+                stats->nodes_polygonized++;
+                double fit = iso_tree_level_error(tree, at, c.shift[at]);
+                stats->fit_error = fit > stats->fit_error ? fit : stats->fit_error;
+                uint32_t b[3] = {i, j, k};
+                rc = march_brick(&c, b, c.shift[at], err);
             }
     stats->cells_visited = c.cells;
     stats->error_bound = c.error;
+    iso_march_part_free(fine);
     free(c.shift);
     free(c.map.keys);
     free(c.map.ids);

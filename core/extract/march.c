@@ -44,6 +44,7 @@
 
 typedef struct active_brick {
     uint32_t brick[3];
+    uint8_t ghost;                       /* lower neighbours marked, bit k = offset -k (ghost_of) */
     uint8_t n[3];                        /* samples per axis, 2..9 */
     uint8_t owned[3];                    /* corners 0..owned-1 per axis are this brick's */
     uint32_t vertices, triangles;        /* counted in PASS 2 */
@@ -87,6 +88,7 @@ typedef struct march_job {
     active_brick *active;
     size_t active_count;
     int32_t *slot;     /* per brick of the grid: its index in active, or -1 */
+    const uint8_t *marked; /* iso_march_selected's bricks to march, or NULL: min/max */
     iso_mesh *mesh;
     int world;         /* positions in world mm rather than index space */
     int axis_aligned;  /* the volume's direction is the identity */
@@ -397,6 +399,42 @@ static uint32_t count_triangles(const active_brick *ab)
     return triangles;
 }
 
+/* The edges of row (y, z) along axis a that a ghost (iso_march_selected) numbers: those
+ * some marked lower neighbour holds too. lower: bit k for the neighbour at -(k & 1),
+ * -(k >> 1 & 1), -(k >> 2 & 1); it holds the edge when the edge lies on the ghost's low
+ * plane along every axis where k steps down (never the edge's own axis). */
+static unsigned ghost_edges(unsigned lower, int a, int y, int z)
+{
+    unsigned edges = 0;
+    for (int x = 0; x < S; x++) {
+        const int at[3] = {x, y, z};
+        for (int k = 1; k < 8; k++) {
+            int holds = (lower >> k & 1) && !(k >> a & 1);
+            for (int d = 0; d < 3; d++)
+                holds &= !(k >> d & 1) || at[d] == 0;
+            edges |= (unsigned)holds << x;
+        }
+    }
+    return edges;
+}
+
+/* A ghost keeps the crossings its marked neighbours share and marches no cell. */
+static void keep_ghost_edges(active_brick *ab)
+{
+    ab->crossing_rows[0] = ab->crossing_rows[1] = 0;
+    ab->marching_rows[0] = ab->marching_rows[1] = 0;
+    memset(ab->marching, 0, sizeof ab->marching);
+    for (int r = 0; r < ROWS; r++) {
+        unsigned any = 0;
+        for (int a = 0; a < 3; a++) {
+            if (ab->cross[a][r])
+                ab->cross[a][r] &= (uint16_t)ghost_edges(ab->ghost, a, r % S, r / S);
+            any |= ab->cross[a][r];
+        }
+        ab->crossing_rows[r / 64] |= (uint64_t)(any != 0) << (r % 64);
+    }
+}
+
 /* Returns the cells of the brick marching cubes visits. */
 static size_t classify(march_job *job, active_brick *ab)
 {
@@ -415,9 +453,11 @@ static size_t classify(march_job *job, active_brick *ab)
     else
 #endif
         scalar_rows(ab);
+    if (ab->ghost)
+        keep_ghost_edges(ab);
     ab->vertices = number_crossings(ab);
     ab->triangles = count_triangles(ab);
-    return (size_t)(ab->n[0] - 1) * (size_t)(ab->n[1] - 1) * (size_t)(ab->n[2] - 1);
+    return ab->ghost ? 0 : (size_t)(ab->n[0] - 1) * (size_t)(ab->n[1] - 1) * (size_t)(ab->n[2] - 1);
 }
 
 typedef struct range {
@@ -851,30 +891,74 @@ static size_t number_selected(const march_job *job, int prune, int32_t *slot, ui
     return n;
 }
 
+/* The marked lower neighbours of brick b (bit k: the one at -(k & 1), -(k >> 1 & 1),
+ * -(k >> 2 & 1)) if b is an unmarked brick the level crosses: it owns edges they hold. */
+static unsigned ghost_of(const march_job *job, const uint32_t b[3], float level)
+{
+    const iso_bricks *g = job->bricks;
+    size_t at = ((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0];
+    if (job->marked[at] || !(g->min[at] <= level && g->max[at] > level))
+        return 0;
+    unsigned lower = 0;
+    for (int k = 1; k < 8; k++) {
+        uint32_t o[3] = {k & 1, k >> 1 & 1, k >> 2 & 1};
+        if ((o[0] && !b[0]) || (o[1] && !b[1]) || (o[2] && !b[2]))
+            continue;
+        size_t n = ((size_t)(b[2] - o[2]) * g->count[1] + (b[1] - o[1])) * g->count[0] + (b[0] - o[0]);
+        lower |= (unsigned)(job->marked[n] != 0) << k;
+    }
+    return lower;
+}
+
+/* number_selected for iso_march_selected: the marked bricks and their ghosts. */
+static size_t number_marked(const march_job *job, int32_t *slot, uint32_t *order, uint8_t *ghost)
+{
+    const iso_bricks *g = job->bricks;
+    float level = float_at_or_below(job->level);
+    size_t n = 0, at = 0;
+    for (uint32_t k = 0; k < g->count[2]; k++)
+        for (uint32_t j = 0; j < g->count[1]; j++)
+            for (uint32_t i = 0; i < g->count[0]; i++, at++) {
+                uint32_t b[3] = {i, j, k};
+                unsigned lower = ghost_of(job, b, level);
+                slot[at] = job->marked[at] || lower ? (int32_t)n : -1;
+                if (slot[at] < 0)
+                    continue;
+                order[n] = (uint32_t)at;
+                ghost[n++] = (uint8_t)lower;
+            }
+    return n;
+}
+
 static int select_bricks(march_job *job, int prune)
 {
     const iso_bricks *g = job->bricks;
     size_t total = iso_bricks_total(g);
     job->slot = malloc(total * sizeof *job->slot);
     uint32_t *order = malloc(total * sizeof *order);
-    if (!job->slot || !order) {
+    uint8_t *ghost = job->marked ? malloc(total ? total : 1) : NULL;
+    if (!job->slot || !order || (job->marked && !ghost)) {
         free(order);
+        free(ghost);
         return ISO_E_NOMEM;
     }
-    size_t n = number_selected(job, prune, job->slot, order);
+    size_t n = job->marked ? number_marked(job, job->slot, order, ghost) : number_selected(job, prune, job->slot, order);
     job->active = malloc((n ? n : 1) * sizeof *job->active);
     if (!job->active) {
         free(order);
+        free(ghost);
         return ISO_E_NOMEM;
     }
     for (size_t i = 0; i < n; i++) {
         active_brick *ab = &job->active[i];
         uint32_t at = order[i];
+        ab->ghost = ghost ? ghost[i] : 0;
         ab->brick[0] = at % g->count[0];
         ab->brick[1] = at / g->count[0] % g->count[1];
         ab->brick[2] = at / g->count[0] / g->count[1];
     }
     free(order);
+    free(ghost);
     job->active_count = n;
     return 0;
 }
@@ -934,8 +1018,9 @@ static void march_free(march_job *job)
     free(job);
 }
 
-int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double level, int prune,
-                     int world, int threads, iso_mesh *mesh, iso_march_stats *stats, iso_error *err)
+/* Runs the passes on a new job; *out keeps it (for iso_march_part_vertex) if not NULL. */
+static int march(const iso_volume *vol, const iso_bricks *bricks, double level, int prune, const uint8_t *marked,
+                 int world, int threads, iso_mesh *mesh, iso_march_stats *stats, march_job **out, iso_error *err)
 {
     static pthread_once_t once = PTHREAD_ONCE_INIT;
     assert(vol && bricks && mesh && stats);
@@ -949,6 +1034,7 @@ int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double lev
     job->vol = vol;
     job->bricks = bricks;
     job->level = level;
+    job->marked = marked;
     job->reach = make_threshold(vol->type, level, &job->threshold);
     job->mesh = mesh;
     job->world = world;
@@ -957,7 +1043,12 @@ int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double lev
         for (int c = 0; c < 3; c++)
             job->axis_aligned &= vol->direction[r][c] == (r == c);
     int rc = run_passes(job, prune, threads, stats);
-    march_free(job);
+    if (rc || !out) {
+        march_free(job);
+        job = NULL;
+    }
+    if (out)
+        *out = job;
     if (rc) {
         iso_mesh_free(mesh);
         if (rc == ISO_E_LIMIT)
@@ -965,4 +1056,43 @@ int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double lev
         return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
     }
     return 0;
+}
+
+int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double level, int prune,
+                     int world, int threads, iso_mesh *mesh, iso_march_stats *stats, iso_error *err)
+{
+    return march(vol, bricks, level, prune, NULL, world, threads, mesh, stats, NULL, err);
+}
+
+int iso_march_selected(const iso_volume *vol, const iso_bricks *bricks, double level, const uint8_t *marked,
+                       int threads, iso_mesh *mesh, iso_march_stats *stats, iso_march_part **part,
+                       iso_error *err)
+{
+    return march(vol, bricks, level, 0, marked, 0, threads, mesh, stats, part, err);
+}
+
+int iso_march_part_vertex(const iso_march_part *job, const uint32_t p[3], int axis, uint32_t *id)
+{
+    const iso_bricks *g = job->bricks;
+    uint32_t b[3], local[3];
+    for (int d = 0; d < 3; d++) {
+        b[d] = p[d] / ISO_BRICK_CELLS;
+        if (b[d] >= g->count[d])
+            b[d] = g->count[d] - 1; /* the last brick owns the volume's last sample plane */
+        local[d] = p[d] - b[d] * ISO_BRICK_CELLS;
+    }
+    int32_t slot = job->slot[((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0]];
+    if (slot < 0)
+        return 0;
+    const active_brick *ab = &job->active[slot];
+    unsigned r = local[2] * S + local[1], row = ab->cross[axis][r];
+    if (!(ab->crossing_rows[r / 64] >> (r % 64) & 1) || !(row >> local[0] & 1))
+        return 0;
+    *id = (uint32_t)(ab->first_vertex + ab->before[axis][r] + bit_count[row & ((1u << local[0]) - 1)]);
+    return 1;
+}
+
+void iso_march_part_free(iso_march_part *part)
+{
+    march_free(part);
 }

@@ -9,6 +9,7 @@
 #define ISO_MARCH_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 #include "hierarchy/tree.h"
 #include "base/base.h"
@@ -27,5 +28,21 @@ typedef struct iso_march_stats {
  * when the mesh would need more than 2^32 - 1 vertices. */
 int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double level, int prune,
                      int world, int threads, iso_mesh *mesh, iso_march_stats *stats, iso_error *err);
+
+/* The surface of the bricks marked (nonzero per brick of the grid, x fastest) in index
+ * space, for the tolerance path (lod.h): marching cubes as above on those bricks, none
+ * other. An unmarked brick the level crosses that owns an edge a marked brick holds (it
+ * holds the edge's low corner) gives the vertices of those edges only, no triangle, so
+ * that every crossing on a marked brick's box is in the mesh. *part keeps the numbering
+ * for iso_march_part_vertex until iso_march_part_free (NULL after an error). */
+typedef struct march_job iso_march_part;
+int iso_march_selected(const iso_volume *vol, const iso_bricks *bricks, double level, const uint8_t *marked,
+                       int threads, iso_mesh *mesh, iso_march_stats *stats, iso_march_part **part,
+                       iso_error *err);
+
+/* 1 and *id the vertex of the crossing on the data edge from sample p along axis, if the
+ * mesh of iso_march_selected has one; else 0. */
+int iso_march_part_vertex(const iso_march_part *part, const uint32_t p[3], int axis, uint32_t *id);
+void iso_march_part_free(iso_march_part *part);
 
 #endif
