@@ -67,9 +67,13 @@ static json_t *chain_json(const proto_pipeline_result *res)
     json_t *levels = json_array();
     for (int k = 0; c && levels && k < c->levels; k++)
         json_array_append_new(levels, json_pack(
-            "{s:I, s:f, s:f, s:f, s:I, s:f, s:f}", "triangles", (json_int_t)c->level[k].triangle_count,
-            "p99", c->level[k].distance.p99, "max", c->level[k].distance.max,
-            "estimate", c->level[k].estimate, "nonmanifold_edges", (json_int_t)c->level[k].nonmanifold_edges,
+            "{s:I, s:f, s:f, s:f, s:I, s:I, s:I, s:I, s:f, s:f}", "triangles",
+            (json_int_t)c->level[k].triangle_count, "p99", c->level[k].distance.p99,
+            "max", c->level[k].distance.max, "estimate", c->level[k].estimate,
+            "edges", (json_int_t)c->level[k].edges,
+            "nonmanifold_edges", (json_int_t)c->level[k].nonmanifold_edges,
+            "pinch_vertices", (json_int_t)c->level[k].pinch_vertices,
+            "folds_dropped", (json_int_t)c->level[k].folds_dropped,
             "simplify_ms", c->level[k].simplify_ms, "measure_ms", c->level[k].measure_ms));
     return json_pack("{s:i, s:I, s:I, s:f, s:o}", "level", res->chain_level,
                      "levels", (json_int_t)res->chain_levels, "exact_triangles",

@@ -122,7 +122,7 @@ static void simplify_slab(void *context, int part, int parts)
         iso_simplify_params sp = {.target_triangles = sl->target, .target_error = INFINITY,
                                   .voxel_size = job->chain->voxel_size, .lock_border = 1,
                                   .keep_vertices = 1};
-        sl->rc = iso_simplify(&sl->mesh, &sp, &sl->result, &sl->err);
+        sl->rc = iso_simplify_manifold(&sl->mesh, &sp, &sl->result, &sl->err);
     }
 }
 
@@ -196,7 +196,7 @@ static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *s
     if (workers > 1 && prev->triangle_count >= (size_t)workers * ISO_CHAIN_SLAB_MIN)
         rc = simplify_slabs(chain, &m, k, target - target / 64, workers, &slabs, err);
     if (!rc)
-        rc = iso_simplify(&m, &sp, &r, err);
+        rc = iso_simplify_manifold(&m, &sp, &r, err);
     if (rc) {
         free(m.indices);
         return rc;
@@ -212,10 +212,15 @@ static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *s
     lv->indices = m.indices = shrunk ? shrunk : m.indices;
     lv->triangle_count = m.triangle_count;
     lv->vertex_count = used_vertices(&m, seen);
+    chain->levels = k + 1; /* the level is the chain's from here: destroy frees it */
     lv->estimate = r.error;
-    lv->nonmanifold_edges = r.nonmanifold_edges;
     lv->folds_dropped = r.folds_dropped;
-    chain->levels = k + 1;
+    iso_mesh_pinches pinches;
+    if ((rc = iso_mesh_find_pinches(&m, NULL, &pinches)))
+        return iso_error_set(err, rc, "chain: no memory to count level %d's pinches", k);
+    lv->nonmanifold_edges = pinches.pinch_edges;
+    lv->pinch_vertices = pinches.pinch_vertices;
+    lv->edges = pinches.edges;
     iso_mesh exact = view_of(chain, 0), level = view_of(chain, k);
     double measure_start = iso_clock_ms();
     rc = iso_mesh_distance_compute(&exact, &level, ISO_CHAIN_SPACING_VOXELS * chain->voxel_size,

@@ -205,8 +205,8 @@ int iso_normals_compute(const iso_volume *vol, iso_mesh *mesh, int order, iso_sp
  * each other (a fold: same corners, opposite windings; dropped here, which keeps every
  * balance) or pinch the sheets onto one edge of four triangles, which stays and is counted
  * in result->nonmanifold_edges (a few in 10,000 edges on CT skin; docs/performance.md).
- * Freezing the triangles around such an edge and simplifying again converges slowly and
- * drives the error up, so it is not done. */
+ * iso_simplify_manifold (below) prevents those pinches by locking vertices and
+ * simplifying again. */
 
 typedef struct iso_simplify_params {
     size_t target_triangles; /* at most this many triangles (>= 1) */
@@ -230,6 +230,9 @@ typedef struct iso_simplify_result {
     double scale;                /* position units per unit of meshoptimizer's relative error */
     size_t folds_dropped;        /* triangles dropped as folds (pairs) */
     size_t nonmanifold_edges;    /* edges of the result used by 3 or more triangles */
+    size_t pinch_vertices;       /* vertices whose triangles make two fans or more
+                                  * (iso_simplify_manifold only; 0 from iso_simplify) */
+    size_t locked_vertices;      /* vertices iso_simplify_manifold kept from moving */
     size_t unpaired_edges;       /* edges used twice or more, not as often in each direction
                                   * (0 whenever the input had none: the tests check it) */
     int measured;                /* distance below was measured (params->measure) */
@@ -248,6 +251,37 @@ typedef struct iso_simplify_result {
  * own allocations included). Safe on any mesh whose indices are below vertex_count. */
 int iso_simplify(iso_mesh *mesh, const iso_simplify_params *params,
                  iso_simplify_result *result, iso_error *err);
+
+/* Pinches: where two sheets of a surface meet at an edge of three or more triangles or at
+ * a vertex whose triangles make two fans or more (joined through corners other than the
+ * vertex). A watertight extraction has none; edge collapses that ignore the link
+ * condition make them (manifold.c). */
+typedef struct iso_mesh_pinches {
+    size_t edges;          /* all edges */
+    size_t pinch_edges;    /* used by 3 or more triangles */
+    size_t pinch_vertices; /* whose triangles make 2 fans or more */
+    size_t unpaired_edges; /* used twice or more, not as often in each direction */
+} iso_mesh_pinches;
+/* Counts mesh's pinches; mark, when not NULL (vertex_count bytes), gets 1 at every pinch
+ * vertex and both ends of every pinch edge, 0 elsewhere. O(T log T), allocates about 40
+ * bytes per triangle for the call. Returns 0, ISO_E_NOMEM or ISO_E_ARGUMENT (an index not
+ * below vertex_count). */
+int iso_mesh_find_pinches(const iso_mesh *mesh, unsigned char *mark, iso_mesh_pinches *out);
+
+/* iso_simplify that makes no pinch the input did not have, where it can: the result's
+ * new pinches are found, the input's vertices within the reach of the collapses that made
+ * them are locked (they do not move; collapses onto them stay allowed) and the input is
+ * simplified again with no more error than ISO_MANIFOLD_ERROR_GROWTH times the first
+ * round's (so the result may keep more triangles than the target), at most
+ * ISO_MANIFOLD_ROUNDS times; pinches still left are counted in result->nonmanifold_edges
+ * and pinch_vertices. Every vertex is still an input vertex, the result watertight
+ * wherever the input was. Needs params->lock_border (without it, this is iso_simplify).
+ * Costs one simplification, plus a pinch search and another simplification per round
+ * that found pinches; allocates about 60 bytes per triangle for the call. Errors as
+ * iso_simplify's (the mesh unchanged). */
+#define ISO_MANIFOLD_ROUNDS 4
+int iso_simplify_manifold(iso_mesh *mesh, const iso_simplify_params *params,
+                          iso_simplify_result *result, iso_error *err);
 
 /* A simplification chain: one surface at a few levels of detail, each measured.
  *
@@ -272,6 +306,7 @@ typedef struct iso_mesh_chain_level {
     iso_mesh_distance distance;   /* from level 0; all zero for level 0 */
     double estimate;              /* meshoptimizer's error for the step, position units */
     size_t nonmanifold_edges, folds_dropped;
+    size_t pinch_vertices, edges; /* pinches left (iso_simplify_manifold), all edges */
     double simplify_ms, measure_ms;
 } iso_mesh_chain_level;
 

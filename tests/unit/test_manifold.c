@@ -1,0 +1,148 @@
+/* test_manifold.c: pinches counted exactly on hand-built meshes, and simplification that
+ * makes none where plain meshoptimizer does (a thin tube whose cross-section is a triangle:
+ * every collapse along it breaks the link condition). */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "mesh/mesh.h"
+#include "check.h"
+
+static void add_vertex(iso_mesh *m, double x, double y, double z)
+{
+    float *p = m->positions + 3 * m->vertex_count++;
+    p[0] = (float)x, p[1] = (float)y, p[2] = (float)z;
+}
+
+static void add_triangle(iso_mesh *m, uint32_t a, uint32_t b, uint32_t c)
+{
+    uint32_t *t = m->indices + 3 * m->triangle_count++;
+    t[0] = a, t[1] = b, t[2] = c;
+}
+
+/* A tetrahedron on corners a, b, c, d, its four faces wound consistently. */
+static void add_tetrahedron(iso_mesh *m, uint32_t a, uint32_t b, uint32_t c, uint32_t d)
+{
+    add_triangle(m, a, c, b);
+    add_triangle(m, a, b, d);
+    add_triangle(m, b, c, d);
+    add_triangle(m, c, a, d);
+}
+
+static void test_counts_on_hand_built_meshes(void)
+{
+    iso_mesh m;
+    iso_mesh_init(&m);
+    CHECK(iso_mesh_reserve(&m, 16, 16) == 0);
+    unsigned char mark[16];
+    iso_mesh_pinches p;
+    /* One tetrahedron: 6 edges, no pinch. */
+    add_vertex(&m, 0, 0, 0), add_vertex(&m, 1, 0, 0), add_vertex(&m, 0, 1, 0), add_vertex(&m, 0, 0, 1);
+    add_tetrahedron(&m, 0, 1, 2, 3);
+    CHECK_EQ(iso_mesh_find_pinches(&m, mark, &p), 0);
+    CHECK_EQ(p.edges, 6);
+    CHECK_EQ(p.pinch_edges, 0);
+    CHECK_EQ(p.pinch_vertices, 0);
+    CHECK_EQ(p.unpaired_edges, 0);
+    for (int v = 0; v < 4; v++)
+        CHECK_EQ(mark[v], 0);
+    /* A second one sharing vertex 0 only: a bowtie, vertex 0 has two fans. */
+    add_vertex(&m, -1, 0, 0), add_vertex(&m, 0, -1, 0), add_vertex(&m, 0, 0, -1);
+    add_tetrahedron(&m, 0, 4, 5, 6);
+    CHECK_EQ(iso_mesh_find_pinches(&m, mark, &p), 0);
+    CHECK_EQ(p.edges, 12);
+    CHECK_EQ(p.pinch_edges, 0);
+    CHECK_EQ(p.pinch_vertices, 1);
+    CHECK_EQ(mark[0], 1);
+    for (int v = 1; v < 7; v++)
+        CHECK_EQ(mark[v], 0);
+    /* A third one sharing edge 1-2 with the first: that edge has four triangles; its ends
+     * keep one fan each (the triangles join through the other end). */
+    add_vertex(&m, 1, 1, 1), add_vertex(&m, 1, 1, -1);
+    add_tetrahedron(&m, 1, 2, 7, 8);
+    CHECK_EQ(iso_mesh_find_pinches(&m, mark, &p), 0);
+    CHECK_EQ(p.edges, 12 + 5);
+    CHECK_EQ(p.pinch_edges, 1);
+    CHECK_EQ(p.pinch_vertices, 1);
+    CHECK_EQ(mark[1], 1);
+    CHECK_EQ(mark[2], 1);
+    CHECK_EQ(mark[0], 1);
+    CHECK_EQ(mark[3] + mark[4] + mark[5] + mark[6] + mark[7] + mark[8], 0);
+    /* An index out of range is refused. */
+    m.indices[0] = (uint32_t)m.vertex_count;
+    CHECK_EQ(iso_mesh_find_pinches(&m, NULL, &p), ISO_E_ARGUMENT);
+    iso_mesh_free(&m);
+}
+
+/* A torus of `ring` cross-sections around the z axis, each a triangle of radius r. */
+static void thin_tube(iso_mesh *m, int ring, double r)
+{
+    iso_mesh_init(m);
+    CHECK(iso_mesh_reserve(m, (size_t)(3 * ring), (size_t)(6 * ring)) == 0);
+    for (int i = 0; i < ring; i++) {
+        double a = 2 * M_PI * i / ring;
+        for (int j = 0; j < 3; j++) {
+            double b = 2 * M_PI * j / 3, rho = 10 + r * cos(b);
+            add_vertex(m, rho * cos(a), rho * sin(a), r * sin(b));
+        }
+    }
+    for (int i = 0; i < ring; i++)
+        for (int j = 0; j < 3; j++) {
+            uint32_t a = (uint32_t)(3 * i + j), b = (uint32_t)(3 * i + (j + 1) % 3);
+            uint32_t c = (uint32_t)(3 * ((i + 1) % ring) + j), d = (uint32_t)(3 * ((i + 1) % ring) + (j + 1) % 3);
+            add_triangle(m, a, c, b);
+            add_triangle(m, b, c, d);
+        }
+}
+
+/* Every edge used exactly twice, once each way, and no pinch vertex. */
+static void check_closed_manifold(const iso_mesh *m)
+{
+    iso_mesh_edges e;
+    CHECK_EQ(iso_mesh_count_edges(m, &e), 0);
+    CHECK_EQ(e.open, 0);
+    CHECK_EQ(e.nonmanifold, 0);
+    CHECK_EQ(e.misoriented, 0);
+    iso_mesh_pinches p;
+    CHECK_EQ(iso_mesh_find_pinches(m, NULL, &p), 0);
+    CHECK_EQ(p.pinch_edges, 0);
+    CHECK_EQ(p.pinch_vertices, 0);
+    CHECK_EQ(p.unpaired_edges, 0);
+}
+
+static void test_thin_tube_is_not_pinched(void)
+{
+    iso_mesh plain, kept;
+    thin_tube(&plain, 40, 0.5);
+    thin_tube(&kept, 40, 0.5);
+    check_closed_manifold(&plain);
+    iso_simplify_params sp = {.target_triangles = 60, .target_error = INFINITY, .lock_border = 1,
+                              .keep_vertices = 1};
+    iso_simplify_result r;
+    iso_error err = {0};
+    /* Plain meshoptimizer pinches this tube: the case is a real one. */
+    CHECK_OK(iso_simplify(&plain, &sp, &r, &err), &err);
+    iso_mesh_pinches p;
+    CHECK_EQ(iso_mesh_find_pinches(&plain, NULL, &p), 0);
+    CHECKF(p.pinch_edges + p.pinch_vertices > 0, "plain simplification made no pinch (%zu triangles)",
+           plain.triangle_count);
+    CHECK_OK(iso_simplify_manifold(&kept, &sp, &r, &err), &err);
+    check_closed_manifold(&kept);
+    CHECK_EQ(r.nonmanifold_edges, 0);
+    CHECK_EQ(r.pinch_vertices, 0);
+    CHECK_EQ(r.triangles, kept.triangle_count);
+    CHECK(kept.triangle_count < 240);
+    CHECK(r.locked_vertices > 0);
+    /* Every vertex used is an input vertex (indices into the unchanged positions). */
+    for (size_t i = 0; i < 3 * kept.triangle_count; i++)
+        CHECK(kept.indices[i] < 120);
+    iso_mesh_free(&plain);
+    iso_mesh_free(&kept);
+}
+
+int main(void)
+{
+    CHECK_RUN(test_counts_on_hand_built_meshes);
+    CHECK_RUN(test_thin_tube_is_not_pinched);
+    return check_finish();
+}
