@@ -2,8 +2,11 @@
  *
  * PASS 1 (layout): walk the split rule breadth-first from the root, one box per node,
  *   until bricks; children of node n are appended together, so first_child is known.
- * PASS 2 (fit): scan every node's samples once for min, max and the Lemma 1 error of the
- *   trilinear through its corners. Nodes are independent; the pass runs on all cores.
+ * PASS 2 (fit): deepest nodes first, each node's min, max and the Lemma 1 error of the
+ *   trilinear through its corners: bricks by scanning their samples, the nodes above by
+ *   their children's min and max and a branch and bound over the bricks below them for
+ *   the error (error_by_bounds: the same figure a scan of the node's samples gives, bit
+ *   for bit, from a fraction of them). A depth's nodes are shared by all cores.
  * The file is a 64-byte header (magic, version, volume identity, checksums) followed by
  * the nodes exactly as in memory, so loading is one mmap plus verification. */
 #include "tree.h"
@@ -12,14 +15,12 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
-#include <pthread.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
-#include <time.h>
 #include <unistd.h>
 #include <zlib.h>
 
@@ -78,40 +79,58 @@ int iso_box_is_brick(const iso_box *box)
 /* ---- scanning one box: min, max, Lemma 1 error ---- */
 
 /* One function per voxel type; the trilinear is evaluated along each x-row as a line
- * between its values at the row's ends, so a sample costs a multiply-add and compares. */
-#define DEFINE_SCAN(NAME, T)                                                                 \
-    static void NAME(const iso_volume *vol, const iso_box *b, double *mn, double *mx,         \
-                     double *er)                                                              \
-    {                                                                                         \
-        const T *p = (const T *)vol->data;                                                    \
-        size_t nx = vol->dims[0], nxy = vol->dims[0] * vol->dims[1];                          \
-        double c[8], lo = INFINITY, hi = -INFINITY, worst = 0;                                \
-        int nan = 0;                                                                          \
-        for (int k = 0; k < 8; k++)                                                           \
-            c[k] = (double)p[(k & 4 ? b->hi[2] : b->lo[2]) * nxy +                            \
-                             (size_t)(k & 2 ? b->hi[1] : b->lo[1]) * nx + (k & 1 ? b->hi[0] : b->lo[0])]; \
-        double inv[3];                                                                        \
-        for (int d = 0; d < 3; d++)                                                           \
-            inv[d] = b->hi[d] > b->lo[d] ? 1.0 / (b->hi[d] - b->lo[d]) : 0.0;                 \
-        for (uint32_t z = b->lo[2]; z <= b->hi[2]; z++) {                                     \
-            double w = (z - b->lo[2]) * inv[2];                                               \
-            for (uint32_t y = b->lo[1]; y <= b->hi[1]; y++) {                                 \
-                double v = (y - b->lo[1]) * inv[1];                                           \
-                double a = iso_tri_eval(c, 0, v, w), e = iso_tri_eval(c, 1, v, w) - a;        \
-                const T *row = p + z * nxy + (size_t)y * nx;                                  \
-                for (uint32_t x = b->lo[0]; x <= b->hi[0]; x++) {                             \
-                    double s = (double)row[x];                                                \
-                    double d = fabs(s - (a + e * ((x - b->lo[0]) * inv[0])));                 \
-                    if (s < lo) lo = s;                                                       \
-                    if (s > hi) hi = s;                                                       \
-                    if (d > worst) worst = d;                                                 \
-                    if (s != s) nan = 1;                                                      \
-                }                                                                             \
-            }                                                                                 \
-        }                                                                                     \
-        *mn = lo;                                                                             \
-        *mx = hi;                                                                             \
-        *er = nan ? INFINITY : worst;                                                         \
+ * between its values at the row's ends, so a sample costs a multiply-add and compares.
+ * The trilinear is the frame's (through its 8 corners) and the samples are the range's,
+ * a box inside the frame: a node's error is then the maximum of the same per-sample
+ * figures over any boxes that cover it, bit for bit, whichever boxes are scanned. With
+ * `full` 0 only the error is wanted, of samples known to be numbers: the loop is then a
+ * multiply-add and a maximum per sample. */
+#define DEFINE_SCAN(NAME, T)                                                                  \
+    static inline void NAME##_any(const iso_volume *vol, const iso_box *f, const iso_box *b,   \
+                                  double *mn, double *mx, double *er, const int full)          \
+    {                                                                                          \
+        const T *p = (const T *)vol->data;                                                     \
+        size_t nx = vol->dims[0], nxy = vol->dims[0] * vol->dims[1];                           \
+        double c[8], lo = INFINITY, hi = -INFINITY, worst = 0;                                 \
+        int nan = 0;                                                                           \
+        for (int k = 0; k < 8; k++)                                                            \
+            c[k] = (double)p[(k & 4 ? f->hi[2] : f->lo[2]) * nxy +                             \
+                             (size_t)(k & 2 ? f->hi[1] : f->lo[1]) * nx + (k & 1 ? f->hi[0] : f->lo[0])]; \
+        double inv[3];                                                                         \
+        for (int d = 0; d < 3; d++)                                                            \
+            inv[d] = f->hi[d] > f->lo[d] ? 1.0 / (f->hi[d] - f->lo[d]) : 0.0;                  \
+        for (uint32_t z = b->lo[2]; z <= b->hi[2]; z++) {                                      \
+            double w = (z - f->lo[2]) * inv[2];                                                \
+            for (uint32_t y = b->lo[1]; y <= b->hi[1]; y++) {                                  \
+                double v = (y - f->lo[1]) * inv[1];                                            \
+                double a = iso_tri_eval(c, 0, v, w), e = iso_tri_eval(c, 1, v, w) - a;         \
+                const T *row = p + z * nxy + (size_t)y * nx;                                   \
+                for (uint32_t x = b->lo[0]; x <= b->hi[0]; x++) {                              \
+                    double s = (double)row[x];                                                 \
+                    double d = fabs(s - (a + e * ((x - f->lo[0]) * inv[0])));                  \
+                    worst = d > worst ? d : worst;                                             \
+                    if (full) {                                                                \
+                        if (s < lo) lo = s;                                                    \
+                        if (s > hi) hi = s;                                                    \
+                        if (s != s) nan = 1;                                                   \
+                    }                                                                          \
+                }                                                                              \
+            }                                                                                  \
+        }                                                                                      \
+        *mn = lo;                                                                              \
+        *mx = hi;                                                                              \
+        *er = nan ? INFINITY : worst;                                                          \
+    }                                                                                          \
+    static void NAME(const iso_volume *vol, const iso_box *f, const iso_box *b, double *mn,    \
+                     double *mx, double *er)                                                   \
+    {                                                                                          \
+        NAME##_any(vol, f, b, mn, mx, er, 1);                                                  \
+    }                                                                                          \
+    static double NAME##_err(const iso_volume *vol, const iso_box *f, const iso_box *b)        \
+    {                                                                                          \
+        double mn, mx, er;                                                                     \
+        NAME##_any(vol, f, b, &mn, &mx, &er, 0);                                               \
+        return er;                                                                             \
     }
 
 DEFINE_SCAN(scan_u8, uint8_t)
@@ -123,18 +142,34 @@ DEFINE_SCAN(scan_i32, int32_t)
 DEFINE_SCAN(scan_f32, float)
 DEFINE_SCAN(scan_f64, double)
 
+/* The error alone of range's samples (numbers, no NaN) against frame's trilinear. */
+static double scan_error(const iso_volume *vol, const iso_box *frame, const iso_box *range)
+{
+    switch (vol->type) {
+    case ISO_U8: return scan_u8_err(vol, frame, range);
+    case ISO_I8: return scan_i8_err(vol, frame, range);
+    case ISO_U16: return scan_u16_err(vol, frame, range);
+    case ISO_I16: return scan_i16_err(vol, frame, range);
+    case ISO_U32: return scan_u32_err(vol, frame, range);
+    case ISO_I32: return scan_i32_err(vol, frame, range);
+    case ISO_F32: return scan_f32_err(vol, frame, range);
+    case ISO_F64: return scan_f64_err(vol, frame, range);
+    }
+    return INFINITY;
+}
+
 void iso_tree_scan_box(const iso_volume *vol, const iso_box *box, double *min, double *max,
                        double *err)
 {
     switch (vol->type) {
-    case ISO_U8: scan_u8(vol, box, min, max, err); break;
-    case ISO_I8: scan_i8(vol, box, min, max, err); break;
-    case ISO_U16: scan_u16(vol, box, min, max, err); break;
-    case ISO_I16: scan_i16(vol, box, min, max, err); break;
-    case ISO_U32: scan_u32(vol, box, min, max, err); break;
-    case ISO_I32: scan_i32(vol, box, min, max, err); break;
-    case ISO_F32: scan_f32(vol, box, min, max, err); break;
-    case ISO_F64: scan_f64(vol, box, min, max, err); break;
+    case ISO_U8: scan_u8(vol, box, box, min, max, err); break;
+    case ISO_I8: scan_i8(vol, box, box, min, max, err); break;
+    case ISO_U16: scan_u16(vol, box, box, min, max, err); break;
+    case ISO_I16: scan_i16(vol, box, box, min, max, err); break;
+    case ISO_U32: scan_u32(vol, box, box, min, max, err); break;
+    case ISO_I32: scan_i32(vol, box, box, min, max, err); break;
+    case ISO_F32: scan_f32(vol, box, box, min, max, err); break;
+    case ISO_F64: scan_f64(vol, box, box, min, max, err); break;
     }
 }
 
@@ -182,42 +217,159 @@ static int lay_out(const iso_volume *vol, layout *l)
     return 0;
 }
 
-/* ---- PASS 2: fit, in parallel ---- */
+/* ---- PASS 2: fit, deepest nodes first ---- */
 
 typedef struct fit_job {
     const iso_volume *vol;
     layout *l;
-    atomic_size_t next;      /* next node to claim */
-    atomic_size_t samples;   /* samples scanned so far, for progress */
+    size_t first, last;  /* this round's nodes: one depth of the breadth-first order */
+    atomic_size_t next;  /* next node of the round to claim */
 } fit_job;
 
-enum { FIT_CHUNK = 16 };
+enum { FIT_CHUNK = 16, FIT_STACK = 128 };
 
-static uint64_t box_samples(const iso_box *b)
+typedef struct pending {
+    uint32_t node;
+    double bound; /* of |p - T| over its box (bound_below) */
+} pending;
+
+/* An upper bound on |p(s) - T(s)| over the samples s of node q's box, T the trilinear
+ * through frame's corners c (inv: 1 / frame's extents): T on q's box lies between its
+ * values at q's corners, and the samples between q's min and max; and |p - T| <= |p - T_q|
+ * + |T_q - T|, the first at most q's error, the second trilinear, so largest at q's
+ * corners, where T_q is p. The smaller of the two. */
+static double bound_below(const iso_volume *vol, const iso_box *frame, const double c[8], const double inv[3],
+                          const iso_tree_node *q, const iso_box *qb)
 {
-    return (uint64_t)(b->hi[0] - b->lo[0] + 1) * (b->hi[1] - b->lo[1] + 1) * (b->hi[2] - b->lo[2] + 1);
+    double tmin = INFINITY, tmax = -INFINITY, dev = 0;
+    for (int k = 0; k < 8; k++) {
+        uint32_t x = k & 1 ? qb->hi[0] : qb->lo[0], y = k & 2 ? qb->hi[1] : qb->lo[1];
+        uint32_t z = k & 4 ? qb->hi[2] : qb->lo[2];
+        double t = iso_tri_eval(c, (x - frame->lo[0]) * inv[0], (y - frame->lo[1]) * inv[1],
+                                (z - frame->lo[2]) * inv[2]);
+        double d = fabs(iso_vol_get(vol, x, y, z) - t);
+        tmin = t < tmin ? t : tmin;
+        tmax = t > tmax ? t : tmax;
+        dev = d > dev ? d : dev;
+    }
+    double by_range = fmax((double)q->max - tmin, tmax - (double)q->min);
+    return fmin(by_range, (double)q->err + dev);
 }
 
-static void *fit_worker(void *arg)
+/* Node n's error, the largest |p(s) - T(s)| over its samples, T the trilinear through its
+ * corners: the children's boxes cover n's, so it is the largest of the same figures over
+ * the bricks below n. A branch and bound finds it: a subtree whose bound cannot beat the
+ * largest figure found so far is skipped, and the bricks that can are scanned against n's
+ * trilinear (scan_error, the very figures a scan of n's whole box computes; the maximum
+ * does not depend on the order). `margin` covers the rounding of the bounds: far above
+ * it, at a billionth of the largest magnitude, far below any difference that matters. */
+static double error_by_bounds(const iso_volume *vol, const layout *l, size_t n)
 {
-    fit_job *job = arg;
-    for (;;) {
-        size_t first = atomic_fetch_add(&job->next, FIT_CHUNK);
-        if (first >= job->l->count)
-            return NULL;
-        size_t last = first + FIT_CHUNK < job->l->count ? first + FIT_CHUNK : job->l->count;
-        uint64_t scanned = 0;
-        for (size_t n = first; n < last; n++) {
-            double mn, mx, er;
-            iso_tree_scan_box(job->vol, &job->l->boxes[n], &mn, &mx, &er);
-            iso_tree_node *node = &job->l->nodes[n];
-            node->min = mn <= mx ? iso_float_down(mn) : INFINITY; /* all-NaN box: never active */
-            node->max = mn <= mx ? iso_float_up(mx) : -INFINITY;
-            node->err = iso_float_up(er);
-            scanned += box_samples(&job->l->boxes[n]);
+    const iso_box *frame = &l->boxes[n];
+    const iso_tree_node *nodes = l->nodes;
+    double c[8], inv[3], best = 0;
+    for (int k = 0; k < 8; k++)
+        c[k] = iso_vol_get(vol, k & 1 ? frame->hi[0] : frame->lo[0], k & 2 ? frame->hi[1] : frame->lo[1],
+                           k & 4 ? frame->hi[2] : frame->lo[2]);
+    for (int d = 0; d < 3; d++)
+        inv[d] = frame->hi[d] > frame->lo[d] ? 1.0 / (frame->hi[d] - frame->lo[d]) : 0.0;
+    double margin = 1e-9 * fmax(fabs((double)nodes[n].min), fabs((double)nodes[n].max));
+    pending stack[FIT_STACK];
+    int top = 0;
+    stack[top++] = (pending){(uint32_t)n, INFINITY};
+    while (top) {
+        uint32_t q = stack[--top].node;
+        if (stack[top].bound + margin <= best)
+            continue;
+        if (q != n && !nodes[q].first_child) {
+            double e = scan_error(vol, frame, &l->boxes[q]);
+            best = e > best ? e : best;
+            continue;
         }
-        atomic_fetch_add(&job->samples, (size_t)scanned);
+        /* The child with the larger bound goes on top: it is the likelier to raise best. */
+        uint32_t ch[2] = {nodes[q].first_child, nodes[q].first_child + 1};
+        double b[2];
+        for (int i = 0; i < 2; i++)
+            b[i] = bound_below(vol, frame, c, inv, &nodes[ch[i]], &l->boxes[ch[i]]);
+        int big = b[1] > b[0];
+        assert(top + 2 <= FIT_STACK);
+        for (int i = 0; i < 2; i++) {
+            int k = i ? big : !big;
+            if (b[k] + margin > best)
+                stack[top++] = (pending){ch[k], b[k]};
+        }
     }
+    return best;
+}
+
+/* A brick: one scan of its samples. Above: min and max from the children's (outward
+ * rounding commutes with min and max), the error by bounds when every figure below is
+ * finite, else (NaN or infinite samples, or magnitudes where the bounds' rounding could
+ * matter) a scan of the whole box, which gives INFINITY for a NaN as a brick's scan does. */
+static void fit_node(const iso_volume *vol, layout *l, size_t n)
+{
+    iso_tree_node *node = &l->nodes[n];
+    double mn, mx, er;
+    if (!node->first_child) {
+        iso_tree_scan_box(vol, &l->boxes[n], &mn, &mx, &er);
+        node->min = mn <= mx ? iso_float_down(mn) : INFINITY; /* all-NaN box: never active */
+        node->max = mn <= mx ? iso_float_up(mx) : -INFINITY;
+        node->err = iso_float_up(er);
+        return;
+    }
+    const iso_tree_node *a = &l->nodes[node->first_child], *b = a + 1;
+    node->min = a->min < b->min ? a->min : b->min;
+    node->max = a->max > b->max ? a->max : b->max;
+    double magnitude = fmax(fabs((double)node->min), fabs((double)node->max));
+    if (isfinite(a->err) && isfinite(b->err) && magnitude < 1e30)
+        er = error_by_bounds(vol, l, n);
+    else
+        iso_tree_scan_box(vol, &l->boxes[n], &mn, &mx, &er);
+    node->err = iso_float_up(er);
+}
+
+static void fit_round(void *context, int t, int threads)
+{
+    (void)t;
+    (void)threads;
+    fit_job *job = context;
+    for (;;) {
+        size_t first = job->first + atomic_fetch_add(&job->next, FIT_CHUNK);
+        if (first >= job->last)
+            return;
+        size_t last = first + FIT_CHUNK < job->last ? first + FIT_CHUNK : job->last;
+        for (size_t n = first; n < last; n++)
+            fit_node(job->vol, job->l, n);
+    }
+}
+
+/* Depth by depth from the deepest (children come after their parent in the breadth-first
+ * order, so each depth is a run of nodes and the one below it is done); a depth's nodes
+ * are independent and shared by the threads. */
+static int fit_all(const iso_volume *vol, layout *l, int threads, iso_progress_fn progress, void *context)
+{
+    unsigned char *depth = malloc(l->count);
+    if (!depth)
+        return ISO_E_NOMEM;
+    depth[0] = 0;
+    for (size_t n = 0; n < l->count; n++)
+        if (l->nodes[n].first_child)
+            depth[l->nodes[n].first_child] = depth[l->nodes[n].first_child + 1] = (unsigned char)(depth[n] + 1);
+    fit_job job = {.vol = vol, .l = l};
+    for (size_t last = l->count; last > 0;) {
+        size_t first = last;
+        while (first > 0 && depth[first - 1] == depth[last - 1])
+            first--;
+        job.first = first;
+        job.last = last;
+        atomic_init(&job.next, 0);
+        iso_parallel_run(threads, fit_round, &job);
+        if (progress)
+            progress(context, (double)(l->count - first) / (double)l->count);
+        last = first;
+    }
+    free(depth);
+    return 0;
 }
 
 int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress, void *context,
@@ -234,30 +386,9 @@ int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress,
         goto nomem;
     if (l.count > UINT32_MAX)
         goto nomem;
-
-    fit_job job = {.vol = vol, .l = &l};
-    atomic_init(&job.next, 0);
-    atomic_init(&job.samples, 0);
-    uint64_t total = 0;
-    for (size_t n = 0; n < l.count; n++)
-        total += box_samples(&l.boxes[n]);
-    /* `threads` workers fit; the calling thread only reports progress, then joins. */
-    int started = 0;
     threads = iso_parallel_threads(threads);
-    pthread_t tid[64];
-    for (; started < threads; started++)
-        if (pthread_create(&tid[started], NULL, fit_worker, &job) != 0)
-            break;
-    while (progress && started && atomic_load(&job.next) < l.count) {
-        progress(context, (double)atomic_load(&job.samples) / (double)total);
-        struct timespec ts = {0, 5 * 1000 * 1000}; /* 5 ms: short builds stay short */
-        nanosleep(&ts, NULL);
-    }
-    fit_worker(&job); /* does everything if no thread could start, else finds nothing left */
-    for (int t = 0; t < started; t++)
-        pthread_join(tid[t], NULL);
-    if (progress)
-        progress(context, 1.0);
+    if (fit_all(vol, &l, threads, progress, context))
+        goto nomem;
 
     tree = calloc(1, sizeof *tree);
     if (!tree)

@@ -5,8 +5,9 @@
  * refers to, but does not own, its volume; the volume must outlive it. Errors: ISO_E_NOMEM,
  * ISO_E_IO, and for files ISO_E_FORMAT / ISO_E_STALE / ISO_E_CORRUPT with the offset.
  * Thread-safety: a built or loaded tree is read-only and shared by any number of
- * extractions. Cost: the build is one pass over the samples per brick plus the fits of the
- * stored nodes (a few passes in all); memory about 2% of the samples' bytes. */
+ * extractions. Cost: the build is a few passes over the samples (the bricks' own fits,
+ * their min/max grid, their coarse levels, and the bricks that the fits above them cannot
+ * rule out); memory about 2% of the samples' bytes. */
 #ifndef ISO_TREE_H
 #define ISO_TREE_H
 
@@ -131,7 +132,8 @@ typedef struct iso_tree {
 typedef void (*iso_progress_fn)(void *context, double fraction);
 
 /* Builds the hierarchy of vol on `threads` threads (0 = all cores). O(N log(N / brick^3))
- * time (each level scans its samples once), O(N / brick^3) memory. progress may be NULL. */
+ * time at worst (every depth scanning all its samples: noise), a few passes over N on real
+ * scans, where bounds rule out most bricks; O(N / brick^3) memory. progress may be NULL. */
 int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress, void *context,
                    iso_tree **out, iso_error *err);
 /* Frees the tree (or unmaps its file). NULL is allowed. */
