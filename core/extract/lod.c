@@ -51,6 +51,10 @@ typedef struct lod {
     uint32_t stamp;
     double value[BRICK_SAMPLES];
     uint32_t value_stamp[BRICK_SAMPLES];
+    /* Set when the brick has transition cells: then every sample of its box is in value,
+     * and row z * 9 + y has bit x set where sample (x, y, z) (brick-local) is above. */
+    int whole;
+    uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES];
     uint32_t inner_id[BRICK_SAMPLES * 3], inner_stamp[BRICK_SAMPLES * 3];
     loop_segment *segments;
     size_t segment_count, segment_capacity;
@@ -116,7 +120,7 @@ static double sample(lod *c, const uint32_t p[3])
 {
     size_t local = ((size_t)(p[2] - c->lo[2]) * ISO_BRICK_SAMPLES + (p[1] - c->lo[1])) * ISO_BRICK_SAMPLES +
                    (p[0] - c->lo[0]);
-    if (c->value_stamp[local] != c->stamp) {
+    if (!c->whole && c->value_stamp[local] != c->stamp) {
         c->value_stamp[local] = c->stamp;
         c->value[local] = iso_vol_sample(c->vol, ((size_t)p[2] * c->dims[1] + p[1]) * c->dims[0] + p[0]);
     }
@@ -126,7 +130,39 @@ static double sample(lod *c, const uint32_t p[3])
 /* 1 if sample p is above the level. */
 static int above(lod *c, const uint32_t p[3])
 {
+    if (c->whole)
+        return c->rows[(p[2] - c->lo[2]) * ISO_BRICK_SAMPLES + (p[1] - c->lo[1])] >> (p[0] - c->lo[0]) & 1;
     return sample(c, p) > c->level;
+}
+
+/* Reads the brick at hand whole: its transition cells visit most of its face samples, and
+ * a cell whose samples all lie on one side of the level (rows) has no segment. */
+static void read_whole(lod *c)
+{
+    c->whole = 1;
+    for (uint32_t z = 0; z < c->n[2]; z++)
+        for (uint32_t y = 0; y < c->n[1]; y++) {
+            size_t from[3] = {c->lo[0], c->lo[1] + y, c->lo[2] + z}, to[3] = {c->hi[0], from[1], from[2]};
+            double *v = c->value + (z * ISO_BRICK_SAMPLES + y) * ISO_BRICK_SAMPLES;
+            iso_vol_read_box(c->vol, from, to, v);
+            unsigned bits = 0;
+            for (uint32_t x = 0; x < c->n[0]; x++)
+                bits |= (unsigned)(v[x] > c->level) << x;
+            c->rows[z * ISO_BRICK_SAMPLES + y] = (uint16_t)bits;
+        }
+}
+
+/* 1 if the cell at o has samples on both sides of the level (the brick read whole). */
+static int cell_mixed(const lod *c, const uint32_t o[3], const uint32_t size[3])
+{
+    unsigned x = o[0] - c->lo[0], mask = ((1u << (size[0] + 1)) - 1) << x, any = 0, all = mask;
+    for (uint32_t z = o[2] - c->lo[2]; z <= o[2] - c->lo[2] + size[2]; z++)
+        for (uint32_t y = o[1] - c->lo[1]; y <= o[1] - c->lo[1] + size[1]; y++) {
+            unsigned row = c->rows[z * ISO_BRICK_SAMPLES + y] & mask;
+            any |= row;
+            all &= row;
+        }
+    return any && all != mask;
 }
 
 /* f, the data's trilinear interpolant, at x inside the brick at hand. */
@@ -584,6 +620,9 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
     brick_around(c, b);
     uint32_t s = 1u << shift;
     int regular = no_finer_neighbour(c, shift);
+    c->whole = 0;
+    if (!regular)
+        read_whole(c);
     for (uint32_t z = 0; z + 1 < c->n[2]; z += s)
         for (uint32_t y = 0; y + 1 < c->n[1]; y += s)
             for (uint32_t x = 0; x + 1 < c->n[0]; x += s) {
@@ -597,7 +636,7 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
                     if (rc)
                         return iso_error_set(err, rc, rc == ISO_E_LIMIT ? "more than 2^32 - 1 vertices"
                                                                          : "out of memory extracting the surface");
-                } else if ((rc = transition_cell(c, o, size, err))) {
+                } else if (cell_mixed(c, o, size) && (rc = transition_cell(c, o, size, err))) {
                     return rc;
                 }
             }
