@@ -125,6 +125,29 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
 int proto_gzip(const unsigned char *in, size_t size, unsigned char **out, size_t *out_size,
                iso_error *err);
 
+/* A piece of a buffer to gzip: it ends at `end` (the last piece ends at the buffer's end,
+ * whatever `end` says); `huffman`: entropy coding alone (zlib's Z_HUFFMAN_ONLY), for
+ * bytes with few repeats, such as meshopt's vertex streams: about as small there and twice
+ * as fast as level 1's matching. */
+typedef struct proto_gzip_piece {
+    size_t end;
+    int huffman;
+} proto_gzip_piece;
+#define PROTO_GZIP_PIECES_MAX 4
+
+/* proto_gzip with the buffer cut into `count` (1..PROTO_GZIP_PIECES_MAX) consecutive
+ * pieces deflated independently, on up to `threads` threads (0: all cores), joined into
+ * one gzip member. Same errors. */
+int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_piece *pieces, int count,
+                      int threads, unsigned char **out, size_t *out_size, iso_error *err);
+
+/* The pieces in which to gzip a glb made by proto_encode_glb_meshopt: the container and
+ * the vertex streams (Huffman only), then the index stream (level 1, whose matches find
+ * the index codec's repeats). Fills pieces[0..1] and returns 2; 1 (the whole) if the
+ * bytes are not such a glb. */
+int proto_glb_meshopt_gzip_pieces(const unsigned char *glb, size_t size,
+                                  proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX]);
+
 /* Decodes a Draco mesh bitstream into `out`, which is initialised by the call: on success it
  * owns the positions, the normals when the stream has a 3-component NORMAL attribute, and
  * the triangles (free with iso_mesh_free); on error it is left empty. Safe on untrusted

@@ -10,11 +10,14 @@
  *      bits below qn cleared (zeros the codec's byte deltas compress to nothing);
  *   2. encode each stream (positions, normals, indices) into the BIN chunk, each view
  *      4-byte aligned; the uncompressed layout lives in a second, fallback buffer that
- *      has no data (the extension is required);
+ *      has no data (the extension is required). With two threads (opt->threads) the
+ *      indices are encoded on one while the other quantizes and encodes the vertices;
+ *      the bytes do not depend on it;
  *   3. the JSON and the container (glb_container.h).
  * Every vertex and triangle is kept, in order (the index codec may start a triangle at
  * another corner, same winding): a loader gets the mesh's counts exactly. */
 #include "encode.h"
+#include "base/base.h"
 #include "glb_container.h"
 
 #include <assert.h>
@@ -57,6 +60,16 @@ static void quantized_free(quantized *q)
             free(q->views[v].data);
 }
 
+/* lround(x) for |x| < 2^62 without a library call: rounding halves away from zero. */
+static inline long round_half_away(double x)
+{
+    double a = fabs(x);
+    long k = (long)(a + 0.5);
+    if ((double)k - a > 0.5) /* a + 0.5 rounded up (a just under a half) */
+        k--;
+    return x < 0 ? -k : k;
+}
+
 /* Pass 1, positions: the bounding cube's corner and step (Draco's grid, so that qp
  * means the same for both codecs). */
 static int quantize_positions(const iso_mesh *mesh, int bits, quantized *q)
@@ -94,19 +107,20 @@ static int quantize_positions(const iso_mesh *mesh, int bits, quantized *q)
     if (!out)
         return ISO_E_NOMEM;
     v->data = out;
-    for (int a = 0; a < 3; a++)
-        q->qmin[a] = steps, q->qmax[a] = 0;
+    long kmin[3] = {(long)steps, (long)steps, (long)steps}, kmax[3] = {0, 0, 0};
     for (size_t i = 0; i < n; i++) {
         for (int a = 0; a < 3; a++) {
             double t = extent > 0 ? ((double)p[3 * i + a] - lo[a]) / extent * steps : 0;
-            long k = lround(t);
+            long k = round_half_away(t);
             k = k < 0 ? 0 : k > (long)steps ? (long)steps : k;
             out[4 * i + a] = (uint16_t)k;
-            q->qmin[a] = fmin(q->qmin[a], (double)k);
-            q->qmax[a] = fmax(q->qmax[a], (double)k);
+            kmin[a] = k < kmin[a] ? k : kmin[a];
+            kmax[a] = k > kmax[a] ? k : kmax[a];
         }
         out[4 * i + 3] = 0;
     }
+    for (int a = 0; a < 3; a++)
+        q->qmin[a] = (double)kmin[a], q->qmax[a] = (double)kmax[a];
     return 0;
 }
 
@@ -122,12 +136,13 @@ static int quantize_normals(const iso_mesh *mesh, int bits, quantized *q)
     v->data = malloc(n * v->stride);
     if (!v->data)
         return ISO_E_NOMEM;
-    double max = wide ? 32767 : 127, grain = wide ? (double)(1 << (16 - bits)) : 1;
+    double max = wide ? 32767 : 127;
+    long grain = wide ? 1L << (16 - bits) : 1, top = (long)max;
     for (size_t i = 0; i < n; i++)
         for (int a = 0; a < 4; a++) {
             double x = a < 3 ? mesh->normals[3 * i + a] : 0;
-            double k = round(x * max / grain) * grain;
-            k = k > max ? max : k < -max ? -max : k;
+            long k = round_half_away(x * max / (double)grain) * grain;
+            k = k > top ? top : k < -top ? -top : k;
             if (wide)
                 ((int16_t *)v->data)[4 * i + a] = (int16_t)k;
             else
@@ -136,34 +151,73 @@ static int quantize_normals(const iso_mesh *mesh, int bits, quantized *q)
     return 0;
 }
 
-/* Pass 2: every view's compressed bytes into one buffer, each 4-byte aligned. */
-static int pack(quantized *q, unsigned char **out, size_t *out_size)
+/* Pass 2 for one view: its compressed bytes into a buffer of their own (malloc'd). */
+static int encode_view(const quantized *q, view *v, unsigned char **out)
 {
-    size_t bound = 0, offset = 0;
-    for (int i = 0; i < VIEW_COUNT; i++) {
-        view *v = &q->views[i];
-        if (i == VIEW_NORMAL && !q->normals)
-            continue;
-        bound += 3 + (v->triangles ? meshopt_encodeIndexBufferBound(v->count, q->views[VIEW_POSITION].count)
-                                   : meshopt_encodeVertexBufferBound(v->count, v->stride));
-        v->offset = offset;
-        v->length = v->count * v->stride;
-        offset += proto_glb_pad4(v->length);
-    }
-    unsigned char *buf = malloc(bound);
+    size_t bound = v->triangles ? meshopt_encodeIndexBufferBound(v->count, q->views[VIEW_POSITION].count)
+                                : meshopt_encodeVertexBufferBound(v->count, v->stride);
+    *out = malloc(bound);
+    if (!*out)
+        return ISO_E_NOMEM;
+    v->packed_length = v->triangles ? meshopt_encodeIndexBuffer(*out, bound, v->data, v->count)
+                                    : meshopt_encodeVertexBuffer(*out, bound, v->data, v->count, v->stride);
+    assert(v->packed_length > 0); /* the bounds above are the codecs' own */
+    return 0;
+}
+
+/* Passes 1 and 2 on up to two threads: the indices on one, the vertices (quantized, then
+ * encoded) on the other. */
+typedef struct pack_job {
+    const iso_mesh *mesh;
+    const proto_encode_options *opt;
+    quantized *q;
+    unsigned char *packed[VIEW_COUNT];
+    int rc[2];
+} pack_job;
+
+static int pack_vertices(pack_job *job)
+{
+    quantized *q = job->q;
+    int rc = quantize_positions(job->mesh, job->opt->position_bits, q);
+    if (!rc)
+        rc = encode_view(q, &q->views[VIEW_POSITION], &job->packed[VIEW_POSITION]);
+    if (!rc && q->normals)
+        rc = quantize_normals(job->mesh, job->opt->normal_bits, q);
+    if (!rc && q->normals)
+        rc = encode_view(q, &q->views[VIEW_NORMAL], &job->packed[VIEW_NORMAL]);
+    return rc;
+}
+
+static void pack_share(void *context, int t, int threads)
+{
+    pack_job *job = context;
+    if (t == 0)
+        job->rc[0] = pack_vertices(job);
+    if (t == threads - 1)
+        job->rc[1] = encode_view(job->q, &job->q->views[VIEW_INDEX], &job->packed[VIEW_INDEX]);
+}
+
+/* Joins the views' compressed bytes into one buffer, each 4-byte aligned, and lays out the
+ * fallback buffer. */
+static int join(quantized *q, unsigned char *const packed[VIEW_COUNT], unsigned char **out, size_t *out_size)
+{
+    size_t total = 0, offset = 0;
+    for (int i = 0; i < VIEW_COUNT; i++)
+        if (packed[i])
+            total += proto_glb_pad4(q->views[i].packed_length);
+    unsigned char *buf = malloc(total ? total : 1);
     if (!buf)
         return ISO_E_NOMEM;
     size_t used = 0;
     for (int i = 0; i < VIEW_COUNT; i++) {
         view *v = &q->views[i];
-        if (i == VIEW_NORMAL && !q->normals)
+        if (!packed[i])
             continue;
-        size_t room = bound - used;
+        v->offset = offset;
+        v->length = v->count * v->stride;
+        offset += proto_glb_pad4(v->length);
         v->packed_offset = used;
-        v->packed_length = v->triangles ? meshopt_encodeIndexBuffer(buf + used, room, v->data, v->count)
-                                        : meshopt_encodeVertexBuffer(buf + used, room, v->data, v->count,
-                                                                     v->stride);
-        assert(v->packed_length > 0); /* the bounds above are the codecs' own */
+        memcpy(buf + used, packed[i], v->packed_length);
         used += v->packed_length;
         while (used % 4)
             buf[used++] = 0;
@@ -171,6 +225,21 @@ static int pack(quantized *q, unsigned char **out, size_t *out_size)
     *out = buf;
     *out_size = used;
     return 0;
+}
+
+/* Passes 1 and 2: the BIN chunk's bytes. */
+static int pack(const iso_mesh *mesh, const proto_encode_options *opt, quantized *q, unsigned char **out,
+                size_t *out_size)
+{
+    pack_job job = {.mesh = mesh, .opt = opt, .q = q};
+    int threads = iso_parallel_threads(opt->threads);
+    iso_parallel_run(threads > 1 ? 2 : 1, pack_share, &job);
+    int rc = job.rc[0] ? job.rc[0] : job.rc[1];
+    if (!rc)
+        rc = join(q, job.packed, out, out_size);
+    for (int i = 0; i < VIEW_COUNT; i++)
+        free(job.packed[i]);
+    return rc;
 }
 
 static void json_view(proto_glb_json *j, const view *v, int target)
@@ -257,11 +326,7 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
                                  .triangles = 1};
     unsigned char *bin = NULL;
     size_t bin_size = 0;
-    rc = quantize_positions(mesh, opt->position_bits, &q);
-    if (!rc && normals)
-        rc = quantize_normals(mesh, opt->normal_bits, &q);
-    if (!rc)
-        rc = pack(&q, &bin, &bin_size);
+    rc = pack(mesh, opt, &q, &bin, &bin_size);
     if (rc) {
         quantized_free(&q);
         return iso_error_set(err, rc, "no memory to encode a glb of %zu vertices", mesh->vertex_count);
@@ -271,4 +336,37 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
     free(bin);
     quantized_free(&q);
     return rc;
+}
+
+int proto_glb_meshopt_gzip_pieces(const unsigned char *glb, size_t size,
+                                  proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX])
+{
+    pieces[0] = (proto_gzip_piece){.end = size};
+    /* The header (12 bytes), the JSON chunk's length and type, its text, the BIN chunk's. */
+    if (size < 20 || memcmp(glb, "glTF", 4))
+        return 1;
+    size_t json_length = (size_t)glb[12] | (size_t)glb[13] << 8 | (size_t)glb[14] << 16 | (size_t)glb[15] << 24;
+    if (json_length > size - 28)
+        return 1;
+    /* The index view (json_view's text): the BIN chunk's last, after the vertex streams. */
+    const char *json = (const char *)glb + 20, *mode = NULL;
+    static const char triangles[] = "\"mode\":\"TRIANGLES\"", key[] = "\"EXT_meshopt_compression\":{\"buffer\":0,\"byteOffset\":";
+    for (size_t i = 0; i + sizeof triangles - 1 <= json_length && !mode; i++)
+        if (!memcmp(json + i, triangles, sizeof triangles - 1))
+            mode = json + i;
+    const char *number = NULL;
+    for (const char *p = json; mode && p + sizeof key - 1 < mode; p++)
+        if (!memcmp(p, key, sizeof key - 1))
+            number = p + sizeof key - 1;
+    if (!number)
+        return 1;
+    size_t offset = 0;
+    for (; number < mode && *number >= '0' && *number <= '9'; number++)
+        offset = offset * 10 + (size_t)(*number - '0');
+    size_t start = 20 + json_length + 8 + offset;
+    if (start >= size)
+        return 1;
+    pieces[0] = (proto_gzip_piece){.end = start, .huffman = 1};
+    pieces[1] = (proto_gzip_piece){.end = size};
+    return 2;
 }

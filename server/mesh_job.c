@@ -80,7 +80,9 @@ int srv_mesh_body_gzip(srv_body *body)
         unsigned char *gz;
         size_t size;
         /* Kept when it saves at least a twentieth; failing to make it only leaves it out. */
-        if (!proto_gzip(body->data, body->size, &gz, &size, NULL)) {
+        proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
+        int count = proto_glb_meshopt_gzip_pieces(body->data, body->size, pieces);
+        if (!proto_gzip_pieces(body->data, body->size, pieces, count, 0, &gz, &size, NULL)) {
             if (size > body->size - body->size / 20) {
                 free(gz);
             } else {

@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <zlib.h>
 
 #include "check.h"
 #include "draco_shim.h"
@@ -1211,21 +1212,59 @@ static void *meshopt_view(const char *ext, const unsigned char *bin, size_t bin_
     return out;
 }
 
+/* The gzip member `gz` inflated (zlib, gzip wrapper only) equals `want`; the stream ends
+ * where the member does. */
+static void check_gunzip(const unsigned char *gz, size_t gz_size, const unsigned char *want, size_t size)
+{
+    unsigned char *out = malloc(size + 1);
+    z_stream z = {0};
+    CHECK(out && inflateInit2(&z, 16 + 15) == Z_OK);
+    if (!out) {
+        free(out);
+        return;
+    }
+    z.next_in = (Bytef *)(uintptr_t)gz;
+    z.avail_in = (uInt)gz_size;
+    z.next_out = out;
+    z.avail_out = (uInt)size + 1;
+    int rc = inflate(&z, Z_FINISH);
+    CHECKF(rc == Z_STREAM_END && z.avail_in == 0 && z.total_out == size, "inflate %d, %u left, %lu out of %zu", rc,
+           z.avail_in, z.total_out, size);
+    CHECK(z.total_out != size || !memcmp(out, want, size));
+    inflateEnd(&z);
+    free(out);
+}
+
 /* Encodes m, reads every view back with meshoptimizer's decoders, and checks the counts
  * exactly, indices exactly, positions within half a quantization step (exactly above 16
- * bits) and normals within their quantization. */
+ * bits) and normals within their quantization. One thread gives the same bytes as two.
+ * Its gzip in pieces (the container and vertex streams Huffman-coded, the indices from the
+ * index view's first byte on) inflates back to it. */
 static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
 {
     iso_error err;
     proto_encode_options opt;
     proto_encode_options_init(&opt);
     opt.position_bits = qp, opt.normal_bits = qn;
-    unsigned char *buf;
-    size_t size, bin_size;
+    unsigned char *buf, *one;
+    size_t size, bin_size, one_size;
     const unsigned char *bin;
     CHECK_OK(proto_encode_glb_meshopt(m, &opt, &buf, &size, &err), &err);
     if (!buf)
         return;
+    opt.threads = 1;
+    CHECK_OK(proto_encode_glb_meshopt(m, &opt, &one, &one_size, &err), &err);
+    CHECK(one && one_size == size && !memcmp(one, buf, size));
+    free(one);
+    proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
+    int count = proto_glb_meshopt_gzip_pieces(buf, size, pieces);
+    CHECK_EQ(count, m->triangle_count ? 2 : 1);
+    unsigned char *gz;
+    size_t gz_size;
+    CHECK_OK(proto_gzip_pieces(buf, size, pieces, count, 2, &gz, &gz_size, &err), &err);
+    if (gz)
+        check_gunzip(gz, gz_size, buf, size);
+    free(gz);
     char *json = glb_parse(buf, size, &bin, &bin_size);
     CHECK(json && bin);
     if (!json || !bin)
@@ -1321,6 +1360,66 @@ static void test_glb_meshopt_round_trip(void)
     iso_mesh_free(&m);
     make_torus(&m, 100, 60, 0);
     check_glb_meshopt(&m, 14, 10);
+    iso_mesh_free(&m);
+}
+
+/* Pieces of any sizes (empty ones too), either strategy, one to four, on one or two
+ * threads: one gzip member that inflates to the input. The meshopt split names the index
+ * view's first byte (the index codec's header, 0xe0 | version), and nothing in bytes that
+ * are not a meshopt glb. */
+static void test_gzip_pieces(void)
+{
+    iso_error err;
+    size_t size = 300000;
+    unsigned char *in = malloc(size);
+    CHECK(in != NULL);
+    if (!in)
+        return;
+    for (size_t i = 0; i < size; i++)
+        in[i] = (unsigned char)(i < size / 2 ? rng() % 7 : (i / 3) % 251);
+    const size_t cuts[][3] = {{size, 0, 0}, {0, size, 0}, {1000, 1000, size / 2}, {size / 3, size / 2, size - 1}};
+    for (int count = 1; count <= PROTO_GZIP_PIECES_MAX; count++)
+        for (int c = 0; c < 4; c++)
+            for (int threads = 1; threads <= 2; threads++) {
+                proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
+                for (int i = 0; i < count; i++)
+                    pieces[i] = (proto_gzip_piece){.end = i < 3 ? cuts[c][i] : size, .huffman = (i + c) % 2};
+                for (int i = 1; i < count; i++)
+                    if (pieces[i].end < pieces[i - 1].end)
+                        pieces[i].end = pieces[i - 1].end;
+                unsigned char *gz;
+                size_t gz_size;
+                CHECK_OK(proto_gzip_pieces(in, size, pieces, count, threads, &gz, &gz_size, &err), &err);
+                if (gz)
+                    check_gunzip(gz, gz_size, in, size);
+                free(gz);
+            }
+    unsigned char *gz;
+    size_t gz_size;
+    CHECK_OK(proto_gzip(in, 0, &gz, &gz_size, &err), &err);
+    if (gz)
+        check_gunzip(gz, gz_size, in, 0);
+    free(gz);
+    proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
+    CHECK_EQ(proto_glb_meshopt_gzip_pieces(in, size, pieces), 1);
+    CHECK_EQ(pieces[0].end, size);
+    free(in);
+
+    iso_mesh m;
+    make_torus(&m, 100, 60, 1);
+    unsigned char *glb;
+    CHECK_OK(proto_encode_glb_meshopt(&m, NULL, &glb, &size, &err), &err);
+    if (glb) {
+        CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 2);
+        CHECK(pieces[0].huffman && !pieces[1].huffman && pieces[0].end < size);
+        CHECKF((glb[pieces[0].end] & 0xf0) == 0xe0, "index view starts with %#x", glb[pieces[0].end]);
+        /* The index view is the BIN chunk's last: it runs to the end but for its padding. */
+        size_t encoded = meshopt_encodeIndexBufferBound(3 * m.triangle_count, m.vertex_count);
+        CHECK(size - pieces[0].end <= encoded + 3);
+        glb[0] = 'x';
+        CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 1);
+    }
+    free(glb);
     iso_mesh_free(&m);
 }
 
@@ -1440,6 +1539,7 @@ int main(void)
     CHECK_RUN(test_glb_container);
     CHECK_RUN(test_glb_meshopt_round_trip);
     CHECK_RUN(test_glb_meshopt_refuses_and_empties);
+    CHECK_RUN(test_gzip_pieces);
     CHECK_RUN(test_empty_mesh_gives_valid_files);
     return check_finish();
 }
