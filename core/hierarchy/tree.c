@@ -86,7 +86,7 @@ int iso_box_is_brick(const iso_box *box)
  * `full` 0 only the error is wanted, of samples known to be numbers: the loop is then a
  * multiply-add and a maximum per sample. */
 #define DEFINE_SCAN(NAME, T)                                                                  \
-    static inline void NAME##_any(const iso_volume *vol, const iso_box *f, const iso_box *b,   \
+    static inline __attribute__((always_inline)) void NAME##_any(const iso_volume *vol, const iso_box *f, const iso_box *b,   \
                                   double *mn, double *mx, double *er, const int full)          \
     {                                                                                          \
         const T *p = (const T *)vol->data;                                                     \
@@ -219,9 +219,18 @@ static int lay_out(const iso_volume *vol, layout *l)
 
 /* ---- PASS 2: fit, deepest nodes first ---- */
 
-typedef struct fit_job {
+/* What the fit pass shares: the layout, and per brick (the stored leaves) the min and max
+ * of each of its octants (the halves of its box per axis, sharing the middle plane), for
+ * bounds finer than a brick's own. */
+typedef struct fit_ctx {
     const iso_volume *vol;
     layout *l;
+    uint32_t count[3];          /* bricks per axis */
+    float *oct_min, *oct_max;   /* 8 per brick, x fastest, rounded outward */
+} fit_ctx;
+
+typedef struct fit_job {
+    fit_ctx *f;
     size_t first, last;  /* this round's nodes: one depth of the breadth-first order */
     atomic_size_t next;  /* next node of the round to claim */
 } fit_job;
@@ -233,11 +242,60 @@ typedef struct pending {
     double bound; /* of |p - T| over its box (bound_below) */
 } pending;
 
-/* An upper bound on |p(s) - T(s)| over the samples s of node q's box, T the trilinear
- * through frame's corners c (inv: 1 / frame's extents): T on q's box lies between its
- * values at q's corners, and the samples between q's min and max; and |p - T| <= |p - T_q|
- * + |T_q - T|, the first at most q's error, the second trilinear, so largest at q's
- * corners, where T_q is p. The smaller of the two. */
+/* The brick grid's index of a stored leaf's box. */
+static size_t brick_of(const fit_ctx *f, const iso_box *box)
+{
+    return ((size_t)(box->lo[2] / ISO_TREE_BRICK) * f->count[1] + box->lo[1] / ISO_TREE_BRICK) * f->count[0] +
+           box->lo[0] / ISO_TREE_BRICK;
+}
+
+/* Octant o of box: per axis a, the lower half [lo, mid] if bit a of o is 0, else [mid, hi]. */
+static iso_box octant(const iso_box *box, int o)
+{
+    iso_box b;
+    for (int a = 0; a < 3; a++) {
+        uint32_t mid = box->lo[a] + (box->hi[a] - box->lo[a]) / 2;
+        b.lo[a] = o >> a & 1 ? mid : box->lo[a];
+        b.hi[a] = o >> a & 1 ? box->hi[a] : mid;
+    }
+    return b;
+}
+
+/* A brick's octants' min and max (NaN samples ignored: the bounds that read them are used
+ * only where no NaN is). */
+static void leaf_octants(fit_ctx *f, const iso_box *box)
+{
+    double samples[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES];
+    size_t lo[3] = {box->lo[0], box->lo[1], box->lo[2]}, hi[3] = {box->hi[0], box->hi[1], box->hi[2]};
+    iso_vol_read_box(f->vol, lo, hi, samples);
+    size_t nx = hi[0] - lo[0] + 1, ny = hi[1] - lo[1] + 1, at = brick_of(f, box) * 8;
+    for (int o = 0; o < 8; o++) {
+        iso_box b = octant(box, o);
+        double mn = INFINITY, mx = -INFINITY;
+        for (uint32_t z = b.lo[2]; z <= b.hi[2]; z++)
+            for (uint32_t y = b.lo[1]; y <= b.hi[1]; y++) {
+                const double *row = samples + ((z - box->lo[2]) * ny + (y - box->lo[1])) * nx - box->lo[0];
+                for (uint32_t x = b.lo[0]; x <= b.hi[0]; x++) {
+                    mn = row[x] < mn ? row[x] : mn;
+                    mx = row[x] > mx ? row[x] : mx;
+                }
+            }
+        f->oct_min[at + (size_t)o] = iso_float_down(mn);
+        f->oct_max[at + (size_t)o] = iso_float_up(mx);
+    }
+}
+
+/* T (the frame's trilinear: corners c, inv = 1 / its extents) at sample (x, y, z). */
+static double frame_eval(const iso_box *frame, const double c[8], const double inv[3], uint32_t x, uint32_t y,
+                         uint32_t z)
+{
+    return iso_tri_eval(c, (x - frame->lo[0]) * inv[0], (y - frame->lo[1]) * inv[1], (z - frame->lo[2]) * inv[2]);
+}
+
+/* An upper bound on |p(s) - T(s)| over the samples s of node q's box, T the frame's
+ * trilinear: T on q's box lies between its values at q's corners, and the samples between
+ * q's min and max; and |p - T| <= |p - T_q| + |T_q - T|, the first at most q's error, the
+ * second trilinear, so largest at q's corners, where T_q is p. The smaller of the two. */
 static double bound_below(const iso_volume *vol, const iso_box *frame, const double c[8], const double inv[3],
                           const iso_tree_node *q, const iso_box *qb)
 {
@@ -245,8 +303,7 @@ static double bound_below(const iso_volume *vol, const iso_box *frame, const dou
     for (int k = 0; k < 8; k++) {
         uint32_t x = k & 1 ? qb->hi[0] : qb->lo[0], y = k & 2 ? qb->hi[1] : qb->lo[1];
         uint32_t z = k & 4 ? qb->hi[2] : qb->lo[2];
-        double t = iso_tri_eval(c, (x - frame->lo[0]) * inv[0], (y - frame->lo[1]) * inv[1],
-                                (z - frame->lo[2]) * inv[2]);
+        double t = frame_eval(frame, c, inv, x, y, z);
         double d = fabs(iso_vol_get(vol, x, y, z) - t);
         tmin = t < tmin ? t : tmin;
         tmax = t > tmax ? t : tmax;
@@ -256,20 +313,58 @@ static double bound_below(const iso_volume *vol, const iso_box *frame, const dou
     return fmin(by_range, (double)q->err + dev);
 }
 
+/* A brick below the frame: its octants bounded by their own min and max against T at
+ * their corners (T's 27 values on the brick's halving grid), the likeliest first, and only
+ * those that could beat *best scanned. */
+static void scan_brick(const fit_ctx *f, const iso_box *frame, const double c[8], const double inv[3],
+                       const iso_box *box, double margin, double *best)
+{
+    uint32_t g[3][3];
+    for (int a = 0; a < 3; a++)
+        g[a][0] = box->lo[a], g[a][1] = box->lo[a] + (box->hi[a] - box->lo[a]) / 2, g[a][2] = box->hi[a];
+    double t[27];
+    for (int k = 0; k < 27; k++)
+        t[k] = frame_eval(frame, c, inv, g[0][k % 3], g[1][k / 3 % 3], g[2][k / 9]);
+    size_t at = brick_of(f, box) * 8;
+    double ub[8];
+    int order[8];
+    for (int o = 0; o < 8; o++) {
+        double tmin = INFINITY, tmax = -INFINITY;
+        for (int k = 0; k < 8; k++) {
+            double v = t[((o >> 2 & 1) + (k >> 2 & 1)) * 9 + ((o >> 1 & 1) + (k >> 1 & 1)) * 3 + (o & 1) + (k & 1)];
+            tmin = v < tmin ? v : tmin;
+            tmax = v > tmax ? v : tmax;
+        }
+        ub[o] = fmax((double)f->oct_max[at + (size_t)o] - tmin, tmax - (double)f->oct_min[at + (size_t)o]);
+        int i = o;
+        for (; i > 0 && ub[order[i - 1]] < ub[o]; i--)
+            order[i] = order[i - 1];
+        order[i] = o;
+    }
+    for (int i = 0; i < 8; i++) {
+        if (ub[order[i]] + margin <= *best)
+            break;
+        iso_box b = octant(box, order[i]);
+        double e = scan_error(f->vol, frame, &b);
+        *best = e > *best ? e : *best;
+    }
+}
+
 /* Node n's error, the largest |p(s) - T(s)| over its samples, T the trilinear through its
  * corners: the children's boxes cover n's, so it is the largest of the same figures over
  * the bricks below n. A branch and bound finds it: a subtree whose bound cannot beat the
- * largest figure found so far is skipped, and the bricks that can are scanned against n's
- * trilinear (scan_error, the very figures a scan of n's whole box computes; the maximum
- * does not depend on the order). `margin` covers the rounding of the bounds: far above
- * it, at a billionth of the largest magnitude, far below any difference that matters. */
-static double error_by_bounds(const iso_volume *vol, const layout *l, size_t n)
+ * largest figure found so far is skipped, and the brick octants that can are scanned
+ * against n's trilinear (scan_error, the very figures a scan of n's whole box computes;
+ * the maximum does not depend on the order). `margin` covers the rounding of the bounds:
+ * far above it, at a billionth of the largest magnitude, far below any difference that
+ * matters. */
+static double error_by_bounds(const fit_ctx *f, size_t n)
 {
-    const iso_box *frame = &l->boxes[n];
-    const iso_tree_node *nodes = l->nodes;
+    const iso_box *frame = &f->l->boxes[n];
+    const iso_tree_node *nodes = f->l->nodes;
     double c[8], inv[3], best = 0;
     for (int k = 0; k < 8; k++)
-        c[k] = iso_vol_get(vol, k & 1 ? frame->hi[0] : frame->lo[0], k & 2 ? frame->hi[1] : frame->lo[1],
+        c[k] = iso_vol_get(f->vol, k & 1 ? frame->hi[0] : frame->lo[0], k & 2 ? frame->hi[1] : frame->lo[1],
                            k & 4 ? frame->hi[2] : frame->lo[2]);
     for (int d = 0; d < 3; d++)
         inv[d] = frame->hi[d] > frame->lo[d] ? 1.0 / (frame->hi[d] - frame->lo[d]) : 0.0;
@@ -282,15 +377,14 @@ static double error_by_bounds(const iso_volume *vol, const layout *l, size_t n)
         if (stack[top].bound + margin <= best)
             continue;
         if (q != n && !nodes[q].first_child) {
-            double e = scan_error(vol, frame, &l->boxes[q]);
-            best = e > best ? e : best;
+            scan_brick(f, frame, c, inv, &f->l->boxes[q], margin, &best);
             continue;
         }
         /* The child with the larger bound goes on top: it is the likelier to raise best. */
         uint32_t ch[2] = {nodes[q].first_child, nodes[q].first_child + 1};
         double b[2];
         for (int i = 0; i < 2; i++)
-            b[i] = bound_below(vol, frame, c, inv, &nodes[ch[i]], &l->boxes[ch[i]]);
+            b[i] = bound_below(f->vol, frame, c, inv, &nodes[ch[i]], &f->l->boxes[ch[i]]);
         int big = b[1] > b[0];
         assert(top + 2 <= FIT_STACK);
         for (int i = 0; i < 2; i++) {
@@ -302,19 +396,22 @@ static double error_by_bounds(const iso_volume *vol, const layout *l, size_t n)
     return best;
 }
 
-/* A brick: one scan of its samples. Above: min and max from the children's (outward
- * rounding commutes with min and max), the error by bounds when every figure below is
- * finite, else (NaN or infinite samples, or magnitudes where the bounds' rounding could
- * matter) a scan of the whole box, which gives INFINITY for a NaN as a brick's scan does. */
-static void fit_node(const iso_volume *vol, layout *l, size_t n)
+/* A brick: one scan of its samples, and its octants' bounds. Above: min and max from the
+ * children's (outward rounding commutes with min and max), the error by bounds when every
+ * figure below is finite, else (NaN or infinite samples, or magnitudes where the bounds'
+ * rounding could matter) a scan of the whole box, which gives INFINITY for a NaN as a
+ * brick's scan does. */
+static void fit_node(fit_ctx *f, size_t n)
 {
+    layout *l = f->l;
     iso_tree_node *node = &l->nodes[n];
     double mn, mx, er;
     if (!node->first_child) {
-        iso_tree_scan_box(vol, &l->boxes[n], &mn, &mx, &er);
+        iso_tree_scan_box(f->vol, &l->boxes[n], &mn, &mx, &er);
         node->min = mn <= mx ? iso_float_down(mn) : INFINITY; /* all-NaN box: never active */
         node->max = mn <= mx ? iso_float_up(mx) : -INFINITY;
         node->err = iso_float_up(er);
+        leaf_octants(f, &l->boxes[n]);
         return;
     }
     const iso_tree_node *a = &l->nodes[node->first_child], *b = a + 1;
@@ -322,9 +419,9 @@ static void fit_node(const iso_volume *vol, layout *l, size_t n)
     node->max = a->max > b->max ? a->max : b->max;
     double magnitude = fmax(fabs((double)node->min), fabs((double)node->max));
     if (isfinite(a->err) && isfinite(b->err) && magnitude < 1e30)
-        er = error_by_bounds(vol, l, n);
+        er = error_by_bounds(f, n);
     else
-        iso_tree_scan_box(vol, &l->boxes[n], &mn, &mx, &er);
+        iso_tree_scan_box(f->vol, &l->boxes[n], &mn, &mx, &er);
     node->err = iso_float_up(er);
 }
 
@@ -339,7 +436,7 @@ static void fit_round(void *context, int t, int threads)
             return;
         size_t last = first + FIT_CHUNK < job->last ? first + FIT_CHUNK : job->last;
         for (size_t n = first; n < last; n++)
-            fit_node(job->vol, job->l, n);
+            fit_node(job->f, n);
     }
 }
 
@@ -348,14 +445,23 @@ static void fit_round(void *context, int t, int threads)
  * are independent and shared by the threads. */
 static int fit_all(const iso_volume *vol, layout *l, int threads, iso_progress_fn progress, void *context)
 {
+    fit_ctx f = {.vol = vol, .l = l};
+    iso_bricks_count(vol, f.count);
+    size_t bricks = (size_t)f.count[0] * f.count[1] * f.count[2];
     unsigned char *depth = malloc(l->count);
-    if (!depth)
+    f.oct_min = malloc(bricks * 8 * sizeof *f.oct_min);
+    f.oct_max = malloc(bricks * 8 * sizeof *f.oct_max);
+    if (!depth || !f.oct_min || !f.oct_max) {
+        free(depth);
+        free(f.oct_min);
+        free(f.oct_max);
         return ISO_E_NOMEM;
+    }
     depth[0] = 0;
     for (size_t n = 0; n < l->count; n++)
         if (l->nodes[n].first_child)
             depth[l->nodes[n].first_child] = depth[l->nodes[n].first_child + 1] = (unsigned char)(depth[n] + 1);
-    fit_job job = {.vol = vol, .l = l};
+    fit_job job = {.f = &f};
     for (size_t last = l->count; last > 0;) {
         size_t first = last;
         while (first > 0 && depth[first - 1] == depth[last - 1])
@@ -369,6 +475,39 @@ static int fit_all(const iso_volume *vol, layout *l, int threads, iso_progress_f
         last = first;
     }
     free(depth);
+    free(f.oct_min);
+    free(f.oct_max);
+    return 0;
+}
+
+/* The min/max grid of bricks (tree.h): the stored leaves are exactly the bricks, and
+ * without NaN (integer samples) a brick's bounds are its leaf's, rounded the same way; so
+ * they are copied rather than scanned again. Float samples may hold NaN, which the grid
+ * marks differently (min -INFINITY): those are scanned. */
+static int bricks_from_leaves(const iso_volume *vol, const iso_tree *tree, const layout *l, int threads,
+                              iso_bricks *bricks, iso_error *err)
+{
+    if (iso_vol_type_is_float(vol->type))
+        return iso_bricks_build(vol, threads, bricks, err);
+    iso_bricks b = {0};
+    iso_bricks_count(vol, b.count);
+    size_t total = iso_bricks_total(&b);
+    b.min = malloc(total * sizeof *b.min);
+    b.max = malloc(total * sizeof *b.max);
+    if (!b.min || !b.max) {
+        iso_bricks_free(&b);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory for %zu brick bounds", total);
+    }
+    for (size_t n = 0; n < tree->node_count; n++) {
+        if (tree->nodes[n].first_child)
+            continue;
+        const iso_box *box = &l->boxes[n];
+        size_t at = ((size_t)(box->lo[2] / ISO_TREE_BRICK) * b.count[1] + box->lo[1] / ISO_TREE_BRICK) * b.count[0] +
+                    box->lo[0] / ISO_TREE_BRICK;
+        b.min[at] = tree->nodes[n].min;
+        b.max[at] = tree->nodes[n].max;
+    }
+    *bricks = b;
     return 0;
 }
 
@@ -398,7 +537,7 @@ int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress,
     tree->node_count = l.count;
     tree->volume_crc = iso_tree_volume_crc(vol);
     l.nodes = NULL;
-    int rc = iso_bricks_build(vol, threads, &tree->bricks, err);
+    int rc = bricks_from_leaves(vol, tree, &l, threads, &tree->bricks, err);
     if (!rc)
         rc = iso_levels_build(vol, &tree->bricks, threads, &tree->level_error, err);
     if (rc) {

@@ -89,7 +89,8 @@ def test_bench_distances(header, tmp):
     assert doc["voxels"] == N ** 3 and doc["voxel_mm"] == SPACING, doc
     assert close(doc["hierarchy_percent"], 100 * doc["hierarchy_bytes"] / doc["volume_bytes"]), doc
     assert close(doc["build_s_per_1e7_voxels"], doc["build_ms"] / doc["voxels"] * 1e4), doc
-    assert doc["build_ms"] > 0 and 0 < doc["hierarchy_percent"] < 100, doc
+    assert close(doc["build_cpu_s_per_1e7_voxels"], doc["build_cpu_ms"] / doc["voxels"] * 1e4), doc
+    assert doc["build_ms"] > 0 and doc["build_cpu_ms"] > 0 and 0 < doc["hierarchy_percent"] < 100, doc
     assert close(doc["preview_tolerance"], doc["value_range"] / 2), doc
     check_rows(doc)
 
@@ -102,7 +103,7 @@ def test_peer_ladder(header, tmp):
     subprocess.run(["/usr/bin/python3", os.path.join(os.path.dirname(os.path.abspath(__file__)), "bench_peer.py")],
                    check=True, env=env, stdout=subprocess.DEVNULL)
     case = json.load(open(out))["cases"][0]
-    for k in ("build_s_per_1e7_voxels", "hierarchy_percent", "preview_tolerance", "faithful", "ladder"):
+    for k in ("build_s_per_1e7_voxels", "build_cpu_s_per_1e7_voxels", "hierarchy_percent", "preview_tolerance", "faithful", "ladder"):
         assert k in case, f"case lacks {k}"
     ladder = case["ladder"]
     assert len(ladder) == 6 and ladder[-1]["tolerance"] == case["preview_tolerance"], ladder

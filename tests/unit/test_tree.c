@@ -1,7 +1,7 @@
 /* test_tree.c: the hierarchy's nodes as the build computes them (deepest first, the
  * errors above bricks by a branch and bound over the bricks below) against a scan of each
  * node's whole box (iso_tree_scan_box), rounded as the build rounds: min, max and error
- * must agree bit for bit, on random data of every voxel type in boxes clipped by odd
+ * must agree bit for bit, and the brick grid with iso_bricks_build's, on random data of every voxel type in boxes clipped by odd
  * dimensions, on smooth and on constant data (where every bound ties), on floats with NaN,
  * infinities and huge magnitudes, on one and on two threads, and on the shared CThead. */
 #include <math.h>
@@ -51,6 +51,16 @@ static void check_volume(const iso_volume *vol)
     CHECK_EQ(one->node_count, two->node_count);
     CHECK(memcmp(one->nodes, two->nodes, iso_tree_bytes(one)) == 0);
     check_nodes_match_scans(vol, one);
+    /* The brick grid, copied from the leaves for integer samples, is what its scan gives. */
+    iso_bricks scanned;
+    CHECK_OK(iso_bricks_build(vol, 1, &scanned, &err), &err);
+    size_t n = iso_bricks_total(&scanned);
+    CHECK_EQ(iso_bricks_total(&one->bricks), n);
+    if (iso_bricks_total(&one->bricks) == n) {
+        CHECK(memcmp(scanned.min, one->bricks.min, n * sizeof *scanned.min) == 0);
+        CHECK(memcmp(scanned.max, one->bricks.max, n * sizeof *scanned.max) == 0);
+    }
+    iso_bricks_free(&scanned);
     iso_tree_destroy(one);
     iso_tree_destroy(two);
 }
