@@ -7,6 +7,7 @@
 
 #include "check.h"
 #include "extract/march.h"
+#include "extract/mc.h"
 #include "surface.h"
 
 typedef struct triangle {
@@ -267,6 +268,85 @@ static void test_cthead_matches_full_scan(void)
     iso_vol_destroy(vol);
 }
 
+/* iso_march_selected on random fields and random marks: the triangles are exactly those
+ * marching cubes gives the marked bricks' cells, every vertex is some triangle's, and
+ * iso_march_part_vertex finds each crossing of a marked brick's cells at its position
+ * (the ghosts' vertices included: a cell's crossing on an edge a ghost owns). */
+static void test_selected_bricks(void)
+{
+    for (int trial = 0; trial < 40 && !check_failed(); trial++) {
+        size_t n[3];
+        for (int d = 0; d < 3; d++)
+            n[d] = 2 + (size_t)(surface_uniform() * 30);
+        iso_volume *vol = surface_make_volume(n[0], n[1], n[2], trial % 2 ? ISO_U8 : ISO_F32);
+        for (size_t k = 0; k < n[2]; k++)
+            for (size_t j = 0; j < n[1]; j++)
+                for (size_t i = 0; i < n[0]; i++)
+                    iso_vol_set(vol, i, j, k, trial % 2 ? floor(surface_uniform() * 4) : surface_uniform());
+        iso_vol_update_stats(vol);
+        double level = trial % 2 ? 1 : 0.5;
+        iso_bricks bricks;
+        iso_error err;
+        CHECK_OK(iso_bricks_build(vol, 1, &bricks, &err), &err);
+        size_t total = iso_bricks_total(&bricks);
+        uint8_t *marked = malloc(total);
+        for (size_t b = 0; b < total; b++)
+            marked[b] = trial % 5 == 0 || surface_uniform() < 0.4;
+        iso_mesh m, soup;
+        iso_mesh_init(&m);
+        iso_mesh_init(&soup);
+        iso_march_stats st;
+        iso_march_part *part = NULL;
+        CHECK_OK(iso_march_selected(vol, &bricks, level, marked, 1 + trial % 3, &m, &st, &part, &err), &err);
+        static const double unit[3] = {1, 1, 1};
+        size_t found = 0, crossings = 0;
+        for (size_t z = 0; z + 1 < n[2]; z++)
+            for (size_t y = 0; y + 1 < n[1]; y++)
+                for (size_t x = 0; x + 1 < n[0]; x++) {
+                    size_t b = ((z / 8) * bricks.count[1] + y / 8) * bricks.count[0] + x / 8;
+                    if (!marked[b])
+                        continue;
+                    double v[8], origin[3] = {(double)x, (double)y, (double)z};
+                    for (int c = 0; c < 8; c++)
+                        v[c] = iso_vol_get(vol, x + (c & 1), y + (c >> 1 & 1), z + (c >> 2 & 1));
+                    CHECK(iso_mc_cell(v, level, origin, unit, &soup, NULL) >= 0);
+                    for (int e = 0; e < 12; e++) {
+                        int lo = iso_mc_edge_corner[e][0], hi = iso_mc_edge_corner[e][1], axis = e / 4;
+                        if ((v[lo] > level) == (v[hi] > level))
+                            continue;
+                        uint32_t p[3] = {(uint32_t)x + (lo & 1), (uint32_t)y + (lo >> 1 & 1), (uint32_t)z + (lo >> 2 & 1)}, id;
+                        crossings++;
+                        if (!iso_march_part_vertex(part, p, axis, &id) || id >= m.vertex_count)
+                            continue;
+                        float want = (float)((double)p[axis] + iso_mc_edge_t(v[lo], v[hi], level));
+                        found += m.positions[3 * id + axis] == want;
+                    }
+                }
+        CHECK_EQ(found, crossings);
+        CHECK_EQ(m.triangle_count, soup.triangle_count);
+        if (m.triangle_count == soup.triangle_count) {
+            triangle *a = canonical_triangles(&m), *b = canonical_triangles(&soup);
+            CHECK(memcmp(a, b, m.triangle_count * sizeof *a) == 0);
+            free(a);
+            free(b);
+        }
+        uint8_t *used = calloc(m.vertex_count + 1, 1);
+        for (size_t i = 0; i < 3 * m.triangle_count; i++)
+            used[m.indices[i]] = 1;
+        size_t unused = 0;
+        for (size_t i = 0; i < m.vertex_count; i++)
+            unused += !used[i];
+        CHECK_EQ(unused, 0);
+        free(used);
+        iso_march_part_free(part);
+        iso_mesh_free(&m);
+        iso_mesh_free(&soup);
+        free(marked);
+        iso_bricks_free(&bricks);
+        iso_vol_destroy(vol);
+    }
+}
+
 int main(void)
 {
     CHECK_RUN(test_random_fields_match_full_scan);
@@ -276,5 +356,6 @@ int main(void)
     CHECK_RUN(test_octahedron_across_eight_bricks);
     CHECK_RUN(test_threads_give_identical_meshes);
     CHECK_RUN(test_cthead_matches_full_scan);
+    CHECK_RUN(test_selected_bricks);
     return check_finish();
 }
