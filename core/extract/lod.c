@@ -51,10 +51,12 @@ typedef struct lod {
     uint32_t stamp;
     double value[BRICK_SAMPLES];
     uint32_t value_stamp[BRICK_SAMPLES];
-    /* Set when the brick has transition cells: then every sample of its box is in value,
-     * and row z * 9 + y has bit x set where sample (x, y, z) (brick-local) is above. */
+    /* Set when the brick has transition cells: then row z * 9 + y has bit x set where
+     * sample (x, y, z) (brick-local) is above the level. */
     int whole;
     uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES];
+    uint32_t corner_cell[3], corner_stamp; /* value_at's last data cell, and its corners */
+    double corner[8];
     uint32_t inner_id[BRICK_SAMPLES * 3], inner_stamp[BRICK_SAMPLES * 3];
     loop_segment *segments;
     size_t segment_count, segment_capacity;
@@ -120,7 +122,7 @@ static double sample(lod *c, const uint32_t p[3])
 {
     size_t local = ((size_t)(p[2] - c->lo[2]) * ISO_BRICK_SAMPLES + (p[1] - c->lo[1])) * ISO_BRICK_SAMPLES +
                    (p[0] - c->lo[0]);
-    if (!c->whole && c->value_stamp[local] != c->stamp) {
+    if (c->value_stamp[local] != c->stamp) {
         c->value_stamp[local] = c->stamp;
         c->value[local] = iso_vol_sample(c->vol, ((size_t)p[2] * c->dims[1] + p[1]) * c->dims[0] + p[0]);
     }
@@ -135,21 +137,19 @@ static int above(lod *c, const uint32_t p[3])
     return sample(c, p) > c->level;
 }
 
-/* Reads the brick at hand whole: its transition cells visit most of its face samples, and
- * a cell whose samples all lie on one side of the level (rows) has no segment. */
-static void read_whole(lod *c)
+/* Classifies every sample of the brick at hand (march.c's rows, 8 at a time): its
+ * transition cells visit most of its face samples, and a cell whose samples all lie on one
+ * side of the level has no segment. */
+static void classify_whole(lod *c)
 {
+    size_t lo[3];
+    uint8_t n[3];
+    for (int d = 0; d < 3; d++) {
+        lo[d] = c->lo[d];
+        n[d] = (uint8_t)c->n[d];
+    }
     c->whole = 1;
-    for (uint32_t z = 0; z < c->n[2]; z++)
-        for (uint32_t y = 0; y < c->n[1]; y++) {
-            size_t from[3] = {c->lo[0], c->lo[1] + y, c->lo[2] + z}, to[3] = {c->hi[0], from[1], from[2]};
-            double *v = c->value + (z * ISO_BRICK_SAMPLES + y) * ISO_BRICK_SAMPLES;
-            iso_vol_read_box(c->vol, from, to, v);
-            unsigned bits = 0;
-            for (uint32_t x = 0; x < c->n[0]; x++)
-                bits |= (unsigned)(v[x] > c->level) << x;
-            c->rows[z * ISO_BRICK_SAMPLES + y] = (uint16_t)bits;
-        }
+    iso_march_inside_rows(c->vol, c->level, lo, n, c->rows);
 }
 
 /* 1 if the cell at o has samples on both sides of the level (the brick read whole). */
@@ -169,7 +169,7 @@ static int cell_mixed(const lod *c, const uint32_t o[3], const uint32_t size[3])
 static double value_at(lod *c, const double x[3])
 {
     uint32_t cell[3];
-    double u[3], corner[8];
+    double u[3];
     for (int d = 0; d < 3; d++) {
         double local = x[d] - c->lo[d];
         uint32_t i = local <= 0 ? 0 : (uint32_t)local;
@@ -178,11 +178,16 @@ static double value_at(lod *c, const double x[3])
         cell[d] = c->lo[d] + i;
         u[d] = x[d] - cell[d];
     }
-    for (int k = 0; k < 8; k++) {
-        uint32_t p[3] = {cell[0] + (k & 1), cell[1] + ((k >> 1) & 1), cell[2] + ((k >> 2) & 1)};
-        corner[k] = sample(c, p);
+    /* A centre's bisection evaluates one data cell many times over. */
+    if (c->corner_stamp != c->stamp || memcmp(cell, c->corner_cell, sizeof cell)) {
+        for (int k = 0; k < 8; k++) {
+            uint32_t p[3] = {cell[0] + (k & 1), cell[1] + ((k >> 1) & 1), cell[2] + ((k >> 2) & 1)};
+            c->corner[k] = sample(c, p);
+        }
+        memcpy(c->corner_cell, cell, sizeof cell);
+        c->corner_stamp = c->stamp;
     }
-    return iso_tri_eval(corner, u[0], u[1], u[2]);
+    return iso_tri_eval(c->corner, u[0], u[1], u[2]);
 }
 
 static void measure(lod *c, const double x[3])
@@ -622,7 +627,7 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
     int regular = no_finer_neighbour(c, shift);
     c->whole = 0;
     if (!regular)
-        read_whole(c);
+        classify_whole(c);
     for (uint32_t z = 0; z + 1 < c->n[2]; z += s)
         for (uint32_t y = 0; y + 1 < c->n[1]; y += s)
             for (uint32_t x = 0; x + 1 < c->n[0]; x += s) {

@@ -249,6 +249,14 @@ static void inside_rows(const march_job *job, const size_t lo[3], const uint8_t 
     }
 }
 
+void iso_march_inside_rows(const iso_volume *vol, double level, const size_t lo[3], const uint8_t n[3],
+                           uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES])
+{
+    march_job job = {.vol = vol, .level = level};
+    job.reach = make_threshold(vol->type, level, &job.threshold);
+    inside_rows(&job, lo, n, rows);
+}
+
 static void brick_origin(const active_brick *ab, size_t lo[3])
 {
     for (int d = 0; d < 3; d++)
@@ -406,15 +414,9 @@ static uint32_t count_triangles(const active_brick *ab)
 static unsigned ghost_edges(unsigned lower, int a, int y, int z)
 {
     unsigned edges = 0;
-    for (int x = 0; x < S; x++) {
-        const int at[3] = {x, y, z};
-        for (int k = 1; k < 8; k++) {
-            int holds = (lower >> k & 1) && !(k >> a & 1);
-            for (int d = 0; d < 3; d++)
-                holds &= !(k >> d & 1) || at[d] == 0;
-            edges |= (unsigned)holds << x;
-        }
-    }
+    for (int k = 1; k < 8; k++)
+        if ((lower >> k & 1) && !(k >> a & 1) && (!(k >> 1 & 1) || !y) && (!(k >> 2 & 1) || !z))
+            edges |= k & 1 ? 1u : (1u << S) - 1; /* stepping down in x: the x = 0 edge only */
     return edges;
 }
 

@@ -45,4 +45,9 @@ int iso_march_selected(const iso_volume *vol, const iso_bricks *bricks, double l
 int iso_march_part_vertex(const iso_march_part *part, const uint32_t p[3], int axis, uint32_t *id);
 void iso_march_part_free(iso_march_part *part);
 
+/* Bit x of rows[z * 9 + y]: sample lo + (x, y, z) is above level, for the n[] samples of
+ * a brick's box (rows past n[1], n[2] untouched), as the kernel classifies them. */
+void iso_march_inside_rows(const iso_volume *vol, double level, const size_t lo[3], const uint8_t n[3],
+                           uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES]);
+
 #endif
