@@ -9,7 +9,7 @@
  *      slab), then (2b) the joined mesh with the cuts free, which has little left to do;
  *   3. measure: each level's distance from level 0 (iso_mesh_distance_compute, samples three
  *      voxels apart), so the answers below rest on measurements, not on estimates. */
-#include "mesh.h"
+#include "distance.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -174,7 +174,8 @@ static int simplify_slabs(const iso_mesh_chain *chain, iso_mesh *m, int k, size_
 }
 
 /* PASS 2 and 3 for level k. */
-static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *seen, iso_error *err)
+static int add_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int k, int threads,
+                     unsigned char *seen, iso_error *err)
 {
     const iso_mesh_chain_level *prev = &chain->level[k - 1];
     iso_mesh_chain_level *lv = &chain->level[k];
@@ -223,8 +224,9 @@ static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *s
     lv->edges = pinches.edges;
     iso_mesh exact = view_of(chain, 0), level = view_of(chain, k);
     double measure_start = iso_clock_ms();
-    rc = iso_mesh_distance_compute(&exact, &level, ISO_CHAIN_SPACING_VOXELS * chain->voxel_size,
-                                   threads, &lv->distance, err);
+    rc = iso_mesh_distance_between(&exact, exact_grid, &level, NULL,
+                                   ISO_CHAIN_SPACING_VOXELS * chain->voxel_size,
+                                   ISO_DISTANCE_SAMPLES, threads, &lv->distance, err);
     lv->simplify_ms = r.ms;
     lv->measure_ms = iso_clock_ms() - measure_start;
     chain->bytes += 3 * lv->triangle_count * sizeof *lv->indices;
@@ -267,12 +269,20 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
     c->level[0].vertex_count = used_vertices(&level0, seen);
     c->bytes = sizeof *c + 3 * exact->vertex_count * sizeof *c->positions +
                3 * exact->triangle_count * sizeof *exact->indices;
-    int rc = 0;
+    /* PASS 3's grid of level 0, once for all levels: every level lies within its bounds. */
+    float lo[3], hi[3];
+    iso_mesh_bounds(&level0, lo, hi);
+    iso_mesh_grid *grid = NULL;
+    int rc = exact->triangle_count > 1 && iso_mesh_grid_build(&level0, lo, hi, &grid)
+                 ? iso_error_set(err, ISO_E_NOMEM, "chain: no memory for the grid of %zu triangles",
+                                 exact->triangle_count)
+                 : 0;
     for (int k = 1; k <= ISO_CHAIN_LEVELS && !rc; k++) {
         if ((exact->triangle_count >> k) < 1)
             break;
-        rc = add_level(c, k, threads, seen, err);
+        rc = add_level(c, grid, k, threads, seen, err);
     }
+    iso_mesh_grid_destroy(grid);
     free(seen);
     if (rc) {
         iso_mesh_chain_destroy(c);

@@ -14,6 +14,7 @@
 #include "check.h"
 #include "io/io.h"
 #include "mesh/mesh.h"
+#include "mesh/distance.h"
 #include "extract/extract.h"
 #include "surface.h"
 
@@ -194,8 +195,9 @@ static int by_distance(const void *pa, const void *pb)
 }
 
 /* Every sample mesh.h promises (sub-triangle centroids weighing their area, used vertices
- * weighing 0), measured by brute force; the weighted 99th percentile by a full sort. */
-static void brute_one_way(const iso_mesh *src, const iso_mesh *dst, double spacing,
+ * weighing 0), measured by brute force; the weighted 99th percentile by a full sort, and
+ * the share of the weight within distance `within` (returned). */
+static double brute_share(const iso_mesh *src, const iso_mesh *dst, double spacing, double within,
                           double *p99, double *max, size_t *count)
 {
     size_t cap = 1024, n = 0;
@@ -251,9 +253,19 @@ static void brute_one_way(const iso_mesh *src, const iso_mesh *dst, double spaci
             break;
         }
     }
+    double share = 0;
+    for (size_t i = 0; i < n && s[i].d <= within; i++)
+        share += s[i].w;
     *count = n;
     free(s);
     free(used);
+    return total > 0 ? share / total : 0;
+}
+
+static void brute_one_way(const iso_mesh *src, const iso_mesh *dst, double spacing,
+                          double *p99, double *max, size_t *count)
+{
+    brute_share(src, dst, spacing, 0, p99, max, count);
 }
 
 /* Field `name` (loaded, its hierarchy built) and its exact surface at `level` in index
@@ -314,6 +326,62 @@ static void test_simplified_sphere_matches_brute_force(void)
     iso_mesh_free(&exact);
     iso_mesh_free(&simple);
     iso_vol_destroy(vol);
+}
+
+/* The unit square at z = 0, its left half cut into 20 x 40 small squares and its right
+ * half into 2 large ones (two triangles each): triangles of very unequal sizes. */
+static void uneven_square(iso_mesh *m)
+{
+    iso_mesh_init(m);
+    CHECK(iso_mesh_reserve(m, 4 * 802, 2 * 802) == 0);
+    size_t v = 0, t = 0;
+    for (int i = 0; i < 22; i++) {
+        int right = i >= 20;
+        double x0 = right ? 0.5 : i * 0.025, w = right ? 0.5 : 0.025, h = right ? 0.5 : 0.025;
+        for (int j = 0; j < (right ? 1 : 40); j++) {
+            double y0 = right ? (i - 20) * 0.5 : j * 0.025;
+            float p[12] = {(float)x0, (float)y0, 0, (float)(x0 + w), (float)y0, 0,
+                           (float)(x0 + w), (float)(y0 + h), 0, (float)x0, (float)(y0 + h), 0};
+            memcpy(m->positions + 3 * v, p, sizeof p);
+            uint32_t q[6] = {(uint32_t)v, (uint32_t)v + 1, (uint32_t)v + 2, (uint32_t)v, (uint32_t)v + 2, (uint32_t)v + 3};
+            memcpy(m->indices + 3 * t, q, sizeof q);
+            v += 4, t += 2;
+        }
+    }
+    m->vertex_count = v, m->triangle_count = t;
+}
+
+/* Past the cap, the percentile comes from points drawn by area. From that uneven square
+ * to its left half the distance is max(0, x - 1/2): half the area is at 0, but 800 of the
+ * 804 triangles are, so points drawn by triangle instead of by area would give 0. The
+ * share of the area (brute force over all centroids) within the drawn p99 must be 99% to
+ * within four of the stated standard deviations; the maximum is still every centroid's
+ * and vertex's (1/2, at the right-hand corners); threads change nothing. */
+static void test_drawn_percentile_is_within_its_stated_error(void)
+{
+    iso_error err;
+    iso_mesh a, b;
+    uneven_square(&a);
+    rectangle(&b, 0, 0.5, 1, 0);
+    const size_t cap = 1024;
+    const double spacing = 1.0 / 64, sd = sqrt(0.99 * 0.01 / (double)cap);
+    iso_mesh_distance d, one;
+    CHECK_OK(iso_mesh_distance_between(&a, NULL, &b, NULL, spacing, cap, 0, &d, &err), &err);
+    CHECK_OK(iso_mesh_distance_between(&a, NULL, &b, NULL, spacing, cap, 1, &one, &err), &err);
+    CHECK(one.p99_ab == d.p99_ab && one.max_ab == d.max_ab);
+    CHECK_EQ(d.drawn_a, cap);
+    double p99, max;
+    size_t n;
+    double share = brute_share(&a, &b, spacing, d.p99_ab, &p99, &max, &n);
+    CHECKF(n > 4 * cap, "%zu samples", n);
+    CHECK_EQ(d.samples_a, n);
+    CHECKF(fabs(share - 0.99) <= 4 * sd, "%.4f of the area within the drawn p99 %g (all: %g)", share,
+           d.p99_ab, p99);
+    CHECK_NEAR(d.max_ab, 0.5, 1e-7);
+    CHECK_NEAR(max, 0.5, 1e-7);
+    CHECKF(d.max_ba < 1e-9, "back: max %g", d.max_ba);
+    iso_mesh_free(&a);
+    iso_mesh_free(&b);
 }
 
 /* The chain of a torus (genus 1): level k has at most 1/2^k of the exact triangles, every
@@ -470,6 +538,7 @@ int main(void)
     CHECK_RUN(test_square_against_its_half);
     CHECK_RUN(test_point_against_each_feature);
     CHECK_RUN(test_simplified_sphere_matches_brute_force);
+    CHECK_RUN(test_drawn_percentile_is_within_its_stated_error);
     CHECK_RUN(test_chain_levels_are_measured_and_closed);
     CHECK_RUN(test_chain_in_slabs_stays_closed);
     return check_finish();
