@@ -7,8 +7,9 @@
  *      indexes the one position array): on a large level, first (2a) in slabs across one
  *      axis, one per thread, each with its cut locked (the cut's edges are open in the
  *      slab), then (2b) the joined mesh with the cuts free, which has little left to do;
- *   3. measure: each level's distance from level 0 (iso_mesh_distance_compute, samples three
- *      voxels apart), so the answers below rest on measurements, not on estimates. */
+ *   3. measure: each level's distance from level 0 (iso_mesh_distance_between, samples three
+ *      voxels apart, against level 0's grid built once for all levels), so the answers
+ *      below rest on measurements, not on estimates. */
 #include "distance.h"
 
 #include <math.h>
