@@ -75,6 +75,9 @@ static int from_chain(const iso_tree *tree, const iso_volume *vol,
     res->exact_triangles = chain->level[0].triangle_count;
     res->distance = chain->level[k].distance;
     res->distance_measured = 1;
+    res->pinches = (iso_mesh_pinches){.edges = chain->level[k].edges,
+                                      .pinch_edges = chain->level[k].nonmanifold_edges,
+                                      .pinch_vertices = chain->level[k].pinch_vertices};
     /* A level past 0 was simplified by meshoptimizer: its estimate, the largest of the
      * steps', stands beside the measured distance. */
     double estimate = 0;
@@ -92,7 +95,9 @@ static int from_chain(const iso_tree *tree, const iso_volume *vol,
         iso_simplify_params sp = {.target_triangles = req->budget, .target_error = INFINITY,
                                   .lock_border = 1, .voxel_size = voxel_size(vol, req),
                                   .threads = req->extract.threads};
-        if ((rc = iso_simplify(&res->mesh, &sp, &res->chosen.simplify, err)) ||
+        if ((rc = iso_simplify_manifold(&res->mesh, &sp, &res->chosen.simplify, err)) ||
+            ((rc = iso_mesh_find_pinches(&res->mesh, NULL, &res->pinches)) &&
+             (rc = iso_error_set(err, rc, "no memory to count pinches"))) ||
             (rc = iso_mesh_distance_compute(&exact, &res->mesh, ISO_CHAIN_SPACING_VOXELS * sp.voxel_size,
                                             req->extract.threads, &res->distance, err)))
             return rc;

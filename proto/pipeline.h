@@ -61,6 +61,7 @@ typedef struct proto_pipeline_result {
     int chain_level;            /* the chain level answered (0: exact), -1: not from a chain */
     size_t chain_levels;        /* how many levels that chain has */
     size_t exact_triangles;     /* that chain's level 0 */
+    iso_mesh_pinches pinches;   /* the answer's pinches, when from a chain */
     size_t faithful_triangles;  /* as in the request, found here when a budget needed it */
     int distance_measured;      /* `distance` below holds the final mesh's measured distance
                                  * from the surface of req->extract (a = that surface) */

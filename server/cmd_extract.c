@@ -78,9 +78,12 @@ static json_t *chain_json(const proto_pipeline_result *res)
             "pinch_vertices", (json_int_t)c->level[k].pinch_vertices,
             "folds_dropped", (json_int_t)c->level[k].folds_dropped,
             "simplify_ms", c->level[k].simplify_ms, "measure_ms", c->level[k].measure_ms));
-    return json_pack("{s:i, s:I, s:I, s:f, s:o}", "level", res->chain_level,
+    return json_pack("{s:i, s:I, s:I, s:I, s:I, s:I, s:f, s:o}", "level", res->chain_level,
                      "levels", (json_int_t)res->chain_levels, "exact_triangles",
-                     (json_int_t)res->exact_triangles, "build_ms", c ? c->build_ms : 0.0,
+                     (json_int_t)res->exact_triangles, "edges", (json_int_t)res->pinches.edges,
+                     "pinch_edges", (json_int_t)res->pinches.pinch_edges,
+                     "pinch_vertices", (json_int_t)res->pinches.pinch_vertices,
+                     "build_ms", c ? c->build_ms : 0.0,
                      "built", levels ? levels : json_null());
 }
 

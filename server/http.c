@@ -546,6 +546,9 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
     if (body->chain_level >= 0) {
         add_number(r, "X-Iso-Chain-Level", "%.0f", (double)body->chain_level);
         add_number(r, "X-Iso-Exact-Triangles", "%.0f", (double)body->exact_triangles);
+        add_number(r, "X-Iso-Edges", "%.0f", (double)body->edges);
+        add_number(r, "X-Iso-Pinch-Edges", "%.0f", (double)body->pinch_edges);
+        add_number(r, "X-Iso-Pinch-Vertices", "%.0f", (double)body->pinch_vertices);
     }
     if (body->measured) {
         add_number(r, "X-Iso-Measure-Ms", "%.3f", body->measure_ms);

@@ -175,6 +175,9 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     body->distance_voxels = res.distance.p99 / iso_vol_min_spacing(job->volume->vol);
     body->chain_level = res.chain_level;
     body->exact_triangles = res.exact_triangles;
+    body->edges = res.pinches.edges;
+    body->pinch_edges = res.pinches.pinch_edges;
+    body->pinch_vertices = res.pinches.pinch_vertices;
     body->area_mm2 = res.area;
     body->closed = res.census.closed;
     body->volume_mm3 = res.enclosed_volume;

@@ -268,6 +268,15 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
     c->levels = 1;
     iso_mesh level0 = view_of(c, 0);
     c->level[0].vertex_count = used_vertices(&level0, seen);
+    iso_mesh_pinches pinches;
+    if (iso_mesh_find_pinches(&level0, NULL, &pinches)) {
+        iso_mesh_chain_destroy(c);
+        free(seen);
+        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory to count pinches");
+    }
+    c->level[0].edges = pinches.edges;
+    c->level[0].nonmanifold_edges = pinches.pinch_edges;
+    c->level[0].pinch_vertices = pinches.pinch_vertices;
     c->bytes = sizeof *c + 3 * exact->vertex_count * sizeof *c->positions +
                3 * exact->triangle_count * sizeof *exact->indices;
     /* PASS 3's grid of level 0, once for all levels: every level lies within its bounds. */

@@ -217,6 +217,7 @@ typedef struct manifold_work {
     iso_mesh in;              /* the input's triangles (a copy) over the mesh's positions */
     vertex_triangles vt;      /* the input's */
     unsigned char *had, *now; /* pinch marks per vertex: the input's, the result's */
+    unsigned char *folds;     /* the corners of folds the last round dropped */
     unsigned char *is_locked; /* per vertex */
     uint32_t *locked;         /* the locked vertices, in the order locked */
     size_t locked_count;
@@ -231,6 +232,7 @@ static void work_free(manifold_work *w)
     vertex_triangles_free(&w->vt);
     free(w->had);
     free(w->now);
+    free(w->folds);
     free(w->is_locked);
     free(w->locked);
     free(w->ext);
@@ -248,13 +250,14 @@ static int work_init(const iso_mesh *mesh, manifold_work *w)
     w->in.indices = malloc(3 * nt * sizeof *w->in.indices);
     w->had = malloc(nv);
     w->now = malloc(nv);
+    w->folds = calloc(nv, 1);
     w->is_locked = calloc(nv, 1);
     w->locked = malloc(nv * sizeof *w->locked);
     w->ext = malloc(2 * 3 * nv * sizeof *w->ext);
     w->stack = malloc(nv * sizeof *w->stack);
     w->seen = calloc(nv, sizeof *w->seen);
     w->remap = malloc(nv * sizeof *w->remap);
-    if (!w->in.indices || !w->had || !w->now || !w->is_locked || !w->locked || !w->ext || !w->stack || !w->seen || !w->remap)
+    if (!w->in.indices || !w->had || !w->now || !w->folds || !w->is_locked || !w->locked || !w->ext || !w->stack || !w->seen || !w->remap)
         return ISO_E_NOMEM;
     memcpy(w->in.indices, mesh->indices, 3 * mesh->triangle_count * sizeof *w->in.indices);
     memcpy(w->ext, mesh->positions, 3 * mesh->vertex_count * sizeof *w->ext);
@@ -273,11 +276,17 @@ static int lock_new_pinches(manifold_work *w, const iso_mesh *result, size_t *pi
         return ISO_E_NOMEM;
     *pinches = 0;
     for (size_t v = 0; v < result->vertex_count; v++) {
-        if (!w->now[v] || w->had[v])
+        double radius2 = 0;
+        if (w->now[v] && !w->had[v])
+            radius2 = reach2(result, &rt, (uint32_t)v);
+        /* a fold's corner may be used no more: the reach of the input's edges there */
+        if (w->folds[v])
+            radius2 = fmax(radius2, 4 * reach2(&w->in, &w->vt, (uint32_t)v));
+        if (!(radius2 > 0))
             continue;
         ++*pinches;
-        lock_around(&w->in, &w->vt, (uint32_t)v, reach2(result, &rt, (uint32_t)v), w->is_locked,
-                    w->locked, &w->locked_count, w->stack, w->seen, ++w->stamp);
+        lock_around(&w->in, &w->vt, (uint32_t)v, radius2, w->is_locked, w->locked,
+                    &w->locked_count, w->stack, w->seen, ++w->stamp);
     }
     vertex_triangles_free(&rt);
     return 0;
@@ -303,7 +312,9 @@ int iso_simplify_manifold(iso_mesh *mesh, const iso_simplify_params *params,
     double start = iso_clock_ms();
     size_t pinches = 0;
     iso_simplify_params sp = *params;
+    sp.fold_marks = w.folds;
     for (int round = 0; !rc; round++) {
+        memset(w.folds, 0, w.in.vertex_count);
         if ((rc = simplify_locked(&w.in, w.locked, w.locked_count, w.ext, &sp, mesh, r, err)))
             break;
         /* Locked vertices leave fewer collapses: the count is then not worth any error,

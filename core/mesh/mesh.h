@@ -228,6 +228,8 @@ typedef struct iso_simplify_params {
     int threads;             /* for the measure: 0 = all cores */
     int keep_vertices;       /* 1: keep unused vertices (indices stay valid for the input's
                               * positions); 0: drop them */
+    unsigned char *fold_marks; /* NULL, or vertex_count bytes: the corners of every fold
+                              * dropped are set to 1 (the others left as they were) */
 } iso_simplify_params;
 
 typedef struct iso_simplify_result {

@@ -46,7 +46,8 @@ static corner_key key_of(const uint32_t *t, uint32_t index)
  * windings (a collapse laid one onto the other). Each adds one use in each direction to
  * its three edges, so dropping the pair leaves every edge's balance as it was. keys has
  * triangle_count entries. O(T log T). Returns the triangles dropped. */
-static size_t drop_folds(uint32_t *indices, size_t triangle_count, corner_key *keys)
+static size_t drop_folds(uint32_t *indices, size_t triangle_count, corner_key *keys,
+                         unsigned char *marks)
 {
     for (size_t t = 0; t < triangle_count; t++)
         keys[t] = key_of(indices + 3 * t, (uint32_t)t);
@@ -56,6 +57,8 @@ static size_t drop_folds(uint32_t *indices, size_t triangle_count, corner_key *k
         corner_key *a = keys + i, *b = keys + i + 1;
         if (memcmp(a->v, b->v, sizeof a->v) || !((a->triangle ^ b->triangle) & ODD_WINDING))
             continue;
+        for (int k = 0; marks && k < 3; k++)
+            marks[a->v[k]] = 1;
         /* UINT32_MAX in a first corner marks a dropped triangle for the compaction below. */
         indices[3 * (size_t)(a->triangle & ~ODD_WINDING)] = UINT32_MAX;
         indices[3 * (size_t)(b->triangle & ~ODD_WINDING)] = UINT32_MAX;
@@ -136,7 +139,7 @@ int iso_simplify(iso_mesh *mesh, const iso_simplify_params *params,
     size_t triangles = index_count / 3;
     if (!(keys = malloc((triangles ? triangles : 1) * sizeof *keys)))
         goto nomem;
-    r->folds_dropped = drop_folds(indices, triangles, keys);
+    r->folds_dropped = drop_folds(indices, triangles, keys, params->fold_marks);
     triangles -= r->folds_dropped;
     free(keys);
     keys = NULL;

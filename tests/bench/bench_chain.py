@@ -8,7 +8,9 @@ For each case, in one run on the same exact surface (world mm):
            from the one before and measured against the exact surface), its build time
            split into simplification and measurement, and its 25% level's measured p99;
   answer   `extract --distance D` with D = half the smallest spacing: the level chosen,
-           its share of the exact triangles and its measured distance.
+           its share of the exact triangles and its measured distance;
+  pinch    the chain's worst level: its pinches (edges of 3+ triangles and vertices of
+           2+ fans) per 10,000 edges (the target is under 1).
 Ratios are chain time / single time, measured in the same run. Prints a table, writes
 bench/results/chain.json. Needs ../shared/volumes (prints SKIP otherwise)."""
 
@@ -43,7 +45,7 @@ def main():
     rows = []
     head = (f"{'case':<20} {'exact':>8} {'single ms':>9} {'p99 mm':>7} {'chain ms':>9} {'simpl.':>7} "
             f"{'meas.':>7} {'ratio':>6} {'s.ratio':>7} {'25% p99':>7} {'D mm':>5} {'level':>5} {'share':>6} "
-            f"{'p99':>6} {'max':>6} {'vol %':>6}")
+            f"{'p99':>6} {'max':>6} {'vol %':>6} {'pinch':>6}")
     print(head)
     for name, level, label, spacing in CASES:
         if only and label not in only.split(","):
@@ -75,12 +77,15 @@ def main():
                "answer_share": answer["triangles"] / answer["chain"]["exact_triangles"], "answer_p99_mm": answer["distance"]["p99"],
                "answer_max_mm": answer["distance"]["max"], "answer_nonmanifold_edges": answer["nonmanifold_edges"],
                "answer_edges_closed": answer["closed"], "answer_volume_change_percent": vol}
+        row["pinches_per_10k_edges"] = max(1e4 * (b["nonmanifold_edges"] + b["pinch_vertices"]) / b["edges"]
+                                           for b in built if b["edges"])
+        row["folds_dropped"] = sum(b["folds_dropped"] for b in built)
         rows.append(row)
         print(f"{label:<20} {exact['triangles']:>8} {single_ms:>9.0f} {s['distance']['p99']:>7.3f} "
               f"{chain['build_ms']:>9.0f} {simplify_ms:>7.0f} {measure_ms:>7.0f} {row['ratio']:>6.2f} "
               f"{row['simplify_ratio']:>7.2f} {built[2]['p99']:>7.3f} {d:>5.2f} {k:>5} "
               f"{100 * row['answer_share']:>5.1f}% {answer['distance']['p99']:>6.3f} {answer['distance']['max']:>6.2f} "
-              f"{'' if vol is None else f'{vol:+.2f}':>6}", flush=True)
+              f"{'' if vol is None else f'{vol:+.2f}':>6} {row['pinches_per_10k_edges']:>6.2f}", flush=True)
     os.makedirs("bench/results", exist_ok=True)
     with open("bench/results/chain.json", "w") as f:
         json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "rows": rows}, f, indent=1)

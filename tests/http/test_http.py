@@ -447,6 +447,30 @@ draco3d.createDecoderModule({}).then(m => {
                 edges[e] = edges.get(e, 0) + 1
         assert all(n == 1 and edges.get((b, a)) == 1 for (a, b), n in edges.items())
 
+    def count_pinches(faces):
+        """Edges, edges of 3+ triangles, and vertices whose triangles make 2+ fans (joined
+        through corners other than the vertex): the X-Iso-Edges / Pinch-* headers' counts."""
+        uses, around = {}, {}
+        for t in faces:
+            t = [int(x) for x in t]
+            for k in range(3):
+                a, b = t[k], t[(k + 1) % 3]
+                uses[(min(a, b), max(a, b))] = uses.get((min(a, b), max(a, b)), 0) + 1
+                around.setdefault(a, []).append([x for x in t if x != a])
+        pinch_vertices = 0
+        for v, links in around.items():
+            parent = list(range(len(links)))
+            def root(i):
+                while parent[i] != i:
+                    i = parent[i]
+                return i
+            for i in range(len(links)):
+                for j in range(i + 1, len(links)):
+                    if set(links[i]) & set(links[j]):
+                        parent[root(i)] = root(j)
+            pinch_vertices += len({root(i) for i in range(len(links))}) > 1
+        return len(uses), sum(n > 2 for n in uses.values()), pinch_vertices
+
     def budget_faithful():
         r = s.get(f"/v1/volumes/blob/mesh?level={level}&budget=3000&format=ply&normals=none")
         nt = int(r.getheader("X-Iso-Triangles"))
@@ -535,6 +559,10 @@ draco3d.createDecoderModule({}).then(m => {
         assert max(from_exact.max(), to_exact.max()) >= 0.5 * top, (from_exact.max(), top)
         assert np.quantile(from_exact, 0.9) <= p99 + 1e-4, (np.quantile(from_exact, 0.9), p99)
         assert_closed(faces)
+        counted = count_pinches(faces)
+        assert counted == tuple(int(r.getheader(h)) for h in ("X-Iso-Edges", "X-Iso-Pinch-Edges",
+                                                             "X-Iso-Pinch-Vertices")), counted
+        assert counted[1] == counted[2] == 0, counted
         v, v0 = float(r.getheader("X-Iso-Volume-Mm3")), float(exact.getheader("X-Iso-Volume-Mm3"))
         print(f"distance_volume: chain level {k}: {nt} of 3004 triangles, p99 {p99:.4f} mm, "
                f"max {top:.4f} mm, enclosed volume {100 * (v - v0) / v0:+.3f}%", flush=True)
