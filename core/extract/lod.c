@@ -51,9 +51,7 @@ typedef struct lod {
     uint32_t stamp;
     double value[BRICK_SAMPLES];
     uint32_t value_stamp[BRICK_SAMPLES];
-    /* Set when the brick has transition cells: then row z * 9 + y has bit x set where
-     * sample (x, y, z) (brick-local) is above the level. */
-    int whole;
+    /* Row z * 9 + y has bit x set where sample (x, y, z) (brick-local) is above. */
     uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES];
     uint32_t corner_cell[3], corner_stamp; /* value_at's last data cell, and its corners */
     double corner[8];
@@ -132,14 +130,12 @@ static double sample(lod *c, const uint32_t p[3])
 /* 1 if sample p is above the level. */
 static int above(lod *c, const uint32_t p[3])
 {
-    if (c->whole)
-        return c->rows[(p[2] - c->lo[2]) * ISO_BRICK_SAMPLES + (p[1] - c->lo[1])] >> (p[0] - c->lo[0]) & 1;
-    return sample(c, p) > c->level;
+    return c->rows[(p[2] - c->lo[2]) * ISO_BRICK_SAMPLES + (p[1] - c->lo[1])] >> (p[0] - c->lo[0]) & 1;
 }
 
-/* Classifies every sample of the brick at hand (march.c's rows, 8 at a time): its
- * transition cells visit most of its face samples, and a cell whose samples all lie on one
- * side of the level has no segment. */
+/* Classifies every sample of the brick at hand (march.c's rows, 8 at a time, cheaper than
+ * its grid's samples one by one): a cell's case is then bits, and a transition cell whose
+ * samples all lie on one side of the level has no segment. */
 static void classify_whole(lod *c)
 {
     size_t lo[3];
@@ -148,11 +144,10 @@ static void classify_whole(lod *c)
         lo[d] = c->lo[d];
         n[d] = (uint8_t)c->n[d];
     }
-    c->whole = 1;
     iso_march_inside_rows(c->vol, c->level, lo, n, c->rows);
 }
 
-/* 1 if the cell at o has samples on both sides of the level (the brick read whole). */
+/* 1 if the cell at o has samples on both sides of the level. */
 static int cell_mixed(const lod *c, const uint32_t o[3], const uint32_t size[3])
 {
     unsigned x = o[0] - c->lo[0], mask = ((1u << (size[0] + 1)) - 1) << x, any = 0, all = mask;
@@ -625,18 +620,24 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
     brick_around(c, b);
     uint32_t s = 1u << shift;
     int regular = no_finer_neighbour(c, shift);
-    c->whole = 0;
-    if (!regular)
-        classify_whole(c);
+    /* Whether a cell is regular depends only on which of the brick's planes it touches. */
+    int8_t by_touch[64];
+    memset(by_touch, -1, sizeof by_touch);
+    classify_whole(c);
     for (uint32_t z = 0; z + 1 < c->n[2]; z += s)
         for (uint32_t y = 0; y + 1 < c->n[1]; y += s)
             for (uint32_t x = 0; x + 1 < c->n[0]; x += s) {
                 uint32_t o[3] = {c->lo[0] + x, c->lo[1] + y, c->lo[2] + z}, size[3];
-                for (int d = 0; d < 3; d++)
+                unsigned touch = 0;
+                for (int d = 0; d < 3; d++) {
                     size[d] = c->hi[d] - o[d] < s ? c->hi[d] - o[d] : s; /* the last may be narrower */
+                    touch |= (unsigned)(o[d] == c->lo[d]) << (2 * d) | (unsigned)(o[d] + size[d] == c->hi[d]) << (2 * d + 1);
+                }
                 c->cells++;
+                if (by_touch[touch] < 0)
+                    by_touch[touch] = (int8_t)(regular || cell_is_regular(c, o, size, shift));
                 int rc;
-                if (regular || cell_is_regular(c, o, size, shift)) {
+                if (by_touch[touch]) {
                     rc = regular_cell(c, o, size);
                     if (rc)
                         return iso_error_set(err, rc, rc == ISO_E_LIMIT ? "more than 2^32 - 1 vertices"
