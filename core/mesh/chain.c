@@ -3,10 +3,12 @@
  * Passes of iso_mesh_chain_build:
  *   1. keep: the exact surface's positions and triangles become level 0;
  *   2. simplify: level k (k = 1..ISO_CHAIN_LEVELS) is level k - 1 simplified to half its
- *      triangles (iso_simplify, borders locked, unused vertices kept so that every level
- *      indexes the one position array): on a large level, first (2a) in slabs across one
- *      axis, one per thread, each with its cut locked (the cut's edges are open in the
- *      slab), then (2b) the joined mesh with the cuts free, which has little left to do;
+ *      triangles (iso_simplify_manifold, borders locked), in parts, each gathered over
+ *      compact vertices and mapped back to the chain's (so that every level indexes the
+ *      one position array): on a large level, first (2a) slabs across one axis, one per
+ *      thread, each with its cut locked (the cut's edges are open in the slab), then (2b)
+ *      the bands around the cuts, each with its rim locked and the cut free, shed what the
+ *      cuts kept above the target; a small level is one part;
  *   3. measure: each level's distance from level 0 (iso_mesh_distance_between, samples three
  *      voxels apart, against level 0's grid built once for all levels), so the answers
  *      below rest on measurements, not on estimates. */
@@ -50,91 +52,143 @@ static size_t used_vertices(const iso_mesh *m, unsigned char *seen)
     return n;
 }
 
-/* One slab of a level being simplified on several threads (PASS 2a). */
-typedef struct slab {
+/* One part of a level, simplified on its own thread (PASS 2a, 2b). */
+typedef struct part {
     iso_mesh mesh;          /* its triangles over its own vertices */
     uint32_t *global;       /* its vertex i is the chain's vertex global[i] */
+    size_t triangles;       /* the source's triangles in it */
     size_t target;
     iso_simplify_result result;
     int rc;
     iso_error err;
-} slab;
+} part;
 
-typedef struct slab_job {
+typedef struct part_job {
     const iso_mesh_chain *chain;
     const iso_mesh *source;
-    int axis;
-    float cut[ISO_CHAIN_SLABS_MAX + 1]; /* slab s: cut[s] <= centre < cut[s + 1] */
-    slab *slabs;
+    const int *part_of;     /* per source triangle: its part, or -1 (kept as it is) */
+    part *parts;
     int count;
-    size_t target;
-} slab_job;
+} part_job;
 
-static int slab_of(const slab_job *job, const iso_mesh *m, size_t t)
+/* One part on one thread: its triangles gathered over compact vertices (so that its cost
+ * follows its own size, not the chain's vertex count), then simplified with every vertex
+ * on an open edge, which is where the part was cut out, locked. */
+static void simplify_part(void *context, int thread, int threads)
 {
-    float c = 0;
-    for (int k = 0; k < 3; k++)
-        c += m->positions[3 * (size_t)m->indices[3 * t + k] + (size_t)job->axis];
-    c /= 3;
-    int s = 0;
-    while (s + 1 < job->count && c >= job->cut[s + 1])
-        s++;
-    return s;
-}
-
-/* PASS 2a on one thread: gathers slab `part`'s triangles over compact vertices, then
- * simplifies them with every vertex on the slab's cut (an open edge there) locked. */
-static void simplify_slab(void *context, int part, int parts)
-{
-    slab_job *job = context;
+    part_job *job = context;
     const iso_mesh *m = job->source;
-    for (int s = part; s < job->count; s += parts) {
-        slab *sl = &job->slabs[s];
-        size_t n = 0;
-        for (size_t t = 0; t < m->triangle_count; t++)
-            n += slab_of(job, m, t) == s;
+    for (int s = thread; s < job->count; s += threads) {
+        part *pt = &job->parts[s];
+        size_t n = pt->triangles;
         uint32_t *local = malloc((m->vertex_count ? m->vertex_count : 1) * sizeof *local);
-        iso_mesh_init(&sl->mesh);
-        if (!local || iso_mesh_reserve(&sl->mesh, 3 * n, n) ||
-            !(sl->global = malloc((3 * n + 1) * sizeof *sl->global))) {
+        iso_mesh_init(&pt->mesh);
+        if (!local || iso_mesh_reserve(&pt->mesh, 3 * n, n) ||
+            !(pt->global = malloc((3 * n + 1) * sizeof *pt->global))) {
             free(local);
-            sl->rc = iso_error_set(&sl->err, ISO_E_NOMEM, "chain: no memory for a slab of %zu triangles", n);
+            pt->rc = iso_error_set(&pt->err, ISO_E_NOMEM, "chain: no memory for a part of %zu triangles", n);
             continue;
         }
         memset(local, 0xff, m->vertex_count * sizeof *local);
         size_t v = 0, i = 0;
         for (size_t t = 0; t < m->triangle_count; t++) {
-            if (slab_of(job, m, t) != s)
+            if (job->part_of[t] != s)
                 continue;
             for (int k = 0; k < 3; k++) {
                 uint32_t g = m->indices[3 * t + k];
                 if (local[g] == UINT32_MAX) {
                     local[g] = (uint32_t)v;
-                    sl->global[v] = g;
-                    memcpy(sl->mesh.positions + 3 * v++, m->positions + 3 * (size_t)g, 3 * sizeof(float));
+                    pt->global[v] = g;
+                    memcpy(pt->mesh.positions + 3 * v++, m->positions + 3 * (size_t)g, 3 * sizeof(float));
                 }
-                sl->mesh.indices[i++] = local[g];
+                pt->mesh.indices[i++] = local[g];
             }
         }
         free(local);
-        sl->mesh.vertex_count = v;
-        sl->mesh.triangle_count = n;
-        sl->target = (size_t)((double)job->target * (double)n / (double)m->triangle_count) + 1;
-        iso_simplify_params sp = {.target_triangles = sl->target, .target_error = INFINITY,
-                                  .voxel_size = job->chain->voxel_size, .lock_border = 1,
-                                  .keep_vertices = 1};
-        sl->rc = iso_simplify_manifold(&sl->mesh, &sp, &sl->result, &sl->err);
+        pt->mesh.vertex_count = v;
+        pt->mesh.triangle_count = n;
+        iso_simplify_params sp = {.target_triangles = pt->target ? pt->target : 1,
+                                  .target_error = INFINITY, .voxel_size = job->chain->voxel_size,
+                                  .lock_border = 1, .keep_vertices = 1};
+        pt->rc = iso_simplify_manifold(&pt->mesh, &sp, &pt->result, &pt->err);
     }
 }
 
-/* PASS 2a: level k - 1 (in m) cut into slabs across an axis (the longest side on even
- * levels, the next on odd ones, so that one level's cuts are simplified by the next),
- * simplified on all threads, and joined back into m. */
-static int simplify_slabs(const iso_mesh_chain *chain, iso_mesh *m, int k, size_t target,
+/* Simplifies the parts of m (part_of, parts[s].target set) on `threads` and joins them
+ * into m: first the triangles of no part, as they were, then each part's. */
+static int run_parts(part_job *job, iso_mesh *m, int threads, iso_simplify_result *r, iso_error *err)
+{
+    iso_parallel_run(threads < job->count ? threads : job->count, simplify_part, job);
+    int rc = 0;
+    size_t joined = 0;
+    for (int s = 0; s < job->count; s++)
+        if (job->parts[s].rc && !rc) {
+            rc = job->parts[s].rc;
+            if (err)
+                *err = job->parts[s].err;
+        }
+    for (size_t t = 0; !rc && t < m->triangle_count; t++)
+        if (job->part_of[t] < 0)
+            memmove(m->indices + 3 * joined, m->indices + 3 * t, 3 * sizeof *m->indices), joined++;
+    for (int s = 0; s < job->count; s++) {
+        part *pt = &job->parts[s];
+        for (size_t i = 0; !rc && i < 3 * pt->mesh.triangle_count; i++)
+            m->indices[3 * joined + i] = pt->global[pt->mesh.indices[i]];
+        joined += rc ? 0 : pt->mesh.triangle_count;
+        r->error = fmax(r->error, pt->result.error);
+        r->folds_dropped += pt->result.folds_dropped;
+        iso_mesh_free(&pt->mesh);
+        free(pt->global);
+        pt->global = NULL;
+    }
+    if (!rc)
+        m->triangle_count = joined;
+    return rc;
+}
+
+/* A triangle's centroid along an axis. */
+static float centre_of(const iso_mesh *m, size_t t, int axis)
+{
+    float c = 0;
+    for (int k = 0; k < 3; k++)
+        c += m->positions[3 * (size_t)m->indices[3 * t + k] + (size_t)axis];
+    return c / 3;
+}
+
+/* The mean edge length of m (its triangles' first two edges). */
+static double mean_edge(const iso_mesh *m)
+{
+    double sum = 0;
+    for (size_t t = 0; t < m->triangle_count; t++)
+        for (int e = 0; e < 2; e++) {
+            const float *a = m->positions + 3 * (size_t)m->indices[3 * t + e];
+            const float *b = m->positions + 3 * (size_t)m->indices[3 * t + e + 1];
+            sum += sqrt((double)(a[0] - b[0]) * (a[0] - b[0]) + (double)(a[1] - b[1]) * (a[1] - b[1]) +
+                        (double)(a[2] - b[2]) * (a[2] - b[2]));
+        }
+    return m->triangle_count ? sum / (2.0 * (double)m->triangle_count) : 0;
+}
+
+/* PASS 2 for level k: m (level k - 1's triangles) simplified to `target`. In slabs
+ * (2a) across an axis (the longest side on even levels, the next on odd ones), one per
+ * thread, each with its cut locked, to the slab's share of the target; then (2b) the
+ * bands of triangles within ISO_CHAIN_BAND_EDGES mean edges of each cut, each with its
+ * own rim locked, shed what the locked cuts kept above the target. A small level is one
+ * part. */
+static int simplify_level(const iso_mesh_chain *chain, iso_mesh *m, int k, size_t target,
                           int threads, iso_simplify_result *r, iso_error *err)
 {
-    slab_job job = {.chain = chain, .source = m, .target = target};
-    job.count = threads < ISO_CHAIN_SLABS_MAX ? threads : ISO_CHAIN_SLABS_MAX;
+    size_t T = m->triangle_count;
+    int slabs = threads > 1 && T >= (size_t)threads * ISO_CHAIN_SLAB_MIN ? threads : 1;
+    slabs = slabs < ISO_CHAIN_SLABS_MAX ? slabs : ISO_CHAIN_SLABS_MAX;
+    *r = (iso_simplify_result){.triangles_in = T, .vertices_in = m->vertex_count};
+    int *part_of = malloc((T ? T : 1) * sizeof *part_of);
+    part *parts = calloc((size_t)slabs, sizeof *parts);
+    if (!part_of || !parts) {
+        free(part_of);
+        free(parts);
+        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for the parts of level %d", k);
+    }
     float lo[3], hi[3];
     iso_mesh_bounds(m, lo, hi);
     int order[3] = {0, 1, 2};
@@ -144,33 +198,40 @@ static int simplify_slabs(const iso_mesh_chain *chain, iso_mesh *m, int k, size_
                 int swap = order[a];
                 order[a] = order[b], order[b] = swap;
             }
-    job.axis = order[k % 2];
-    for (int s = 0; s <= job.count; s++)
-        job.cut[s] = lo[job.axis] + (hi[job.axis] - lo[job.axis]) * (float)s / (float)job.count;
-    if (!(job.slabs = calloc((size_t)job.count, sizeof *job.slabs)))
-        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for slabs");
-    iso_parallel_run(threads, simplify_slab, &job);
-    int rc = 0;
-    size_t joined = 0;
-    *r = (iso_simplify_result){.triangles_in = m->triangle_count, .vertices_in = m->vertex_count};
-    for (int s = 0; s < job.count; s++) {
-        slab *sl = &job.slabs[s];
-        if (sl->rc && !rc) {
-            rc = sl->rc;
-            if (err)
-                *err = sl->err;
-        }
-        for (size_t i = 0; !rc && i < 3 * sl->mesh.triangle_count; i++)
-            m->indices[joined++] = sl->global[sl->mesh.indices[i]];
-        r->error = fmax(r->error, sl->result.error);
-        r->nonmanifold_edges += sl->result.nonmanifold_edges;
-        r->folds_dropped += sl->result.folds_dropped;
-        iso_mesh_free(&sl->mesh);
-        free(sl->global);
+    int axis = order[k % 2];
+    double side = (double)hi[axis] - lo[axis];
+    for (size_t t = 0; t < T; t++) {
+        int s = (int)(((double)centre_of(m, t, axis) - lo[axis]) / side * slabs);
+        part_of[t] = s < 0 ? 0 : s >= slabs ? slabs - 1 : s;
+        parts[part_of[t]].triangles++;
     }
-    free(job.slabs);
-    if (!rc)
-        m->triangle_count = joined / 3;
+    for (int s = 0; s < slabs; s++)
+        parts[s].target = (size_t)((double)target * (double)parts[s].triangles / (double)T);
+    part_job job = {.chain = chain, .source = m, .part_of = part_of, .parts = parts, .count = slabs};
+    int rc = run_parts(&job, m, threads, r, err); /* PASS 2a */
+    if (!rc && slabs > 1 && m->triangle_count > target) {
+        /* PASS 2b: band c - 1 around cut c (c = 1 .. slabs - 1). */
+        double half = ISO_CHAIN_BAND_EDGES * mean_edge(m), total = 0;
+        size_t excess = m->triangle_count - target;
+        memset(parts, 0, (size_t)slabs * sizeof *parts);
+        for (size_t t = 0; t < m->triangle_count; t++) {
+            double x = ((double)centre_of(m, t, axis) - lo[axis]) / side * slabs;
+            int c = (int)lround(x);
+            int in = c >= 1 && c < slabs && fabs(x - c) * side / slabs < half;
+            part_of[t] = in ? c - 1 : -1;
+            if (in)
+                parts[c - 1].triangles++, total++;
+        }
+        for (int s = 0; s < slabs - 1; s++) {
+            double shed = (double)excess * (double)parts[s].triangles / (total > 0 ? total : 1);
+            parts[s].target = parts[s].triangles > shed ? parts[s].triangles - (size_t)ceil(shed) : 1;
+        }
+        job.count = slabs - 1;
+        rc = run_parts(&job, m, threads, r, err);
+    }
+    r->triangles = m->triangle_count;
+    free(part_of);
+    free(parts);
     return rc;
 }
 
@@ -186,28 +247,12 @@ static int add_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int
     memcpy(m.indices, prev->indices, 3 * prev->triangle_count * sizeof *m.indices);
     size_t target = chain->level[0].triangle_count >> k;
     target = target ? target : 1;
-    iso_simplify_params sp = {.target_triangles = target, .target_error = INFINITY,
-                              .voxel_size = chain->voxel_size, .lock_border = 1,
-                              .keep_vertices = 1};
-    iso_simplify_result r, slabs = {0};
+    iso_simplify_result r;
     double start = iso_clock_ms();
-    int workers = iso_parallel_threads(threads), rc = 0;
-    /* PASS 2a, on large levels: slabs on all threads, to a little under the target so that
-     * the cuts' unsimplified strips still fit; PASS 2b, the joined mesh with the cuts free,
-     * which has little left to do. */
-    if (workers > 1 && prev->triangle_count >= (size_t)workers * ISO_CHAIN_SLAB_MIN)
-        rc = simplify_slabs(chain, &m, k, target - target / 64, workers, &slabs, err);
-    if (!rc)
-        rc = iso_simplify_manifold(&m, &sp, &r, err);
+    int rc = simplify_level(chain, &m, k, target, iso_parallel_threads(threads), &r, err);
     if (rc) {
         free(m.indices);
         return rc;
-    }
-    if (slabs.triangles_in) {
-        r.error = fmax(r.error, slabs.error);
-        r.folds_dropped += slabs.folds_dropped;
-        if (r.triangles == r.triangles_in) /* PASS 2b had nothing to do: the slabs' count */
-            r.nonmanifold_edges = slabs.nonmanifold_edges;
     }
     r.ms = iso_clock_ms() - start;
     uint32_t *shrunk = realloc(m.indices, (3 * m.triangle_count + 1) * sizeof *m.indices);

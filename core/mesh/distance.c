@@ -15,8 +15,10 @@
  *      the result is reproducible and the same on any number of threads);
  *   4. nearest: each percentile sample's exact distance to the nearest triangle of the
  *      target (point to triangle, in double): the fine grid's cells ring by ring around the
- *      sample's cell until no farther ring can hold anything nearer, and past three rings
- *      the coarse grid's likewise; the largest of these distances starts the maximum M;
+ *      sample's cell until no farther ring can hold anything nearer, or until one holds a
+ *      triangle at distance d, then the cells of the box p +- d not scanned yet; when that
+ *      box reaches past three rings, the coarse grid's likewise; the largest of these
+ *      distances starts the maximum M;
  *   5. maximum: every sample of pass 2 not measured in pass 4, searched only until some
  *      triangle lies within M (the nearest triangle of the previous sample is tried first):
  *      such a sample cannot raise the maximum; any other gets its exact distance and
@@ -311,17 +313,56 @@ static void search_cell(const grid *g, const iso_mesh_grid *ix, size_t at, const
     }
 }
 
+/* The cells of box lo..hi (cell ranges) not within Chebyshev distance `done` of cell c,
+ * each skipped when it holds nothing or is no nearer than the best. */
+static void search_box(const grid *g, const iso_mesh_grid *ix, const double p[3], const int c[3],
+                       int done, const int lo[3], const int hi[3], search *s)
+{
+    for (int k = lo[2]; k <= hi[2]; k++)
+        for (int j = lo[1]; j <= hi[1]; j++) {
+            int inner = abs(k - c[2]) <= done && abs(j - c[1]) <= done;
+            for (int i = lo[0]; i <= hi[0]; i++) {
+                if (inner && abs(i - c[0]) <= done) {
+                    i = c[0] + done; /* the rows' scanned middle */
+                    continue;
+                }
+                size_t at = cell_index(g, i, j, k);
+                int cell[3] = {i, j, k};
+                if (g->start[at] != g->start[at + 1] && cell_gap_sq(g, p, cell) < s->best)
+                    search_cell(g, ix, at, p, s);
+            }
+        }
+}
+
 /* PASS 4 in one grid: the cells at Chebyshev distance r from p's cell, r = 0, 1, ...,
- * rings, each cell skipped when its box is no nearer than the best yet. Returns 1 when
- * the search is over: the best is the nearest (the box of rings 0..r, where the grid goes
- * on, is farther from p than the best) or within `stop`; 0 when `rings` ran out first. */
+ * `rings`, until some triangle is found at distance d; then the cells of the box p +- d
+ * not scanned yet (a nearer triangle must cross one of them), when that box is at most
+ * `rings` + 1 cells from p's cell. Returns 1 when the search is over: the best is the
+ * nearest, or within `stop`; 0 when it must go on in a coarser grid. */
 static int search_rings(const grid *g, const iso_mesh_grid *ix, const double p[3], int rings,
                         double stop, search *s)
 {
     int c[3];
     for (int a = 0; a < 3; a++)
         c[a] = cell_of(g, p[a], a);
-    for (int r = 0; r < rings; r++) {
+    double entry = s->best; /* a bound brought in is no reason to scan its whole box */
+    for (int r = 0;; r++) {
+        if (s->best <= stop)
+            return 1;
+        if (s->best < entry) {
+            double d = sqrt(s->best);
+            int lo[3], hi[3], within = 1;
+            for (int a = 0; a < 3; a++) {
+                lo[a] = cell_of(g, p[a] - d, a), hi[a] = cell_of(g, p[a] + d, a);
+                within &= c[a] - lo[a] <= rings && hi[a] - c[a] <= rings;
+            }
+            if (!within)
+                return 0;
+            search_box(g, ix, p, c, r - 1, lo, hi, s);
+            return 1;
+        }
+        if (r == rings)
+            return 0;
         int lo[3], hi[3], whole = 1;
         double reach = INFINITY; /* from p to where ring r + 1 begins */
         for (int a = 0; a < 3; a++) {
@@ -334,28 +375,10 @@ static int search_rings(const grid *g, const iso_mesh_grid *ix, const double p[3
             if (hi[a] < g->n[a] - 1)
                 reach = to_hi < reach ? to_hi : reach, whole = 0;
         }
-        for (int k = lo[2]; k <= hi[2]; k++)
-            for (int j = lo[1]; j <= hi[1]; j++) {
-                /* Rows inside the ring's shell touch it only at their two ends. */
-                int shell = abs(k - c[2]) == r || abs(j - c[1]) == r;
-                for (int i = lo[0]; i <= hi[0]; i++) {
-                    if (!shell && abs(i - c[0]) != r) {
-                        if (i < c[0] + r && c[0] + r <= hi[0]) {
-                            i = c[0] + r - 1;
-                            continue;
-                        }
-                        break;
-                    }
-                    size_t at = cell_index(g, i, j, k);
-                    int cell[3] = {i, j, k};
-                    if (g->start[at] != g->start[at + 1] && cell_gap_sq(g, p, cell) < s->best)
-                        search_cell(g, ix, at, p, s);
-                }
-            }
-        if (s->best <= stop || whole || (reach > 0 && s->best <= reach * reach))
+        search_box(g, ix, p, c, r - 1, lo, hi, s);
+        if (whole || (reach > 0 && s->best <= reach * reach))
             return 1;
     }
-    return 0;
 }
 
 /* The nearest triangle's squared distance, or any triangle's within `stop` (squared; 0:

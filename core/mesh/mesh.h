@@ -296,18 +296,20 @@ int iso_simplify_manifold(iso_mesh *mesh, const iso_simplify_params *params,
 /* A simplification chain: one surface at a few levels of detail, each measured.
  *
  * Level 0 is the surface given (the exact one); level k halves level k - 1's triangles
- * (iso_simplify with borders locked: 50%, 25%, 12.5%, ... of level 0), each from the one
- * before, so the chain costs little more than its first step; a level of at least
- * ISO_CHAIN_SLAB_MIN triangles per thread is simplified in slabs on all threads first
- * (chain.c), the slabs' cuts moving from one level to the next. Every level indexes the one
+ * (iso_simplify_manifold with borders locked: 50%, 25%, 12.5%, ... of level 0), each from
+ * the one before, so the chain costs little more than its first step; a level of at least
+ * ISO_CHAIN_SLAB_MIN triangles per thread is simplified in slabs on all threads, each
+ * with its cut locked, then the bands around the cuts with the cuts free (chain.c); each
+ * part is simplified over its own compact vertices. Every level indexes the one
  * position array, a copy of level 0's: every vertex of every level is a vertex of the
  * exact surface, so its value error is the exact surface's. Each level carries its
- * distance from level 0, measured (iso_mesh_distance_compute, a = level 0, samples three
- * voxels apart), and meshoptimizer's estimate beside it. A built chain is read-only:
+ * distance from level 0, measured (iso_mesh_distance_compute's measure, a = level 0,
+ * samples three voxels apart), and meshoptimizer's estimate beside it. A built chain is read-only:
  * any number of threads may pick from it and copy meshes out of it at once. */
 #define ISO_CHAIN_LEVELS 6
 #define ISO_CHAIN_SLABS_MAX 64  /* a level is simplified in at most this many slabs */
 #define ISO_CHAIN_SLAB_MIN 20000 /* triangles per slab, at least, else one thread */
+#define ISO_CHAIN_BAND_EDGES 4   /* a cut's band reaches this many mean edges each side */
 #define ISO_CHAIN_SPACING_VOXELS 3 /* the measures' sample spacing */
 
 typedef struct iso_mesh_chain_level {
