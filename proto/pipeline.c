@@ -78,6 +78,13 @@ static int from_chain(const iso_tree *tree, const iso_volume *vol,
     res->pinches = (iso_mesh_pinches){.edges = chain->level[k].edges,
                                       .pinch_edges = chain->level[k].nonmanifold_edges,
                                       .pinch_vertices = chain->level[k].pinch_vertices};
+    /* A level moved to keep the enclosed volume: its vertices' value error, measured, is
+     * what the error bound then promises. */
+    res->vertex_offset = chain->level[k].offset;
+    if (res->vertex_offset != 0)
+        res->stats.error_bound = fmax(res->stats.error_bound,
+                                      iso_mesh_value_error(vol, &res->mesh, req->extract.space,
+                                                           req->extract.level));
     /* A level past 0 was simplified by meshoptimizer: its estimate, the largest of the
      * steps', stands beside the measured distance. */
     double estimate = 0;

@@ -62,6 +62,9 @@ typedef struct proto_pipeline_result {
     size_t chain_levels;        /* how many levels that chain has */
     size_t exact_triangles;     /* that chain's level 0 */
     iso_mesh_pinches pinches;   /* the answer's pinches, when from a chain */
+    double vertex_offset;       /* the chain level's move along its normals that keeps a
+                                 * closed surface's volume (mesh.h), position units; 0: every
+                                 * vertex is an exact-surface vertex */
     size_t faithful_triangles;  /* as in the request, found here when a budget needed it */
     int distance_measured;      /* `distance` below holds the final mesh's measured distance
                                  * from the surface of req->extract (a = that surface) */

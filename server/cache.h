@@ -39,6 +39,7 @@ typedef struct srv_body {
     int chain_level;                /* the chain level answered (0: exact), -1: none */
     size_t exact_triangles;         /* the exact surface's triangles, when from a chain */
     size_t edges, pinch_edges, pinch_vertices; /* the answer's, when from a chain (mesh.h) */
+    double vertex_offset_mm;        /* its vertices' move along the normals (0: none) */
     struct iso_mesh_chain *chain;   /* a cached simplification chain (owned), no data;
                                      * triangles then counts the faithful tolerance's mesh
                                      * (pipeline.h), 0 if unknown */

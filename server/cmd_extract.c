@@ -70,19 +70,21 @@ static json_t *chain_json(const proto_pipeline_result *res)
     json_t *levels = json_array();
     for (int k = 0; c && levels && k < c->levels; k++)
         json_array_append_new(levels, json_pack(
-            "{s:I, s:f, s:f, s:f, s:I, s:I, s:I, s:I, s:f, s:f}", "triangles",
+            "{s:I, s:f, s:f, s:f, s:I, s:I, s:I, s:I, s:f, s:f, s:f, s:f}", "triangles",
             (json_int_t)c->level[k].triangle_count, "p99", c->level[k].distance.p99,
             "max", c->level[k].distance.max, "estimate", c->level[k].estimate,
             "edges", (json_int_t)c->level[k].edges,
             "nonmanifold_edges", (json_int_t)c->level[k].nonmanifold_edges,
             "pinch_vertices", (json_int_t)c->level[k].pinch_vertices,
             "folds_dropped", (json_int_t)c->level[k].folds_dropped,
+            "offset", c->level[k].offset, "volume_change", c->level[k].volume_change,
             "simplify_ms", c->level[k].simplify_ms, "measure_ms", c->level[k].measure_ms));
-    return json_pack("{s:i, s:I, s:I, s:I, s:I, s:I, s:f, s:o}", "level", res->chain_level,
+    return json_pack("{s:i, s:I, s:I, s:I, s:I, s:I, s:f, s:f, s:o}", "level", res->chain_level,
                      "levels", (json_int_t)res->chain_levels, "exact_triangles",
                      (json_int_t)res->exact_triangles, "edges", (json_int_t)res->pinches.edges,
                      "pinch_edges", (json_int_t)res->pinches.pinch_edges,
                      "pinch_vertices", (json_int_t)res->pinches.pinch_vertices,
+                     "vertex_offset", res->vertex_offset,
                      "build_ms", c ? c->build_ms : 0.0,
                      "built", levels ? levels : json_null());
 }

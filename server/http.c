@@ -549,6 +549,7 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
         add_number(r, "X-Iso-Edges", "%.0f", (double)body->edges);
         add_number(r, "X-Iso-Pinch-Edges", "%.0f", (double)body->pinch_edges);
         add_number(r, "X-Iso-Pinch-Vertices", "%.0f", (double)body->pinch_vertices);
+        add_number(r, "X-Iso-Vertex-Offset-Mm", "%.6g", body->vertex_offset_mm);
     }
     if (body->measured) {
         add_number(r, "X-Iso-Measure-Ms", "%.3f", body->measure_ms);

@@ -2,6 +2,7 @@
 #include "mesh.h"
 
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 /* Positions come back from world mm to index space through the inverse affine; a
@@ -71,20 +72,26 @@ static size_t degenerate_triangles(const iso_mesh *m)
     return count;
 }
 
+/* Sets b's inverse map when its positions are world mm. */
+static void world_to_index(const iso_volume *vol, border_test *b)
+{
+    if (!b->world)
+        return;
+    double affine[3][4], a[3][3];
+    iso_vol_affine(vol, affine);
+    for (int r = 0; r < 3; r++) {
+        for (int c = 0; c < 3; c++)
+            a[r][c] = affine[r][c];
+        b->origin[r] = affine[r][3];
+    }
+    invert(a, b->inverse);
+}
+
 int iso_census_compute(const iso_volume *vol, const iso_mesh *mesh, iso_space space,
                        iso_census *out, iso_error *err)
 {
     border_test b = {.vol = vol, .mesh = mesh, .world = space == ISO_SPACE_WORLD};
-    if (b.world) {
-        double affine[3][4], a[3][3];
-        iso_vol_affine(vol, affine);
-        for (int r = 0; r < 3; r++) {
-            for (int c = 0; c < 3; c++)
-                a[r][c] = affine[r][c];
-            b.origin[r] = affine[r][3];
-        }
-        invert(a, b.inverse);
-    }
+    world_to_index(vol, &b);
     iso_mesh_edges e;
     if (iso_mesh_count_edges_excusing(mesh, on_border, &b, &e))
         return iso_error_set(err, ISO_E_NOMEM, "out of memory counting edges");
@@ -98,4 +105,55 @@ int iso_census_compute(const iso_volume *vol, const iso_mesh *mesh, iso_space sp
     out->closed = mesh->triangle_count > 0 && !e.open && !e.open_excused && !e.nonmanifold &&
                   !e.misoriented && !out->degenerate_triangles;
     return 0;
+}
+
+/* The trilinear interpolant at index point x, samples outside repeating the border; NaN
+ * when a corner is. */
+static double trilinear(const iso_volume *vol, const double x[3])
+{
+    size_t lo[3];
+    double t[3];
+    for (int d = 0; d < 3; d++) {
+        double top = (double)(vol->dims[d] - 1), c = x[d] < 0 ? 0 : x[d] > top ? top : x[d];
+        lo[d] = (size_t)c;
+        if (lo[d] + 1 > vol->dims[d] - 1)
+            lo[d] = vol->dims[d] > 1 ? vol->dims[d] - 2 : 0;
+        t[d] = vol->dims[d] > 1 ? c - (double)lo[d] : 0;
+    }
+    double f = 0;
+    for (int k = 0; k < 8; k++) {
+        size_t at[3];
+        double w = 1;
+        for (int d = 0; d < 3; d++) {
+            int up = (k >> d) & 1;
+            at[d] = lo[d] + (size_t)(up && vol->dims[d] > 1);
+            w *= up ? t[d] : 1 - t[d];
+        }
+        if (w != 0)
+            f += w * iso_vol_get(vol, at[0], at[1], at[2]);
+    }
+    return f;
+}
+
+double iso_mesh_value_error(const iso_volume *vol, const iso_mesh *mesh, iso_space space, double level)
+{
+    border_test b = {.vol = vol, .mesh = mesh, .world = space == ISO_SPACE_WORLD};
+    world_to_index(vol, &b);
+    unsigned char *used = calloc(mesh->vertex_count + 1, 1);
+    if (!used)
+        return 0;
+    for (size_t i = 0; i < 3 * mesh->triangle_count; i++)
+        used[mesh->indices[i]] = 1;
+    double worst = 0;
+    for (size_t v = 0; v < mesh->vertex_count; v++) {
+        if (!used[v])
+            continue;
+        double x[3];
+        to_index(&b, (uint32_t)v, x);
+        double e = fabs(trilinear(vol, x) - level);
+        if (e > worst) /* NaN compares false: skipped */
+            worst = e;
+    }
+    free(used);
+    return worst;
 }

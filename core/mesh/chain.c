@@ -235,6 +235,33 @@ static int simplify_level(const iso_mesh_chain *chain, iso_mesh *m, int k, size_
     return rc;
 }
 
+/* PASS 2c: a closed surface's level whose enclosed volume strays more than
+ * ISO_CHAIN_VOLUME_SLACK from level 0's gets the offset along its normals that restores
+ * it; *level then becomes that moved level (owned, for the measure), else stays the view. */
+static int keep_volume(iso_mesh_chain *chain, int k, iso_mesh *level, iso_error *err)
+{
+    iso_mesh_chain_level *lv = &chain->level[k];
+    if (!chain->closed || chain->volume == 0)
+        return 0;
+    double v = iso_mesh_enclosed_volume(level);
+    lv->volume_change = (v - chain->volume) / chain->volume;
+    if (!(fabs(lv->volume_change) > ISO_CHAIN_VOLUME_SLACK))
+        return 0;
+    if (iso_mesh_volume_offset(level, chain->volume, &lv->offset))
+        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory to keep level %d's volume", k);
+    iso_mesh moved;
+    iso_mesh_init(&moved);
+    int rc = iso_mesh_chain_mesh(chain, k, &moved, err);
+    if (rc) {
+        iso_mesh_free(&moved);
+        lv->offset = 0;
+        return rc;
+    }
+    lv->volume_change = (iso_mesh_enclosed_volume(&moved) - chain->volume) / chain->volume;
+    *level = moved;
+    return 0;
+}
+
 /* PASS 2 and 3 for level k. */
 static int add_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int k, int threads,
                      unsigned char *seen, iso_error *err)
@@ -270,9 +297,13 @@ static int add_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int
     lv->edges = pinches.edges;
     iso_mesh exact = view_of(chain, 0), level = view_of(chain, k);
     double measure_start = iso_clock_ms();
+    if ((rc = keep_volume(chain, k, &level, err)))
+        return rc;
     rc = iso_mesh_distance_between(&exact, exact_grid, &level, NULL,
                                    ISO_CHAIN_SPACING_VOXELS * chain->voxel_size,
                                    ISO_DISTANCE_SAMPLES, threads, &lv->distance, err);
+    if (lv->offset != 0)
+        iso_mesh_free(&level);
     lv->simplify_ms = r.ms;
     lv->measure_ms = iso_clock_ms() - measure_start;
     chain->bytes += 3 * lv->triangle_count * sizeof *lv->indices;
@@ -322,6 +353,8 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
     c->level[0].edges = pinches.edges;
     c->level[0].nonmanifold_edges = pinches.pinch_edges;
     c->level[0].pinch_vertices = pinches.pinch_vertices;
+    c->closed = exact->triangle_count > 0 && pinches.open_edges == 0;
+    c->volume = c->closed ? iso_mesh_enclosed_volume(&level0) : 0;
     c->bytes = sizeof *c + 3 * exact->vertex_count * sizeof *c->positions +
                3 * exact->triangle_count * sizeof *exact->indices;
     /* PASS 3's grid of level 0, once for all levels: every level lies within its bounds. */
@@ -392,5 +425,9 @@ int iso_mesh_chain_mesh(const iso_mesh_chain *chain, int k, iso_mesh *mesh, iso_
     mesh->vertex_count = n;
     mesh->triangle_count = lv->triangle_count;
     free(remap);
+    if (iso_mesh_offset_along_normals(mesh, lv->offset)) {
+        iso_mesh_clear(mesh);
+        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory to move level %d's vertices", k);
+    }
     return 0;
 }

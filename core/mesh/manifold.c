@@ -100,6 +100,8 @@ static void count_pinch_edge(void *context, uint32_t lo, uint32_t hi, uint32_t f
 {
     pinch_marks *p = context;
     p->out->edges++;
+    if (forward + backward == 1)
+        p->out->open_edges++;
     if (forward + backward > 1 && forward != backward)
         p->out->unpaired_edges++;
     if (forward + backward > 2) {
