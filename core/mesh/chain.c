@@ -5,10 +5,11 @@
  *   2. simplify: level k (k = 1..ISO_CHAIN_LEVELS) is level k - 1 simplified to half its
  *      triangles (iso_simplify_manifold, borders locked), in parts, each gathered over
  *      compact vertices and mapped back to the chain's (so that every level indexes the
- *      one position array): on a large level, first (2a) slabs across one axis, one per
- *      thread, each with its cut locked (the cut's edges are open in the slab), then (2b)
- *      the bands around the cuts, each with its rim locked and the cut free, shed what the
- *      cuts kept above the target; a small level is one part;
+ *      one position array): on a large level, first (2a) slabs across one axis, of about
+ *      ISO_CHAIN_SLAB_TRIANGLES and at least one per thread, each with its cuts locked (the
+ *      cuts' edges are open in the slab), then (2b) the bands around the cuts, each with
+ *      its rim locked and the cut free, shed what the cuts kept above the target; a small
+ *      level is one part;
  *   3. measure: each level's distance from level 0 (iso_mesh_distance_between, samples three
  *      voxels apart, against level 0's grid built once for all levels), so the answers
  *      below rest on measurements, not on estimates. */
@@ -170,8 +171,8 @@ static double mean_edge(const iso_mesh *m)
 }
 
 /* PASS 2 for level k: m (level k - 1's triangles) simplified to `target`. In slabs
- * (2a) across an axis (the longest side on even levels, the next on odd ones), one per
- * thread, each with its cut locked, to the slab's share of the target; then (2b) the
+ * (2a) across an axis (the longest side on even levels, the next on odd ones), at least
+ * one per thread, each with its cuts locked, to the slab's share of the target; then (2b) the
  * bands of triangles within ISO_CHAIN_BAND_EDGES mean edges of each cut, each with its
  * own rim locked, shed what the locked cuts kept above the target. A small level is one
  * part. */
@@ -179,8 +180,12 @@ static int simplify_level(const iso_mesh_chain *chain, iso_mesh *m, int k, size_
                           int threads, iso_simplify_result *r, iso_error *err)
 {
     size_t T = m->triangle_count;
-    int slabs = threads > 1 && T >= (size_t)threads * ISO_CHAIN_SLAB_MIN ? threads : 1;
-    slabs = slabs < ISO_CHAIN_SLABS_MAX ? slabs : ISO_CHAIN_SLABS_MAX;
+    /* Slabs of about ISO_CHAIN_SLAB_TRIANGLES even on one thread: a slab whose
+     * simplification made a pinch or a fold simplifies itself again, not the whole level. */
+    size_t by_size = T / ISO_CHAIN_SLAB_TRIANGLES;
+    int slabs = by_size > ISO_CHAIN_SLABS_MAX ? ISO_CHAIN_SLABS_MAX : by_size < 1 ? 1 : (int)by_size;
+    if (threads > slabs && T >= (size_t)threads * ISO_CHAIN_SLAB_MIN)
+        slabs = threads < ISO_CHAIN_SLABS_MAX ? threads : ISO_CHAIN_SLABS_MAX;
     *r = (iso_simplify_result){.triangles_in = T, .vertices_in = m->vertex_count};
     int *part_of = malloc((T ? T : 1) * sizeof *part_of);
     part *parts = calloc((size_t)slabs, sizeof *parts);

@@ -281,6 +281,7 @@ static double cell_gap_sq(const grid *g, const double p[3], const int cell[3])
 typedef struct search {
     double best;
     uint32_t triangle;
+    double stop; /* any triangle within this (squared) ends the search; 0: the nearest */
 } search;
 
 static void corners_of(const float *f, double c[3][3])
@@ -308,8 +309,11 @@ static void search_cell(const grid *g, const iso_mesh_grid *ix, size_t at, const
         double tc[3][3];
         corners_of(f, tc);
         double d = point_triangle_sq(p, tc);
-        if (d < s->best)
+        if (d < s->best) {
             s->best = d, s->triangle = g->items[e];
+            if (d <= s->stop)
+                return;
+        }
     }
 }
 
@@ -328,8 +332,11 @@ static void search_box(const grid *g, const iso_mesh_grid *ix, const double p[3]
                 }
                 size_t at = cell_index(g, i, j, k);
                 int cell[3] = {i, j, k};
-                if (g->start[at] != g->start[at + 1] && cell_gap_sq(g, p, cell) < s->best)
+                if (g->start[at] != g->start[at + 1] && cell_gap_sq(g, p, cell) < s->best) {
                     search_cell(g, ix, at, p, s);
+                    if (s->best <= s->stop)
+                        return;
+                }
             }
         }
 }
@@ -340,14 +347,14 @@ static void search_box(const grid *g, const iso_mesh_grid *ix, const double p[3]
  * `rings` + 1 cells from p's cell. Returns 1 when the search is over: the best is the
  * nearest, or within `stop`; 0 when it must go on in a coarser grid. */
 static int search_rings(const grid *g, const iso_mesh_grid *ix, const double p[3], int rings,
-                        double stop, search *s)
+                        search *s)
 {
     int c[3];
     for (int a = 0; a < 3; a++)
         c[a] = cell_of(g, p[a], a);
     double entry = s->best; /* a bound brought in is no reason to scan its whole box */
     for (int r = 0;; r++) {
-        if (s->best <= stop)
+        if (s->best <= s->stop)
             return 1;
         if (s->best < entry) {
             double d = sqrt(s->best);
@@ -385,8 +392,9 @@ static int search_rings(const grid *g, const iso_mesh_grid *ix, const double p[3
  * the nearest); s may come in with a bound already (a triangle and its distance). */
 static void nearest(const iso_mesh_grid *ix, const double p[3], double stop, search *s)
 {
-    if (!search_rings(&ix->fine, ix, p, FINE_RINGS, stop, s))
-        search_rings(&ix->coarse, ix, p, INT32_MAX, stop, s);
+    s->stop = stop;
+    if (!search_rings(&ix->fine, ix, p, FINE_RINGS, s))
+        search_rings(&ix->coarse, ix, p, INT32_MAX, s);
 }
 
 /* How many sub-triangles a side of triangle t is cut into (PASS 2). */
@@ -491,7 +499,7 @@ static void measure_percentile(void *context, int part, int parts)
         for (size_t i = i0; i < i1; i++) {
             double p[3];
             draw(d, i, p);
-            search s = {INFINITY, NO_TRIANGLE};
+            search s = {INFINITY, NO_TRIANGLE, 0};
             nearest(d->dst, p, 0, &s);
             d->dist[i] = (float)sqrt(s.best);
             d->weight[i] = 1;
@@ -509,7 +517,7 @@ static void measure_percentile(void *context, int part, int parts)
         int count = centroids(c, n, pts);
         double w = triangle_area(c) / ((double)n * n);
         for (int k = 0; k < count; k++) {
-            search s = {INFINITY, NO_TRIANGLE};
+            search s = {INFINITY, NO_TRIANGLE, 0};
             nearest(d->dst, pts[k], 0, &s);
             d->dist[d->first[t] + (size_t)k] = (float)sqrt(s.best);
             d->weight[d->first[t] + (size_t)k] = (float)w;
@@ -521,7 +529,7 @@ static void measure_percentile(void *context, int part, int parts)
 /* PASS 5 for one point: raises *max (squared) when p lies farther from the target. */
 static void raise_max(const iso_mesh_grid *dst, const double p[3], uint32_t *hint, double *max)
 {
-    search s = {INFINITY, NO_TRIANGLE};
+    search s = {INFINITY, NO_TRIANGLE, 0};
     if (*hint != NO_TRIANGLE) {
         double tc[3][3];
         corners_of(dst->corners + 9 * (size_t)*hint, tc);
