@@ -116,6 +116,52 @@ static int from_chain(const iso_tree *tree, const iso_volume *vol,
     return 0;
 }
 
+/* Steps 1 and 2 for a budget: the chain's finest level that fits (from_chain) and, when
+ * the faithful tolerance's mesh fits too, the ladder's mesh, measured against the chain's
+ * level 0 like the levels are; the closer one (p99 both ways) answers. */
+static int budget_by_measure(const iso_tree *tree, const iso_volume *vol,
+                             const proto_pipeline_request *req, int needs_chain,
+                             proto_pipeline_result *res, iso_error *err)
+{
+    iso_mesh_clear(&res->mesh);
+    int rc = from_chain(tree, vol, req, res, err);
+    res->budget_source = "chain";
+    res->budget_other_p99 = -1;
+    if (rc || needs_chain)
+        return rc;
+    const iso_mesh_chain *chain = req->chain ? req->chain : res->chain_built;
+    iso_mesh ladder, exact = {.positions = chain->positions, .vertex_count = chain->vertex_count,
+                              .indices = chain->level[0].indices,
+                              .triangle_count = chain->level[0].triangle_count};
+    iso_mesh_init(&ladder);
+    iso_extract_stats stats;
+    iso_budget_result chosen = {.tolerance = req->extract.tolerance, .fits = -1};
+    iso_mesh_distance d;
+    if ((rc = iso_extract_budget_faithful(tree, &req->extract, req->budget, &ladder, &stats, &chosen, err)) ||
+        (rc = iso_mesh_distance_compute(&exact, &ladder, ISO_CHAIN_SPACING_VOXELS * chain->voxel_size,
+                                        req->extract.threads, &d, err))) {
+        iso_mesh_free(&ladder);
+        return rc;
+    }
+    if (!chosen.fits || d.p99 >= res->distance.p99) {
+        res->budget_other_p99 = chosen.fits ? d.p99 : -1;
+        iso_mesh_free(&ladder);
+        return 0;
+    }
+    res->budget_other_p99 = res->distance.p99;
+    iso_mesh_free(&res->mesh);
+    res->mesh = ladder;
+    res->stats = stats;
+    res->chosen = chosen;
+    res->distance = d;
+    res->chain_level = -1;
+    res->vertex_offset = 0;
+    res->budget_source = "tolerance";
+    if ((rc = iso_mesh_find_pinches(&res->mesh, NULL, &res->pinches)))
+        return iso_error_set(err, rc, "no memory to count pinches");
+    return 0;
+}
+
 /* Step 1: the exact surface, the hierarchy's within the tolerance, or a budget's. */
 static int extract(const iso_tree *tree, const iso_volume *vol,
                    const proto_pipeline_request *req, proto_pipeline_result *res,
@@ -250,14 +296,16 @@ int proto_pipeline_run(const iso_tree *tree, const iso_volume *vol,
     res->draco_speed = -1;
     double t0 = iso_clock_ms();
     res->chain_level = -1;
-    int rc = 0, chained = !req->full_scan && req->distance >= 0;
-    if (!req->full_scan && req->budget && req->budget_chain && !req->budget_ladder_only &&
-        !(rc = budget_needs_chain(tree, req, res, &chained, err)) && !chained)
-        iso_mesh_clear(&res->mesh);
-    if (!rc && !chained)
+    int rc = 0, chained = !req->full_scan && req->distance >= 0, needs_chain = 0;
+    int measured_budget = !req->full_scan && req->budget && req->budget_chain && !req->budget_ladder_only;
+    if (measured_budget)
+        rc = budget_needs_chain(tree, req, res, &needs_chain, err);
+    if (!rc && !chained && !measured_budget)
         rc = extract(tree, vol, req, res, err);
     double t1 = iso_clock_ms();
-    if (!rc && chained)
+    if (!rc && measured_budget)
+        rc = budget_by_measure(tree, vol, req, needs_chain, res, err);
+    else if (!rc && chained)
         rc = from_chain(tree, vol, req, res, err);
     else if (!rc && req->simplify)
         rc = simplify(vol, req, res, err);

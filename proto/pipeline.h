@@ -62,6 +62,12 @@ typedef struct proto_pipeline_result {
     size_t chain_levels;        /* how many levels that chain has */
     size_t exact_triangles;     /* that chain's level 0 */
     iso_mesh_pinches pinches;   /* the answer's pinches, when from a chain */
+    const char *budget_source;  /* a budget's answer: "chain" (a level of the simplification
+                                 * chain) or "tolerance" (the value-tolerance ladder's mesh),
+                                 * whichever fits and is closer to the exact surface by
+                                 * measurement; NULL when no budget was asked */
+    double budget_other_p99;    /* the measured p99 distance of the one not chosen; -1 when
+                                 * there was none (the ladder did not fit) */
     double vertex_offset;       /* the chain level's move along its normals that keeps a
                                  * closed surface's volume (mesh.h), position units; 0: every
                                  * vertex is an exact-surface vertex */

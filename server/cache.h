@@ -40,6 +40,8 @@ typedef struct srv_body {
     size_t exact_triangles;         /* the exact surface's triangles, when from a chain */
     size_t edges, pinch_edges, pinch_vertices; /* the answer's, when from a chain (mesh.h) */
     double vertex_offset_mm;        /* its vertices' move along the normals (0: none) */
+    const char *budget_source;      /* static: "chain" or "tolerance" (pipeline.h), or NULL */
+    double budget_other_mm;         /* the measured p99 of the candidate not chosen, or -1 */
     struct iso_mesh_chain *chain;   /* a cached simplification chain (owned), no data;
                                      * triangles then counts the faithful tolerance's mesh
                                      * (pipeline.h), 0 if unknown */

@@ -218,8 +218,10 @@ int srv_cmd_extract(int argc, char **argv)
         if (doc)
             json_object_set_new(doc, "fit_error", json_real(st.fit_error));
         if (doc && budget)
-            json_object_set_new(doc, "budget", json_pack("{s:I, s:b, s:i}", "triangles", (json_int_t)budget,
-                                                         "fits", chosen.fits, "extractions", chosen.extractions));
+            json_object_set_new(doc, "budget", json_pack("{s:I, s:b, s:i, s:s?, s:f}", "triangles", (json_int_t)budget,
+                                                         "fits", chosen.fits, "extractions", chosen.extractions,
+                                                         "source", res.budget_source,
+                                                         "other_p99", res.budget_other_p99));
         if (doc && chosen.simplified)
             json_object_set_new(doc, "simplify", json_pack(
                 "{s:I, s:I, s:f, s:f, s:f, s:I, s:I, s:I}", "triangles_in", (json_int_t)chosen.simplify.triangles_in,

@@ -561,6 +561,10 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
     if (body->budget_fits >= 0) {
         add_header(r, "X-Iso-Budget-Fits", body->budget_fits ? "true" : "false");
         add_header(r, "X-Iso-Simplified", body->simplified ? "true" : "false");
+        if (body->budget_source)
+            add_header(r, "X-Iso-Budget-Source", body->budget_source);
+        if (body->budget_source && body->budget_other_mm >= 0)
+            add_number(r, "X-Iso-Budget-Other-Distance-Mm", "%.6g", body->budget_other_mm);
     }
     if (body->simplified) {
         add_number(r, "X-Iso-Simplify-Error-Mm", "%.6g", body->simplify_error_mm);

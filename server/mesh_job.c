@@ -179,6 +179,8 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     body->pinch_edges = res.pinches.pinch_edges;
     body->pinch_vertices = res.pinches.pinch_vertices;
     body->vertex_offset_mm = res.vertex_offset;
+    body->budget_source = res.budget_source;
+    body->budget_other_mm = res.budget_other_p99;
     body->area_mm2 = res.area;
     body->closed = res.census.closed;
     body->volume_mm3 = res.enclosed_volume;
