@@ -27,6 +27,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* Below this many triangles one thread encodes it all: handing half to another thread
+ * (waiting for it on a busy machine) would cost more than it saves. */
+#define MESHOPT_TRIANGLES_PER_THREAD 100000
+
 /* The position bits the uint16 components hold; more bits keep float positions. */
 #define MESHOPT_POSITION_BITS_MAX 16
 
@@ -233,6 +237,8 @@ static int pack(const iso_mesh *mesh, const proto_encode_options *opt, quantized
 {
     pack_job job = {.mesh = mesh, .opt = opt, .q = q};
     int threads = iso_parallel_threads(opt->threads);
+    if (mesh->triangle_count < MESHOPT_TRIANGLES_PER_THREAD)
+        threads = 1;
     iso_parallel_run(threads > 1 ? 2 : 1, pack_share, &job);
     int rc = job.rc[0] ? job.rc[0] : job.rc[1];
     if (!rc)

@@ -14,6 +14,10 @@
 
 #include "base/base.h"
 
+/* Below this many bytes one thread deflates every piece: another thread's share would
+ * cost more to hand over than to do. */
+#define GZIP_BYTES_PER_THREAD (1u << 20)
+
 /* One piece's deflate stream (malloc'd) or its zlib error. */
 typedef struct deflated {
     const unsigned char *in;
@@ -84,7 +88,7 @@ int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_pie
         from = end;
     }
     gzip_job job = {.pieces = d, .count = count};
-    threads = iso_parallel_threads(threads);
+    threads = size < GZIP_BYTES_PER_THREAD ? 1 : iso_parallel_threads(threads);
     iso_parallel_run(threads < count ? threads : count, gzip_share, &job);
     int rc = 0;
     size_t total = 10 + 8;

@@ -93,8 +93,11 @@ async function dragRate(page, codec, ms) {
     const previews = v.shown.slice(n).filter((m) => m.kind === 'preview');
     el.dispatchEvent(new Event('change'));
     const spent = (performance.now() - start) / 1000;
+    const gaps = previews.slice(1).map((m, k) => m.at - previews[k].at);
     return { perSecond: previews.length / spent, previews: previews.length,
-      triangles: median(previews.map((m) => m.triangles)), bytes: median(previews.map((m) => m.bytes)) };
+      triangles: median(previews.map((m) => m.triangles)), bytes: median(previews.map((m) => m.bytes)),
+      gapMs: median(gaps), fetchMs: median(previews.map((m) => m.fetchMs)), serverMs: median(previews.map((m) => m.serverMs)),
+      decodeMs: median(previews.map((m) => m.decodeMs)), drawMs: median(previews.map((m) => m.drawMs)) };
     function median(xs) { const s = [...xs].sort((a, b) => a - b); return s[Math.floor((s.length - 1) / 2)] ?? 0; }
   }, { codec, ms });
 }
@@ -151,7 +154,7 @@ async function main() {
     }
     // Dragging across CThead's range (the first volume), loopback and 20 Mbit/s.
     const vol = vols[0];
-    for (const link of [LINKS[0], LINKS[2]]) {
+    for (const link of process.env.ISO_BENCH_DRAG_LOOPBACK ? [LINKS[0]] : [LINKS[0], LINKS[2]]) {
       await cdp.send('Network.emulateNetworkConditions', link.conditions ??
         { offline: false, latency: 0, downloadThroughput: -1, uploadThroughput: -1 });
       for (const codec of CODECS) {
@@ -161,7 +164,9 @@ async function main() {
         const row = { volume: vol.label, link: link.name, codec, ...d };
         results.drags.push(row);
         console.log(`  drag ${row.volume} | ${row.link} | ${codec}: ${d.perSecond.toFixed(1)} updates/s ` +
-          `(${d.previews} previews, median ${d.triangles} triangles, ${(d.bytes / 1e3).toFixed(0)} kB decoded)`);
+          `(${d.previews} previews, median ${d.triangles} triangles, ${(d.bytes / 1e3).toFixed(0)} kB decoded; medians: ` +
+          `${d.gapMs?.toFixed(0)} ms between previews, request to answer ${d.fetchMs?.toFixed(0)} (server ${d.serverMs?.toFixed(0)}), ` +
+          `decode ${d.decodeMs?.toFixed(0)}, draw ${d.drawMs?.toFixed(0)})`);
       }
     }
   } finally {

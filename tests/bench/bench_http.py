@@ -14,7 +14,12 @@ size. Prints tables and writes bench/results/http.json.
 Volumes: the shared CT heads and the aneurism when ../shared/volumes is there, else an
 analytic field (so a user's clone can run it too). ISO_BENCH_BASELINE_BIN names a second
 binary (an older build) measured the same way in the same run, for side-by-side ratios.
-ISO_BENCH_SECONDS sets each wrk run's length (default 6)."""
+ISO_BENCH_SECONDS sets each wrk run's length (default 6).
+
+First, the server's side of an uncached CThead skin request per codec (Draco; meshopt with
+and without gzip accepted), the binaries up at once and asked in turn: extraction,
+normals, encoding, gzip, their total and its ratio to the extraction. ISO_BENCH_ONLY=split
+runs that alone (bench/results/http_split.json)."""
 
 import http.client
 import json
@@ -211,6 +216,64 @@ def speeds(conn, tmp, vid, level):
     return rows
 
 
+SPLIT_KINDS = (("draco", "", None), ("glb-meshopt, gzip accepted", "&format=glb-meshopt", "gzip"),
+               ("glb-meshopt, identity", "&format=glb-meshopt", None))
+SPLIT_REPEAT = 9
+
+
+def split_one(port, vid, level, extra, encoding):
+    """One uncached request's server steps from its X-Iso-* headers; total is their sum
+    (extraction, normals, encoding and gzip when made), ratio that over the extraction."""
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=600)
+    headers = {"Accept-Encoding": encoding} if encoding else {}
+    conn.request("GET", f"/v1/volumes/{vid}/mesh?level={level:.9f}&tolerance=0{extra}", headers=headers)
+    r = conn.getresponse()
+    body = r.read()
+    conn.close()
+    if r.status != 200 or r.getheader("X-Iso-Cache") != "miss":
+        raise SystemExit(f"bench_http: split {vid} {level}: {r.status} {r.getheader('X-Iso-Cache')}")
+    row = {k: header(r, f"X-Iso-{h}-Ms") or 0.0 for k, h in
+           (("extract_ms", "Extract"), ("normals_ms", "Normals"), ("encode_ms", "Encode"), ("gzip_ms", "Gzip"))}
+    row["total_ms"] = sum(row.values())
+    row["ratio"] = row["total_ms"] / row["extract_ms"]
+    row["bytes"] = len(body)
+    return row
+
+
+def split(binaries, catalog, vid, level):
+    """The server's side of an uncached request per codec (SPLIT_KINDS), every binary up at
+    once and asked in turn, the kinds and binaries alternating: medians per cell."""
+    servers = [start(b, catalog) for b in binaries]
+    cells = {(b, kind[0]): [] for b in binaries for kind in SPLIT_KINDS}
+    try:
+        n = 0
+        for k in range(SPLIT_REPEAT):
+            kinds = SPLIT_KINDS if k % 2 == 0 else SPLIT_KINDS[::-1]
+            for kind in kinds:
+                order = list(zip(binaries, servers))
+                for b, (_, port) in (order if k % 2 == 0 else order[::-1]):
+                    n += 1
+                    lvl = level + n * 1e-4 + time.time() % 1 * 1e-7
+                    cells[(b, kind[0])].append(split_one(port, vid, lvl, kind[1], kind[2]))
+    finally:
+        for proc, _ in servers:
+            proc.send_signal(signal.SIGTERM)
+            proc.wait(timeout=60)
+    out = []
+    for (b, kind), rows in cells.items():
+        out.append({"binary": b, "kind": kind, **{k: median([r[k] for r in rows]) for k in rows[0]}})
+    return out
+
+
+def print_split(rows):
+    print(f"\nuncached CThead skin, tolerance 0, server steps (X-Iso-* headers), median of {SPLIT_REPEAT}, load {os.getloadavg()[0]:.1f}")
+    print("| binary | request | extract | normals | encode | gzip | total | total / extract | MB |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+    for r in rows:
+        print(f"| {os.path.basename(r['binary'])} | {r['kind']} | {r['extract_ms']:.1f} | {r['normals_ms']:.1f} | "
+              f"{r['encode_ms']:.1f} | {r['gzip_ms']:.1f} | {r['total_ms']:.1f} | {r['ratio']:.1f} | {r['bytes'] / 1e6:.2f} |")
+
+
 def run(binary, tmp, catalog, cases, with_speeds):
     proc, port = start(binary, catalog)
     results, speed_rows = [], []
@@ -262,6 +325,14 @@ def main():
     vols, cases = volumes_and_cases()
     catalog = os.path.join(tmp, "catalog.json")
     json.dump({"volumes": [{"id": i, "path": p} for i, p in vols.items()]}, open(catalog, "w"))
+    skin = [c for c in cases if c[0].startswith("CThead skin")] or cases
+    split_rows = split([BIN] + ([os.path.abspath(BASELINE)] if BASELINE else []), catalog, skin[0][1], skin[0][2])
+    print_split(split_rows)
+    if os.environ.get("ISO_BENCH_ONLY") == "split":
+        os.makedirs("bench/results", exist_ok=True)
+        json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "load_average": os.getloadavg(),
+                   "split": split_rows}, open("bench/results/http_split.json", "w"), indent=1)
+        return 0
     runs = [run(BIN, tmp, catalog, cases, True)]
     if BASELINE:
         runs.append(run(os.path.abspath(BASELINE), tmp, catalog, cases, False))
@@ -276,7 +347,7 @@ def main():
     os.makedirs("bench/results", exist_ok=True)
     out = "bench/results/http.json"
     json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "wrk_seconds": int(DURATION),
-               "load_average": os.getloadavg(), "runs": runs}, open(out, "w"), indent=1)
+               "load_average": os.getloadavg(), "split": split_rows, "runs": runs}, open(out, "w"), indent=1)
     shutil.rmtree(tmp, ignore_errors=True)
     print(f"written {out}")
     return 0

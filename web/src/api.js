@@ -37,7 +37,7 @@ export async function getMesh(volume, params, signal) {
   const response = await fetch(meshUrl(volume, params), { signal });
   if (!response.ok) throw await failure(response);
   const bytes = await response.arrayBuffer();
-  return { bytes, size: bytes.byteLength, ...facts(response.headers) };
+  return { bytes, size: bytes.byteLength, arrived: performance.now(), ...facts(response.headers) };
 }
 
 // The measures of a surface (measures=true), from the headers alone: a HEAD request.

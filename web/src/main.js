@@ -31,7 +31,8 @@ const state = {
 };
 // Per surface: the generation (bumped by every full request), the controllers of its
 // requests, the preview pump's state.
-const live = state.surfaces.map(() => ({ generation: 0, controller: null, inFlight: false, want: null }));
+const live = state.surfaces.map(() => ({ generation: 0, controller: null, inFlight: false, want: null,
+  previewTolerance: null }));
 // What the page has drawn, for the browser tests and the benchmark: one record per mesh
 // shown; the benchmark also asks for one surface's full mesh and times it to the screen.
 const shown = [];
@@ -53,9 +54,19 @@ const distanceText = (d) => (d <= 0 ? 'exact' : `${formatNumber(d, 3)} mm = ${fo
   ` (voxel ${formatNumber(voxel(), 3)} mm)`;
 const levelFromSlider = (s) => Number((info.value_range[0] + (s / 1000) * range()).toPrecision(6));
 const sliderFromLevel = (l) => Math.round(((l - info.value_range[0]) / range()) * 1000);
-// Previews: the volume's own suggestion when it has one, else half the value range; never
-// finer than the tolerance asked for.
-const previewTolerance = () => Math.max(state.tolerance, info?.preview_tolerance ?? range() / 2);
+// Previews: from the volume's own suggestion when it has one, else half the value range,
+// never finer than the tolerance asked for; coarsened while a surface's previews come back
+// with more than PREVIEW_TRIANGLES (each answer steers the next surface's tolerance by at
+// most 1.5x, up to four times the value range). The server, the wire, the decoder and
+// the draw all pay per triangle, and a preview only has to follow the slider.
+const PREVIEW_TRIANGLES = 16000;
+const previewFloor = () => Math.max(state.tolerance, info?.preview_tolerance ?? range() / 2);
+const previewTolerance = (i) => Math.max(previewFloor(), live[i].previewTolerance ?? 0);
+function steerPreview(i, tolerance, triangles) {
+  if (!(triangles > 0)) return;
+  const f = Math.min(1.5, Math.max(1 / 1.5, Math.sqrt(triangles / PREVIEW_TRIANGLES)));
+  live[i].previewTolerance = Math.min(4 * range(), Math.max(previewFloor(), tolerance * f));
+}
 const format = () => CODEC_FORMATS[state.codec] ?? 'draco';
 
 function volumeBounds(doc) {
@@ -160,10 +171,15 @@ async function display(i, mesh, params, mine, kind, started) {
     return false;
   }
   const frame = i === 0 && framedVolume !== state.volume;
+  const drawing = performance.now();
   view.show(i, decoded, frame);
   if (frame && mesh.triangles > 0) framedVolume = state.volume;
+  // The split the browser benchmark reports: the answer's arrival after the request
+  // (server and transfer; the server's own steps from its headers), decoding, drawing.
   shown.push({ surface: i, level: params.level, tolerance: params.tolerance, distance: params.distance ?? 0, kind,
-    triangles: mesh.triangles, bytes: mesh.size, decodeMs, ms: performance.now() - started, at: performance.now() });
+    triangles: mesh.triangles, bytes: mesh.size, decodeMs, ms: performance.now() - started, at: performance.now(),
+    fetchMs: (mesh.arrived ?? start) - started, serverMs: (mesh.extractMs ?? 0) + (mesh.normalsMs ?? 0) + (mesh.encodeMs ?? 0),
+    drawMs: performance.now() - drawing });
   if (i === 0) showStats($('stats'), mesh, decodeMs, state.codec);
   if (i === 0) $('status').textContent = mesh.triangles === 0 ? 'no surface at this level' : '';
   return true;
@@ -220,7 +236,7 @@ async function drag(i, level) {
   const mine = l.generation;
   let showing = Promise.resolve();
   while (l.want !== null && mine === l.generation) {
-    const params = { level: l.want, tolerance: previewTolerance(), normals: 'none' };
+    const params = { level: l.want, tolerance: previewTolerance(i), normals: 'none' };
     l.want = null;
     l.controller?.abort();
     l.controller = new AbortController();
@@ -232,6 +248,7 @@ async function drag(i, level) {
       if (mine === l.generation) reportError(error);
       break;
     }
+    steerPreview(i, params.tolerance, mesh.triangles);
     await showing; // previews are drawn in the order they were asked
     showing = display(i, mesh, params, mine, 'preview', started).catch(reportError);
     if (l.want === null) await showing; // nothing newer yet: draw, then look again
@@ -275,6 +292,7 @@ async function selectVolume(id, fromUrl) {
     return;
   }
   state.volume = id;
+  for (const l of live) l.previewTolerance = null;
   bounds = volumeBounds(info);
   $('volume').value = id;
   const levels = info.suggested_levels.length ? info.suggested_levels : [(info.value_range[0] + info.value_range[1]) / 2];
