@@ -42,7 +42,8 @@ static const char expose_headers[] =
     "X-Iso-Tolerance, X-Iso-Area-Mm2, X-Iso-Volume-Mm3, X-Iso-Budget-Fits, X-Iso-Simplified, "
     "X-Iso-Simplify-Error-Mm, X-Iso-Simplify-Error-Voxels, X-Iso-Distance-Mm, "
     "X-Iso-Distance-Max-Mm, X-Iso-Distance-Voxels, X-Iso-Chain-Level, X-Iso-Exact-Triangles, "
-    "X-Iso-Cache, X-Iso-Replica, X-Iso-Load, X-Iso-Total, Link";
+    "X-Iso-Edges, X-Iso-Pinch-Edges, X-Iso-Pinch-Vertices, X-Iso-Vertex-Offset-Mm, "
+    "X-Iso-Budget-Source, X-Iso-Budget-Other-Distance-Mm, X-Iso-Cache, X-Iso-Replica, X-Iso-Load, X-Iso-Total, Link";
 
 /* ---------------------------------------------------------------- responses */
 

@@ -4,6 +4,7 @@
 
 #include <stdio.h>
 #include <stdlib.h>
+#include <unistd.h>
 
 #include "base/base.h"
 #include "pipeline.h"
@@ -107,21 +108,84 @@ static void chain_key(const srv_mesh_job *job, char *key, size_t size)
              job->volume->version, r->level, r->tolerance, r->cap);
 }
 
-/* A chain the run built goes into the cache, in a body of no bytes that owns it and
- * weighs what it holds; without memory for that, it is dropped (a cache is optional). */
+/* FNV-1a, 64 bits. */
+static uint64_t hash64(const char *s)
+{
+    uint64_t h = 14695981039346656037ull;
+    for (; *s; s++)
+        h = (h ^ (unsigned char)*s) * 1099511628211ull;
+    return h;
+}
+
+/* The chain's file beside the volume's hierarchy file in the cache dir:
+ * "<dir>/<id>.<16 hex digits>.isochain", the digits a hash of the level, tolerance and cap
+ * (the catalog's ids are file-name safe, so the path stays in the dir). Its identity, which
+ * the file must carry, hashes the whole chain key, the volume's version included: a file
+ * left from an older version of the volume is refused and rebuilt. 0 without a cache dir. */
+static int chain_file(const srv_mesh_job *job, const char *key, char *path, size_t size, uint64_t *identity)
+{
+    const char *dir = job->collection ? job->collection->options.cache_dir : NULL;
+    if (!dir)
+        return 0;
+    const proto_mesh_request *r = &job->request;
+    char params[128];
+    snprintf(params, sizeof params, "level=%.17g&tolerance=%.17g&cap=%d", r->level, r->tolerance, r->cap);
+    int n = snprintf(path, size, "%s/%s.%016llx.isochain", dir, job->volume->entry->id,
+                     (unsigned long long)hash64(params));
+    *identity = hash64(key);
+    return n > 0 && (size_t)n < size;
+}
+
+/* A chain into the cache, in a body of no bytes that owns it and weighs what it holds;
+ * without memory for that, it is dropped (a cache is optional). Returns the holder with a
+ * reference for the caller (NULL when dropped: the chain is then destroyed unless kept). */
+static srv_body *cache_chain(const srv_mesh_job *job, const char *key, iso_mesh_chain *chain,
+                             size_t faithful_triangles)
+{
+    srv_body *holder = srv_body_create(NULL, 0);
+    if (!holder) {
+        iso_mesh_chain_destroy(chain);
+        return NULL;
+    }
+    holder->chain = chain;
+    holder->size = chain->bytes;
+    holder->triangles = faithful_triangles;
+    srv_cache_put(job->cache, key, holder);
+    return holder;
+}
+
+/* A chain the run built goes to the cache, and to its file when there is a cache dir (a
+ * failure to write only costs the next start a rebuild). */
 static void keep_chain(const srv_mesh_job *job, const char *key, proto_pipeline_result *res)
 {
     if (!job->cache || !res->chain_built)
         return;
-    srv_body *holder = srv_body_create(NULL, 0);
-    if (!holder)
-        return;
-    holder->chain = res->chain_built;
-    holder->size = res->chain_built->bytes;
-    holder->triangles = res->faithful_triangles;
+    char path[4096];
+    uint64_t identity;
+    iso_error err = {0};
+    if (chain_file(job, key, path, sizeof path, &identity) &&
+        iso_mesh_chain_save(res->chain_built, path, identity, &err))
+        fprintf(stderr, "isoserve: %s: chain not written: %s\n", job->volume->entry->id, err.message);
+    srv_body_release(cache_chain(job, key, res->chain_built, res->faithful_triangles));
     res->chain_built = NULL;
-    srv_cache_put(job->cache, key, holder);
-    srv_body_release(holder);
+}
+
+/* The chain from its file, when the cache has none: into the cache, with a reference for
+ * the caller; NULL when there is no valid file (a stale or corrupt one is reported and
+ * left to be rebuilt and overwritten). */
+static srv_body *chain_from_file(const srv_mesh_job *job, const char *key)
+{
+    char path[4096];
+    uint64_t identity;
+    if (!chain_file(job, key, path, sizeof path, &identity) || access(path, F_OK))
+        return NULL;
+    iso_mesh_chain *chain;
+    iso_error err = {0};
+    if (iso_mesh_chain_load(path, identity, &chain, &err)) {
+        fprintf(stderr, "isoserve: %s: %s; rebuilding the chain\n", job->volume->entry->id, err.message);
+        return NULL;
+    }
+    return cache_chain(job, key, chain, 0);
 }
 
 srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
@@ -135,7 +199,7 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     srv_body *chain = NULL;
     if (job->cache && (req.distance >= 0 || req.budget)) {
         chain_key(job, key, sizeof key);
-        if ((chain = srv_cache_get(job->cache, key))) {
+        if ((chain = srv_cache_get(job->cache, key)) || (chain = chain_from_file(job, key))) {
             req.chain = chain->chain;
             req.faithful_triangles = chain->triangles;
         }

@@ -381,4 +381,15 @@ int iso_mesh_chain_pick_budget(const iso_mesh_chain *chain, size_t triangles);
  * Returns 0, ISO_E_ARGUMENT (no such level) or ISO_E_NOMEM (mesh left empty). */
 int iso_mesh_chain_mesh(const iso_mesh_chain *chain, int k, iso_mesh *mesh, iso_error *err);
 
+/* A chain on disk (chain_file.c): iso_mesh_chain_save writes it with the caller's
+ * identity (a hash of what the chain was built from: volume version, level, tolerance;
+ * never trusted from the file) through a temporary file renamed into place; returns 0,
+ * ISO_E_NOMEM or ISO_E_IO. iso_mesh_chain_load reads one back as a chain for
+ * iso_mesh_chain_destroy, after checking everything: ISO_E_IO (cannot read), ISO_E_FORMAT
+ * (not a chain file), ISO_E_STALE (another version, layout or identity), ISO_E_CORRUPT
+ * (sizes, indices or checksums disagree), ISO_E_NOMEM; *out NULL then. Both O(file). */
+int iso_mesh_chain_save(const iso_mesh_chain *chain, const char *path, uint64_t identity,
+                        iso_error *err);
+int iso_mesh_chain_load(const char *path, uint64_t identity, iso_mesh_chain **out, iso_error *err);
+
 #endif
