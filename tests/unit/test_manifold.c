@@ -2,13 +2,16 @@
  * makes none where plain meshoptimizer does (a thin tube whose cross-section is a triangle:
  * every collapse along it breaks the link condition). */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
+#include <unistd.h>
 #include <string.h>
 
 #include "mesh/mesh.h"
 #include "check.h"
 #include "extract/extract.h"
 #include "hierarchy/tree.h"
+#include "io/io.h"
 #include "surface.h"
 
 static void add_vertex(iso_mesh *m, double x, double y, double z)
@@ -208,10 +211,102 @@ static void test_real_chain_is_not_pinched(void)
     iso_vol_destroy(vol);
 }
 
+/* A chain written and read back is the same chain, byte for byte where it matters; a
+ * foreign identity is stale, a flipped byte anywhere or a cut file corrupt, a file of
+ * something else not a chain file, a missing one an I/O error. */
+static void write_bytes(const char *path, const unsigned char *data, size_t n)
+{
+    FILE *f = fopen(path, "wb");
+    CHECK(f != NULL);
+    if (f) {
+        CHECK_EQ(fwrite(data, 1, n, f), n);
+        fclose(f);
+    }
+}
+
+static void test_chain_file_round_trip(void)
+{
+    iso_volume *vol = NULL;
+    iso_error err = {0};
+    CHECK_OK(iso_field_load("field:torus:32", NULL, &vol, &err), &err);
+    if (!vol)
+        return;
+    iso_vol_update_stats(vol);
+    iso_tree *tree = surface_build(vol);
+    iso_mesh m;
+    iso_mesh_init(&m);
+    iso_extract_stats st;
+    iso_extract_params xp = {.level = 1.0, .space = ISO_SPACE_INDEX};
+    CHECK_OK(iso_extract(tree, &xp, &m, &st, &err), &err);
+    iso_mesh_chain *chain = NULL, *back = NULL;
+    CHECK_OK(iso_mesh_chain_build(&m, 1, 0, &chain, &err), &err);
+    char path[] = "/tmp/test_manifold_chain_XXXXXX";
+    int fd = mkstemp(path);
+    CHECK(fd >= 0);
+    if (!chain || fd < 0)
+        return;
+    close(fd);
+    CHECK_OK(iso_mesh_chain_save(chain, path, 42, &err), &err);
+    CHECK_OK(iso_mesh_chain_load(path, 42, &back, &err), &err);
+    if (back) {
+        CHECK_EQ(back->levels, chain->levels);
+        CHECK_EQ(back->vertex_count, chain->vertex_count);
+        CHECK_EQ(back->closed, chain->closed);
+        CHECK(back->volume == chain->volume && back->voxel_size == chain->voxel_size);
+        CHECK(!memcmp(back->positions, chain->positions, 3 * chain->vertex_count * sizeof(float)));
+        for (int k = 0; k < chain->levels; k++) {
+            const iso_mesh_chain_level *a = &chain->level[k], *b = &back->level[k];
+            CHECK_EQ(b->triangle_count, a->triangle_count);
+            CHECK(b->distance.p99 == a->distance.p99 && b->offset == a->offset);
+            CHECK_EQ(b->pinch_vertices, a->pinch_vertices);
+            CHECK(!memcmp(b->indices, a->indices, 3 * a->triangle_count * sizeof(uint32_t)));
+        }
+        iso_mesh mine, theirs;
+        iso_mesh_init(&mine);
+        iso_mesh_init(&theirs);
+        CHECK_OK(iso_mesh_chain_mesh(chain, 3, &mine, &err), &err);
+        CHECK_OK(iso_mesh_chain_mesh(back, 3, &theirs, &err), &err);
+        CHECK(mine.vertex_count == theirs.vertex_count &&
+              !memcmp(mine.positions, theirs.positions, 3 * mine.vertex_count * sizeof(float)));
+        iso_mesh_free(&mine);
+        iso_mesh_free(&theirs);
+        iso_mesh_chain_destroy(back);
+    }
+    back = NULL;
+    CHECK_EQ(iso_mesh_chain_load(path, 43, &back, &err), ISO_E_STALE);
+    CHECK(back == NULL);
+    FILE *f = fopen(path, "rb");
+    unsigned char *data = malloc(1 << 22);
+    size_t n = f && data ? fread(data, 1, 1 << 22, f) : 0;
+    if (f)
+        fclose(f);
+    CHECK(n > 64 && n < (1 << 22));
+    for (size_t at = 0; n > 64 && at < n; at += n / 37 + 1) { /* a flipped byte anywhere */
+        data[at] ^= 0x55;
+        write_bytes(path, data, n);
+        int rc = iso_mesh_chain_load(path, 42, &back, &err);
+        CHECKF(rc == ISO_E_CORRUPT || (at < 8 && rc == ISO_E_FORMAT), "byte %zu flipped: %d", at, rc);
+        CHECK(back == NULL);
+        data[at] ^= 0x55;
+    }
+    write_bytes(path, data, n - 5); /* cut short */
+    CHECK_EQ(iso_mesh_chain_load(path, 42, &back, &err), ISO_E_CORRUPT);
+    write_bytes(path, (const unsigned char *)"not a chain at all, but long enough to hold a header of 64 bytes", 64);
+    CHECK_EQ(iso_mesh_chain_load(path, 42, &back, &err), ISO_E_FORMAT);
+    remove(path);
+    CHECK_EQ(iso_mesh_chain_load(path, 42, &back, &err), ISO_E_IO);
+    free(data);
+    iso_mesh_chain_destroy(chain);
+    iso_mesh_free(&m);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_counts_on_hand_built_meshes);
     CHECK_RUN(test_thin_tube_is_not_pinched);
     CHECK_RUN(test_real_chain_is_not_pinched);
+    CHECK_RUN(test_chain_file_round_trip);
     return check_finish();
 }
