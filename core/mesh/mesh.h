@@ -314,9 +314,9 @@ double iso_mesh_value_error(const iso_volume *vol, const iso_mesh *mesh, iso_spa
  * Level 0 is the surface given (the exact one); level k halves level k - 1's triangles
  * (iso_simplify_manifold with borders locked: 50%, 25%, 12.5%, ... of level 0), each from
  * the one before, so the chain costs little more than its first step; a level of at least
- * ISO_CHAIN_SLAB_MIN triangles per thread, or of 2 x ISO_CHAIN_SLAB_TRIANGLES, is
- * simplified in slabs on all threads, each with its cuts locked, then the bands around the
- * cuts with the cuts free (chain.c); each part is simplified over its own compact vertices. Every level indexes the one
+ * ISO_CHAIN_SLAB_MIN triangles per thread is simplified halfway in slabs on all threads,
+ * each with its cut locked, then the rest of the way joined, with the cuts free (chain.c);
+ * each part is simplified over its own compact vertices. Every level indexes the one
  * position array, a copy of level 0's: every vertex of every level is a vertex of the
  * exact surface, so its value error is the exact surface's, with one exception: on a
  * closed surface, collapses cut chords and a coarse level encloses less (2-3% on a blob
@@ -331,8 +331,6 @@ double iso_mesh_value_error(const iso_volume *vol, const iso_mesh *mesh, iso_spa
 #define ISO_CHAIN_LEVELS 6
 #define ISO_CHAIN_SLABS_MAX 64  /* a level is simplified in at most this many slabs */
 #define ISO_CHAIN_SLAB_MIN 20000 /* triangles per slab, at least, else one thread */
-#define ISO_CHAIN_SLAB_TRIANGLES 40000 /* a large level's slabs, about */
-#define ISO_CHAIN_BAND_EDGES 4   /* a cut's band reaches this many mean edges each side */
 #define ISO_CHAIN_SPACING_VOXELS 3 /* the measures' sample spacing */
 #define ISO_CHAIN_VOLUME_SLACK 1e-3 /* a closed level whose enclosed volume strays further
                                      * (relative) is moved along its normals */

@@ -6,7 +6,8 @@ For each case, in one run on the same exact surface (world mm):
            follows it, and that measure (p99 both ways and max, mm);
   chain    `extract --distance 0`: the whole chain (levels of 50% .. 1.6%, each simplified
            from the one before and measured against the exact surface), its build time
-           split into simplification and measurement, and its 25% level's measured p99;
+           split into simplification and measurement, and its 25% level's triangles and
+           measured p99 (beside the single call's, at its count);
   answer   `extract --distance D` with D = half the smallest spacing: the level chosen,
            its share of the exact triangles and its measured distance;
   pinch    the chain's worst level: its pinches (edges of 3+ triangles and vertices of
@@ -44,7 +45,7 @@ def main():
     only = os.environ.get("ISO_BENCH_CASES")  # e.g. "CThead skin,ch2better"
     rows = []
     head = (f"{'case':<20} {'exact':>8} {'single ms':>9} {'p99 mm':>7} {'chain ms':>9} {'simpl.':>7} "
-            f"{'meas.':>7} {'ratio':>6} {'s.ratio':>7} {'25% p99':>7} {'D mm':>5} {'level':>5} {'share':>6} "
+            f"{'meas.':>7} {'ratio':>6} {'s.ratio':>7} {'25% tris':>8} {'25% p99':>7} {'D mm':>5} {'level':>5} {'share':>6} "
             f"{'p99':>6} {'max':>6} {'vol %':>6} {'pinch':>6}")
     print(head)
     for name, level, label, spacing in CASES:
@@ -80,10 +81,11 @@ def main():
         row["pinches_per_10k_edges"] = max(1e4 * (b["nonmanifold_edges"] + b["pinch_vertices"]) / b["edges"]
                                            for b in built if b["edges"])
         row["folds_dropped"] = sum(b["folds_dropped"] for b in built)
+        row["measure_share"] = measure_ms / chain["build_ms"]
         rows.append(row)
         print(f"{label:<20} {exact['triangles']:>8} {single_ms:>9.0f} {s['distance']['p99']:>7.3f} "
               f"{chain['build_ms']:>9.0f} {simplify_ms:>7.0f} {measure_ms:>7.0f} {row['ratio']:>6.2f} "
-              f"{row['simplify_ratio']:>7.2f} {built[2]['p99']:>7.3f} {d:>5.2f} {k:>5} "
+              f"{row['simplify_ratio']:>7.2f} {built[2]['triangles']:>8} {built[2]['p99']:>7.3f} {d:>5.2f} {k:>5} "
               f"{100 * row['answer_share']:>5.1f}% {answer['distance']['p99']:>6.3f} {answer['distance']['max']:>6.2f} "
               f"{'' if vol is None else f'{vol:+.2f}':>6} {row['pinches_per_10k_edges']:>6.2f}", flush=True)
     os.makedirs("bench/results", exist_ok=True)
