@@ -270,7 +270,7 @@ def print_split(rows):
     print("| binary | request | extract | normals | encode | gzip | total | total / extract | MB |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
-        print(f"| {os.path.basename(r['binary'])} | {r['kind']} | {r['extract_ms']:.1f} | {r['normals_ms']:.1f} | "
+        print(f"| {os.path.relpath(r['binary'])} | {r['kind']} | {r['extract_ms']:.1f} | {r['normals_ms']:.1f} | "
               f"{r['encode_ms']:.1f} | {r['gzip_ms']:.1f} | {r['total_ms']:.1f} | {r['ratio']:.1f} | {r['bytes'] / 1e6:.2f} |")
 
 
