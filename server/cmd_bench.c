@@ -4,8 +4,8 @@
  * With --distances, the tolerance ladder's geometric cost as well: each rung's symmetric
  * distance to the exact surface (mean, p99, max; iso_mesh_distance_compute) in mm and in
  * voxels of the smallest spacing, and its time against the exact path's.
- * Times are the best of --repeat runs (the build's of up to four, wall and CPU time): the
- * machine is shared and noisy. */
+ * Times are the best of --repeat runs (the build's of 1 + --build-repeat, wall and CPU
+ * time): the machine is shared and noisy. */
 #include <jansson.h>
 #include <math.h>
 #include <stdio.h>
@@ -77,9 +77,13 @@ static int parse_tolerances(const char *text, const iso_volume *vol, double **ou
         i++;
     }
     free(copy);
+    if (i != n) { /* an empty field: strtok_r skipped it */
+        free(v);
+        return ISO_E_ARGUMENT;
+    }
     *out = v;
     *count = i;
-    return i ? 0 : ISO_E_ARGUMENT;
+    return 0;
 }
 
 /* Best of `repeat` extractions; the last one's surface stays in mesh (world mm). */
@@ -108,13 +112,13 @@ static double cpu_ms(void)
 }
 
 /* The build's best wall time on the tree's thread count, of the first build (srv_open's)
- * and up to three more, and the best CPU time of those (on one thread the build's own
- * work, whatever else the machine runs). */
+ * and `repeat` more, and the best CPU time of those (on one thread the build's own work,
+ * whatever else the machine runs; NAN without them). */
 static int best_build(const srv_subject *s, int threads, int repeat, double *best, double *best_cpu)
 {
     *best = s->tree->build_ms;
-    *best_cpu = INFINITY;
-    for (int r = 0; r < repeat && r < 3; r++) {
+    *best_cpu = repeat ? INFINITY : NAN;
+    for (int r = 0; r < repeat; r++) {
         iso_tree *tree;
         iso_error err;
         double cpu = cpu_ms();
@@ -254,8 +258,8 @@ static int write_json(const char *path, const srv_subject *s, double level, int 
         json_object_set_new(doc, "voxel_mm", json_real(iso_vol_min_spacing(v)));
         json_object_set_new(doc, "preview_tolerance", json_real(iso_preview_tolerance(v)));
         json_object_set_new(doc, "build_s_per_1e7_voxels", json_real(build_ms / (double)voxels * 1e4));
-        json_object_set_new(doc, "build_cpu_ms", json_real(build_cpu_ms));
-        json_object_set_new(doc, "build_cpu_s_per_1e7_voxels", json_real(build_cpu_ms / (double)voxels * 1e4));
+        json_object_set_new(doc, "build_cpu_ms", maybe_real(build_cpu_ms));
+        json_object_set_new(doc, "build_cpu_s_per_1e7_voxels", maybe_real(build_cpu_ms / (double)voxels * 1e4));
         json_object_set_new(doc, "hierarchy_percent", json_real(100.0 * (double)iso_tree_memory(s->tree) / (double)bytes));
     }
     if (!doc || json_dump_file(doc, path, JSON_INDENT(2) | JSON_REAL_PRECISION(8)))
@@ -290,7 +294,7 @@ int srv_cmd_bench(int argc, char **argv)
     srv_open_options opt = {.want_tree = 1};
     double level = 0, *tolerances = NULL;
     size_t count = 0;
-    int have_level = 0, repeat = 3, baselines = 1, distances = 0;
+    int have_level = 0, repeat = 3, baselines = 1, distances = 0, build_repeat = 1;
     const char *json_path = NULL, *tol_text = "0,6,10,15,25,50,75,100,200,300,400,500";
     srv_keep_freed_memory(); /* the server's allocator, as bench_peer tunes VTK's */
     for (int i = 0; i < argc; i++) {
@@ -308,6 +312,10 @@ int srv_cmd_bench(int argc, char **argv)
             repeat = atoi(argv[++i]);
             if (repeat < 1 || repeat > 1000)
                 return srv_fail("bench: --repeat must be 1..1000");
+        } else if (!strcmp(a, "--build-repeat") && value) {
+            build_repeat = atoi(argv[++i]);
+            if (build_repeat < 0 || build_repeat > 100)
+                return srv_fail("bench: --build-repeat must be 0..100");
         } else if (!strcmp(a, "--resample") && value)
             opt.resample = argv[++i];
         else if (!strcmp(a, "--threads") && value) {
@@ -324,7 +332,7 @@ int srv_cmd_bench(int argc, char **argv)
     }
     if (!opt.path || !have_level)
         return srv_fail("bench: usage: isoserve bench VOLUME --level L [--tolerances 0,5%%,preview,...] "
-                        "[--threads N] [--no-baselines] [--distances]");
+                        "[--threads N] [--no-baselines] [--distances] [--build-repeat N]");
     srv_subject s;
     if (srv_open(&opt, &s))
         return 1;
@@ -342,7 +350,7 @@ int srv_cmd_bench(int argc, char **argv)
     double exact_best;
     int status = rows ? 0 : srv_fail("bench: out of memory");
     if (status == 0)
-        status = best_build(&s, opt.threads, repeat, &build_ms, &build_cpu_ms) ||
+        status = best_build(&s, opt.threads, build_repeat, &build_ms, &build_cpu_ms) ||
                  full_scan(&s, level, repeat, baselines, &full, &full_best) ||
                  (distances && run(s.tree, level, 0, 0, opt.threads, 1, &exact, &exact_stats, &exact_best));
     for (size_t i = 0; status == 0 && i < count; i++) {

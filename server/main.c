@@ -24,8 +24,8 @@ static const struct {
      "                 [--shard K/N --shard-peers HOST:PORT,...] [--replica-name NAME]\n"
      "                 (each option also from ISOSERVE_<OPTION>, e.g. ISOSERVE_CACHE_DIR)"},
     {"bench", srv_cmd_bench,
-     "bench VOLUME --level L [--tolerances 0,6,10,...] [--json FILE] [--repeat N] [--resample WxHxD]\n"
-     "                 [--threads N] [--no-baselines]"},
+     "bench VOLUME --level L [--tolerances 0,5%,preview,...] [--json FILE] [--repeat N] [--resample WxHxD]\n"
+     "                 [--threads N] [--no-baselines] [--distances] [--build-repeat N]"},
 };
 
 static int usage(FILE *to)

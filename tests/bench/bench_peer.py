@@ -157,11 +157,13 @@ def span_space(img, level):
     return {"first_update_ms": first, "query_ms": min(queries), "triangles": triangles}
 
 
-def isoserve_bench(path, level, tolerances, threads, resample=None, distances=False):
-    """`isoserve bench` on the preloaded hierarchy; tolerances as its --tolerances reads them."""
+def isoserve_bench(path, level, tolerances, threads, resample=None, distances=False, builds=1):
+    """`isoserve bench` on the preloaded hierarchy; tolerances as its --tolerances reads them;
+    the build timed 1 + `builds` times."""
     with tempfile.NamedTemporaryFile(suffix=".json") as out:
         args = [BIN, "bench", path, "--level", str(level), "--tolerances", tolerances,
-                "--threads", str(threads), "--repeat", str(REPEAT), "--no-baselines", "--json", out.name]
+                "--threads", str(threads), "--repeat", str(REPEAT), "--no-baselines", "--json", out.name,
+                "--build-repeat", str(builds)]
         if resample:
             args += ["--resample", resample]
         if distances:
@@ -179,7 +181,7 @@ def run_case(path, level, label):
     for n in THREADS:
         fe_ms, fe_tri = flying_edges(img, level, n)
         # One thread: the ladder with its distances; two: the exact path only.
-        iso = isoserve_bench(path, level, LADDER if n == 1 else "0", n, distances=n == 1)
+        iso = isoserve_bench(path, level, LADDER if n == 1 else "0", n, distances=n == 1, builds=3 if n == 1 else 0)
         fe_again, _ = flying_edges(img, level, n)  # alternate, keep the best of both
         fe_ms = min(fe_ms, fe_again)
         for row in iso["rows"]:
@@ -195,7 +197,7 @@ def run_case(path, level, label):
     case["span_space"] = span_space(img, level)
     # Ties: integer levels on integer data; at level + 0.5 both must give the same count.
     fe_half, fe_half_tri = flying_edges(img, level + 0.5, 1)
-    iso_half = isoserve_bench(path, level + 0.5, "0", 1)
+    iso_half = isoserve_bench(path, level + 0.5, "0", 1, builds=0)
     case["half_level_triangles"] = {"flying_edges": fe_half_tri, "isoserve": iso_half["rows"][0]["polygons"]}
     return case
 
@@ -237,7 +239,7 @@ def scaling():
         points = []
         for f in factors:
             size = "x".join(str(max(2, round(d * f))) for d in dims)
-            iso = isoserve_bench(path, level, "0,50", 1, resample=size)
+            iso = isoserve_bench(path, level, "0,50", 1, resample=size, builds=0)
             voxels = int(np.prod([int(v) for v in size.split("x")]))
             points.append({"size": size, "voxels": voxels,
                            "tolerance_0": {k: iso["rows"][0][k] for k in ("extract_ms_with_minmax", "cells_visited", "polygons")},

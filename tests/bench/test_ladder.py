@@ -95,6 +95,24 @@ def test_bench_distances(header, tmp):
     check_rows(doc)
 
 
+def test_rungs_as_shares_and_refusals(header, tmp):
+    """A rung is a value, N% of the range or "preview"; anything else is refused with the
+    option named; --build-repeat 0 times no extra build, so there is no CPU time."""
+    out = os.path.join(tmp, "rungs.json")
+    subprocess.run([BIN, "bench", header, "--level", str(LEVEL), "--tolerances", "0,1.5,25%,preview", "--repeat", "1",
+                    "--no-baselines", "--build-repeat", "0", "--json", out],
+                   check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    doc = json.load(open(out))
+    got = [r["tolerance"] for r in doc["rows"]]
+    want = [0, 1.5, 0.25 * doc["value_range"], doc["preview_tolerance"]]
+    assert all(close(g, w) or g == w == 0 for g, w in zip(got, want)) and len(got) == 4, (got, want)
+    assert doc["build_cpu_ms"] is None and doc["build_ms"] > 0, doc
+    for bad in ("-1", "5%%", "x%", "%", "preview2", "0,,1"):
+        p = subprocess.run([BIN, "bench", header, "--level", str(LEVEL), "--tolerances", bad, "--repeat", "1"],
+                           capture_output=True, text=True)
+        assert p.returncode == 1 and "--tolerances" in p.stderr, (bad, p.returncode, p.stderr)
+
+
 def test_peer_ladder(header, tmp):
     """bench_peer on the same volume: one case, its ladder with Flying Edges beside it."""
     out = os.path.join(tmp, "peer.json")
@@ -119,6 +137,7 @@ def main():
     tmp = tempfile.mkdtemp(prefix="isoserve-ladder-")
     header = write_sphere(tmp)
     RESULTS.check("bench_distances_on_a_sphere", lambda: test_bench_distances(header, tmp))
+    RESULTS.check("rungs_as_shares_and_refusals", lambda: test_rungs_as_shares_and_refusals(header, tmp))
     RESULTS.check("peer_ladder_fields", lambda: test_peer_ladder(header, tmp))
     shutil.rmtree(tmp, ignore_errors=True)
     return 1 if RESULTS.failures else 0
