@@ -160,10 +160,9 @@ static float centre_of(const iso_mesh *m, size_t t, int axis)
  * threads, in slabs (2a) across an axis (the longest side on even levels, the next on odd
  * ones), one per thread, each with its cut locked, making half of the level's collapses
  * (each slab its share); then (2b) the joined level with the cuts free makes the other half,
- * chosen by error over the whole surface. Slabs sent all the way to their shares of the
- * target spent collapses where a slab's own share forced them, not where they cost least
- * (bone's p99 at 25% rose from 0.185 to 0.221 mm). A small level, or one thread, is one
- * part. */
+ * chosen by error over the whole surface: slabs sent all the way to their shares of the
+ * target spend collapses where a slab's own share forces them, not where they cost least
+ * (docs/performance.md). A small level, or one thread, is one part. */
 static int simplify_level(const iso_mesh_chain *chain, iso_mesh *m, int k, size_t target,
                           int threads, iso_simplify_result *r, iso_error *err)
 {
