@@ -330,23 +330,33 @@ static void evict_over_cap(srv_collection *c)
     }
 }
 
-/* A temporary file of iso_tree_save for a catalog id: "ID.isotree.tmp." and mkstemp's six
+/* A temporary file of iso_tree_save or iso_mesh_chain_save for a catalog id:
+ * "ID.isotree.tmp." or "ID.<16 hex digits>.isochain.tmp." (mesh_job.c), then mkstemp's six
  * letters or digits. Nothing else in the cache dir is ever removed. */
 static int is_tree_temporary(const srv_catalog *catalog, const char *name)
 {
-    static const char infix[] = ".isotree.tmp.";
-    const size_t tail = sizeof infix - 1 + 6, n = strlen(name);
-    if (n <= tail || strncmp(name + n - tail, infix, sizeof infix - 1))
-        return 0;
-    for (const char *p = name + n - 6; *p; p++)
-        if (!isalnum((unsigned char)*p))
-            return 0;
-    char id[SRV_ID_MAX + 1];
-    if (n - tail > SRV_ID_MAX)
-        return 0;
-    memcpy(id, name, n - tail);
-    id[n - tail] = '\0';
-    return srv_catalog_find(catalog, id) < catalog->count;
+    static const char *const infixes[] = {".isotree.tmp.", ".isochain.tmp."};
+    const size_t n = strlen(name);
+    for (int i = 0; i < 2; i++) {
+        const size_t tail = strlen(infixes[i]) + 6, hex = i ? 17 : 0; /* ".<16 hex>" */
+        if (n <= tail + hex || strncmp(name + n - tail, infixes[i], tail - 6))
+            continue;
+        int ok = 1;
+        for (const char *p = name + n - 6; *p; p++)
+            ok &= isalnum((unsigned char)*p) != 0;
+        for (size_t j = n - tail - hex + 1; hex && j < n - tail; j++)
+            ok &= isxdigit((unsigned char)name[j]) != 0;
+        ok &= !hex || name[n - tail - hex] == '.';
+        char id[SRV_ID_MAX + 1];
+        size_t len = n - tail - hex;
+        if (!ok || len > SRV_ID_MAX)
+            continue;
+        memcpy(id, name, len);
+        id[len] = '\0';
+        if (srv_catalog_find(catalog, id) < catalog->count)
+            return 1;
+    }
+    return 0;
 }
 
 /* Removes the temporary hierarchy files a killed writer left (iso_tree_save renames its

@@ -9,6 +9,8 @@ between the steps. Checks:
 - a corrupt file (one payload byte flipped) is refused (the log says why), the chain
   rebuilt, the same bytes served, and the file rewritten: the next restart reads it;
 - a stale file (another level's chain under this level's name) is refused the same way;
+- a temporary chain file a killed writer left (ID.HASH.isochain.tmp.XXXXXX, unchanged for
+  two minutes) is removed at start; one of an id not in the catalog is kept;
 - the daemon exits 0 on SIGTERM each time.
 Prints PASS/FAIL lines; exit status 1 on failure. Daemons are stopped by their PIDs."""
 
@@ -145,6 +147,19 @@ def main():
 
     RESULTS.check("corrupt_refused_and_rebuilt", lambda: refused_and_rebuilt(flip, "checksum"))
     RESULTS.check("stale_refused_and_rebuilt", lambda: refused_and_rebuilt(swap, "another surface"))
+    def stale_temporaries_removed():
+        mine = os.path.join(cache, "torus.0123456789abcdef.isochain.tmp.a1B2c3")
+        other = os.path.join(cache, "other.0123456789abcdef.isochain.tmp.a1B2c3")
+        for p in (mine, other):
+            with open(p, "wb") as f:
+                f.write(b"half a chain")
+            old = time.time() - 120
+            os.utime(p, (old, old))
+        d = Daemon(tmp)
+        log = d.stop()
+        assert not os.path.exists(mine) and "removed, a stale temporary file" in log, log[-500:]
+        assert os.path.exists(other)
+    RESULTS.check("stale_temporaries_removed", stale_temporaries_removed)
     shutil.rmtree(tmp, ignore_errors=True)
     return 1 if RESULTS.failures else 0
 
