@@ -112,7 +112,7 @@ static unsigned set_shift(const lod *c, const uint32_t twice[3])
     return c->around[cls];
 }
 
-/* ---- PASS 2: march ---- */
+/* ---- PASS 3: the coarse bricks (PASS 2, march_fine, is below) ---- */
 
 /* Sample p of the brick at hand's box, read from the volume on first use: a coarse brick
  * costs the samples its grid and its transition cells touch, each once. */
@@ -655,7 +655,7 @@ int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, iso_
     return iso_lod_extract_planned(tree, params, NULL, mesh, stats, err);
 }
 
-/* PASS 2 for the stride-1 bricks: march.c's kernel on those (with no min/max, on the bricks
+/* PASS 2: the stride-1 bricks, march.c's kernel on those (with no min/max, on the bricks
  * the level cannot cross too: they are read and give nothing). marked is scratch, a byte
  * per brick. */
 static int march_fine(lod *c, const iso_extract_params *params, uint8_t *marked, iso_march_part **fine,

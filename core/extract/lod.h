@@ -6,7 +6,10 @@
  *   (stride 2^l, tree.h) whose stored fit error is within the tolerance, or stride 1; the
  *   others get the coarsest stride, which touches nothing (their samples all lie on one
  *   side of the level). No sample is read.
- * PASS 2 (march): brick after brick in grid order, cell after cell of its stride grid.
+ * PASS 2 (fine): the stride-1 bricks, marched by the exact kernel (march.h,
+ *   iso_march_selected) on the request's threads; its ghosts give the crossings of the
+ *   edges a stride-1 brick shares with a coarse brick that owns them.
+ * PASS 3 (coarse): brick after brick in grid order, cell after cell of its stride grid.
  *   Every lattice face and edge has a stride of its own, the finest of the bricks that
  *   hold it (with a cap, the volume's border counts as stride 1). A cell whose faces and
  *   edges all have its stride is a regular cell: marching cubes (mc.h) on its 8 corners.
@@ -16,7 +19,8 @@
  *   where it is left to the side where it was entered); the segments chain into closed
  *   loops on the cell's boundary, each fanned around a centre placed on f = level
  *   (a loop of three is one triangle). A crossing is named by its lattice segment (low
- *   end, axis, length), so a vertex shared by cells is made once.
+ *   end, axis, length), so a vertex shared by cells is made once; on a data edge the
+ *   kernel's vertex is used where PASS 2 made one.
  *
  * The value bound: a crossing on a lattice segment of stride 2^l lies on a grid edge of a
  * brick at level l, where |f - T_l| <= err_l <= tolerance (Lemma 1), T_l linear along the

@@ -6,7 +6,9 @@
  * crossings of the edges it owns row by row, in the order z, y, axis, then x; any brick
  * finds a neighbour's vertex id from that neighbour's crossing rows by a popcount.
  *
- * PASS 1 (select): bricks with min <= level < max, in grid order.
+ * PASS 1 (select): bricks with min <= level < max, in grid order (for iso_march_selected,
+ *   the marked bricks and their ghosts: unmarked bricks the level crosses that own edges
+ *   a marked brick holds; a ghost keeps only those edges' crossings and marches no cell).
  * PASS 2 (classify, threads): per active brick, one 9-bit word per x-row of samples
  *   saying which are above the level; from those by shifts and xors, the owned crossing
  *   edges of every row and axis and the row's cells that are neither all inside nor all
