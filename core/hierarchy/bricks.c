@@ -58,6 +58,18 @@ static void scan_slabs(void *context, int t, int threads)
 
 int iso_bricks_build(const iso_volume *vol, int threads, iso_bricks *bricks, iso_error *err)
 {
+    iso_bricks b;
+    int rc = iso_bricks_alloc(vol, &b, err);
+    if (rc)
+        return rc;
+    scan_job job = {vol, &b};
+    iso_parallel_run(threads, scan_slabs, &job);
+    *bricks = b;
+    return 0;
+}
+
+int iso_bricks_alloc(const iso_volume *vol, iso_bricks *bricks, iso_error *err)
+{
     *bricks = (iso_bricks){0};
     iso_bricks b = {0};
     for (int d = 0; d < 3; d++)
@@ -71,8 +83,6 @@ int iso_bricks_build(const iso_volume *vol, int threads, iso_bricks *bricks, iso
         iso_bricks_free(&b);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory for %zu brick bounds", total);
     }
-    scan_job job = {vol, &b};
-    iso_parallel_run(threads, scan_slabs, &job);
     *bricks = b;
     return 0;
 }

@@ -243,9 +243,9 @@ typedef struct pending {
 } pending;
 
 /* The brick grid's index of a stored leaf's box. */
-static size_t brick_of(const fit_ctx *f, const iso_box *box)
+static size_t brick_of(const uint32_t count[3], const iso_box *box)
 {
-    return ((size_t)(box->lo[2] / ISO_TREE_BRICK) * f->count[1] + box->lo[1] / ISO_TREE_BRICK) * f->count[0] +
+    return ((size_t)(box->lo[2] / ISO_TREE_BRICK) * count[1] + box->lo[1] / ISO_TREE_BRICK) * count[0] +
            box->lo[0] / ISO_TREE_BRICK;
 }
 
@@ -268,7 +268,7 @@ static void leaf_octants(fit_ctx *f, const iso_box *box)
     double samples[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES];
     size_t lo[3] = {box->lo[0], box->lo[1], box->lo[2]}, hi[3] = {box->hi[0], box->hi[1], box->hi[2]};
     iso_vol_read_box(f->vol, lo, hi, samples);
-    size_t nx = hi[0] - lo[0] + 1, ny = hi[1] - lo[1] + 1, at = brick_of(f, box) * 8;
+    size_t nx = hi[0] - lo[0] + 1, ny = hi[1] - lo[1] + 1, at = brick_of(f->count, box) * 8;
     for (int o = 0; o < 8; o++) {
         iso_box b = octant(box, o);
         double mn = INFINITY, mx = -INFINITY;
@@ -325,7 +325,7 @@ static void scan_brick(const fit_ctx *f, const iso_box *frame, const double c[8]
     double t[27];
     for (int k = 0; k < 27; k++)
         t[k] = frame_eval(frame, c, inv, g[0][k % 3], g[1][k / 3 % 3], g[2][k / 9]);
-    size_t at = brick_of(f, box) * 8;
+    size_t at = brick_of(f->count, box) * 8;
     double ub[8];
     int order[8];
     for (int o = 0; o < 8; o++) {
@@ -489,21 +489,14 @@ static int bricks_from_leaves(const iso_volume *vol, const iso_tree *tree, const
 {
     if (iso_vol_type_is_float(vol->type))
         return iso_bricks_build(vol, threads, bricks, err);
-    iso_bricks b = {0};
-    iso_bricks_count(vol, b.count);
-    size_t total = iso_bricks_total(&b);
-    b.min = malloc(total * sizeof *b.min);
-    b.max = malloc(total * sizeof *b.max);
-    if (!b.min || !b.max) {
-        iso_bricks_free(&b);
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory for %zu brick bounds", total);
-    }
+    iso_bricks b;
+    int rc = iso_bricks_alloc(vol, &b, err);
+    if (rc)
+        return rc;
     for (size_t n = 0; n < tree->node_count; n++) {
         if (tree->nodes[n].first_child)
             continue;
-        const iso_box *box = &l->boxes[n];
-        size_t at = ((size_t)(box->lo[2] / ISO_TREE_BRICK) * b.count[1] + box->lo[1] / ISO_TREE_BRICK) * b.count[0] +
-                    box->lo[0] / ISO_TREE_BRICK;
+        size_t at = brick_of(b.count, &l->boxes[n]);
         b.min[at] = tree->nodes[n].min;
         b.max[at] = tree->nodes[n].max;
     }

@@ -37,6 +37,9 @@ typedef struct iso_bricks {
 
 /* Scans vol on `threads` threads (0 = all cores). O(N). On failure *bricks is empty. */
 int iso_bricks_build(const iso_volume *vol, int threads, iso_bricks *bricks, iso_error *err);
+/* The grid's arrays for vol, bounds not set: for a builder that knows them otherwise (the
+ * hierarchy's leaves). ISO_E_ARGUMENT or ISO_E_NOMEM; on failure *bricks is empty. */
+int iso_bricks_alloc(const iso_volume *vol, iso_bricks *bricks, iso_error *err);
 /* Frees the arrays; NULL and an empty grid are allowed. */
 void iso_bricks_free(iso_bricks *bricks);
 
