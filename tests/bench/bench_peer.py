@@ -11,7 +11,7 @@ symmetric distance to the exact surface (mean, p99, max over both surfaces, meas
 `isoserve bench --distances`, core/mesh/distance.c), in mm and in voxels of the smallest
 spacing. Then scaling: CThead and ch2better resampled to four sizes, time and cells visited
 against voxels with the fitted exponent. Prints tables, writes bench/results/peer.json and
-bench/results/scaling.png.
+bench/results/scaling.png (beside the JSON).
 
 Without ../shared/volumes it says so and runs what this machine has: Debian's
 mricron-data Colin27 brains (ch2better, ch2bet), no scaling. ISO_BENCH_CASES="CThead
@@ -377,9 +377,10 @@ def main():
                "write_bandwidth_bytes_per_s": bandwidth, "ladder": LADDER,
                "vtk": vtk.vtkVersion.GetVTKVersion(), "cases": cases, "scaling": scale},
               open(out, "w"), indent=1)
+    png = os.path.join(os.path.dirname(out) or ".", "scaling.png")  # beside the JSON
     if scale:
-        plot(scale, "bench/results/scaling.png")
-    print(f"written {out}" + (" and bench/results/scaling.png" if scale else ""))
+        plot(scale, png)
+    print(f"written {out}" + (f" and {png}" if scale else ""))
     return 0
 
 
