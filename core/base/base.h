@@ -1,11 +1,13 @@
 /* base.h: what every stage of the core shares: the error report and status codes, the
- * thread pool, the monotonic clock and outward rounding of doubles to floats.
+ * thread pool, files replaced whole, the monotonic clock and outward rounding of doubles to
+ * floats.
  *
  * Ownership: nothing here allocates for the caller; iso_error is a caller-owned value.
  * Errors: fallible core functions return 0 or a negative ISO_E_* code and fill an optional
  * iso_error. Thread-safety: every function may be called from any thread; the pool's helper
  * threads are started once per process and shared by all calls. Cost: O(1) except
- * iso_parallel_run, which costs what its function does. */
+ * iso_parallel_run, which costs what its function does, and iso_file_replace, which costs
+ * its bytes and one fsync. */
 #ifndef ISO_BASE_H
 #define ISO_BASE_H
 
@@ -69,6 +71,19 @@ int iso_parallel_threads(int requested);
  * fn must not wait for another share of its own call. */
 typedef void (*iso_parallel_fn)(void *context, int t, int threads);
 void iso_parallel_run(int threads, iso_parallel_fn fn, void *context);
+
+/* Files written whole (hierarchies, chains): a reader sees the old bytes or the new. */
+
+/* One run of bytes of a file, written in order with the others. */
+typedef struct iso_file_part {
+    const void *data;
+    size_t bytes;
+} iso_file_part;
+
+/* Writes the parts, in order, to a temporary file beside path, syncs it and renames it
+ * over path. Returns 0, ISO_E_NOMEM or ISO_E_IO (err says which step failed and why); on
+ * failure path is untouched and the temporary file removed. */
+int iso_file_replace(const char *path, const iso_file_part *parts, size_t count, iso_error *err);
 
 /* The monotonic clock behind every *_ms figure (build, extract, load times). */
 

@@ -616,22 +616,6 @@ static uint32_t header_crc(tree_header h)
     return (uint32_t)crc32(0L, (const Bytef *)&h, sizeof h);
 }
 
-static int write_all(int fd, const void *buf, size_t n)
-{
-    const char *p = buf;
-    while (n) {
-        ssize_t w = write(fd, p, n);
-        if (w < 0) {
-            if (errno == EINTR)
-                continue;
-            return -1;
-        }
-        p += w;
-        n -= (size_t)w;
-    }
-    return 0;
-}
-
 int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err)
 {
     tree_header h;
@@ -649,33 +633,10 @@ int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err)
     h.node_crc = (uint32_t)crc32(crc, (const Bytef *)tree->level_error, (uInt)floor_bytes);
     h.header_crc = header_crc(h);
 
-    size_t len = strlen(path);
-    char *tmp = malloc(len + 16);
-    if (!tmp)
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory saving %s", path);
-    snprintf(tmp, len + 16, "%s.tmp.XXXXXX", path);
-    int fd = mkstemp(tmp);
-    if (fd < 0) {
-        int e = errno;
-        free(tmp);
-        return iso_error_set(err, ISO_E_IO, "%s: cannot create a temporary file: %s", path, strerror(e));
-    }
-    if (write_all(fd, &h, sizeof h) || write_all(fd, tree->nodes, iso_tree_bytes(tree)) ||
-        write_all(fd, tree->level_error, floor_bytes) || fsync(fd) != 0) {
-        int e = errno;
-        close(fd);
-        unlink(tmp);
-        free(tmp);
-        return iso_error_set(err, ISO_E_IO, "%s: write failed: %s", path, strerror(e));
-    }
-    if (close(fd) != 0 || rename(tmp, path) != 0) {
-        int e = errno;
-        unlink(tmp);
-        free(tmp);
-        return iso_error_set(err, ISO_E_IO, "%s: cannot put the file in place: %s", path, strerror(e));
-    }
-    free(tmp);
-    return 0;
+    iso_file_part parts[] = {{&h, sizeof h},
+                             {tree->nodes, iso_tree_bytes(tree)},
+                             {tree->level_error, floor_bytes}};
+    return iso_file_replace(path, parts, sizeof parts / sizeof *parts, err);
 }
 
 /* The nodes must be exactly what lay_out gives for these dims, with sane values: a file

@@ -15,7 +15,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 #include <zlib.h>
 
 #include "base/base.h"
@@ -56,22 +55,17 @@ static uint32_t header_crc(chain_header h)
 }
 
 /* The payload's parts in file order, for writing and for the checksum. */
-typedef struct part {
-    const void *data;
-    size_t bytes;
-} part;
-
-static size_t parts_of(const iso_mesh_chain *c, iso_mesh_chain_level *records, part *parts)
+static size_t parts_of(const iso_mesh_chain *c, iso_mesh_chain_level *records, iso_file_part *parts)
 {
     size_t n = 0;
     for (int k = 0; k < c->levels; k++) {
         records[k] = c->level[k];
         records[k].indices = NULL;
     }
-    parts[n++] = (part){records, (size_t)c->levels * sizeof *records};
-    parts[n++] = (part){c->positions, 3 * c->vertex_count * sizeof *c->positions};
+    parts[n++] = (iso_file_part){records, (size_t)c->levels * sizeof *records};
+    parts[n++] = (iso_file_part){c->positions, 3 * c->vertex_count * sizeof *c->positions};
     for (int k = 0; k < c->levels; k++)
-        parts[n++] = (part){c->level[k].indices, 3 * c->level[k].triangle_count * sizeof(uint32_t)};
+        parts[n++] = (iso_file_part){c->level[k].indices, 3 * c->level[k].triangle_count * sizeof(uint32_t)};
     return n;
 }
 
@@ -79,46 +73,19 @@ int iso_mesh_chain_save(const iso_mesh_chain *chain, const char *path, uint64_t 
                         iso_error *err)
 {
     iso_mesh_chain_level records[ISO_CHAIN_LEVELS + 1];
-    part parts[ISO_CHAIN_LEVELS + 3];
+    iso_file_part parts[ISO_CHAIN_LEVELS + 4]; /* the header, then the payload */
     memset(records, 0, sizeof records);
-    size_t n = parts_of(chain, records, parts);
+    size_t n = parts_of(chain, records, parts + 1);
     chain_header h = {.version = CHAIN_VERSION, .record_bytes = sizeof(iso_mesh_chain_level),
                       .identity = identity, .vertex_count = chain->vertex_count,
                       .levels = (uint32_t)chain->levels, .closed = chain->closed,
                       .voxel_size = chain->voxel_size, .volume = chain->volume};
     memcpy(h.magic, CHAIN_MAGIC, sizeof h.magic);
-    for (size_t i = 0; i < n; i++)
+    for (size_t i = 1; i <= n; i++)
         h.payload_crc = crc_of(h.payload_crc, parts[i].data, parts[i].bytes);
     h.header_crc = header_crc(h);
-    size_t len = strlen(path);
-    char *tmp = malloc(len + 16);
-    if (!tmp)
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory saving %s", path);
-    snprintf(tmp, len + 16, "%s.tmp.XXXXXX", path);
-    int fd = mkstemp(tmp);
-    FILE *f = fd >= 0 ? fdopen(fd, "wb") : NULL;
-    if (!f) {
-        int e = errno;
-        if (fd >= 0) {
-            close(fd);
-            remove(tmp);
-        }
-        free(tmp);
-        return iso_error_set(err, ISO_E_IO, "%s: cannot create a temporary file: %s", path, strerror(e));
-    }
-    int ok = fwrite(&h, sizeof h, 1, f) == 1;
-    for (size_t i = 0; ok && i < n; i++)
-        ok = !parts[i].bytes || fwrite(parts[i].data, parts[i].bytes, 1, f) == 1;
-    ok = ok && fflush(f) == 0 && fsync(fileno(f)) == 0;
-    ok = (fclose(f) == 0) && ok;
-    if (!ok || rename(tmp, path) != 0) {
-        int e = errno;
-        remove(tmp);
-        free(tmp);
-        return iso_error_set(err, ISO_E_IO, "%s: cannot write the chain: %s", path, strerror(e));
-    }
-    free(tmp);
-    return 0;
+    parts[0] = (iso_file_part){&h, sizeof h};
+    return iso_file_replace(path, parts, n + 1, err);
 }
 
 /* Reads the whole file; *bytes its size. */

@@ -15,7 +15,6 @@ between the steps. Checks:
 Prints PASS/FAIL lines; exit status 1 on failure. Daemons are stopped by their PIDs."""
 
 import glob
-import http.client
 import json
 import os
 import shutil
@@ -27,21 +26,13 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
 from results import Results  # noqa: E402 - found through the path just set
+from client import request  # noqa: E402
 from ports import free_port  # noqa: E402
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", os.path.join(ROOT, "build/isoserve")))
 RESULTS = Results("chain_file" + os.environ.get("ISO_SAN_SUFFIX", ""))
 LEVELS = (0.0, 0.5)
-
-
-def request(port, target, timeout=120):
-    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=timeout)
-    conn.request("GET", target)
-    r = conn.getresponse()
-    r.body = r.read()
-    conn.close()
-    return r
 
 
 class Daemon:

@@ -23,7 +23,6 @@ A thread scrapes /metrics and the daemon's VmRSS (/proc/PID/status) all along. C
 Prints PASS/FAIL lines; exit status 1 on failure. The daemon is stopped by its PID."""
 
 import hashlib
-import http.client
 import json
 import os
 import random
@@ -37,6 +36,7 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
 from results import Results  # noqa: E402 - found through the path just set
+from client import request  # noqa: E402
 from ports import free_port  # noqa: E402
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
@@ -55,15 +55,6 @@ SAN_OVERHEAD_MB = 256
 # (field, first level, step): the k-th volume of a field gets first + k * step.
 FIELDS = (("sphere", -4.0, 0.9), ("torus", -4.0, 0.4), ("ml", 0.3, 0.04),
           ("spike", 0.3, 0.04), ("ijk", 3000.0, 20000.0))
-
-
-def request(port, target, timeout=120):
-    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=timeout)
-    conn.request("GET", target)
-    r = conn.getresponse()
-    r.body = r.read()
-    conn.close()
-    return r
 
 
 def metrics(port):

@@ -17,7 +17,6 @@ Prints PASS/FAIL/SKIP lines (and INFO lines with numbers); exit status 1 on fail
 process is stopped by its PID at the end, and listed in $ISO_SCALE_PIDS for the caller's
 trap."""
 
-import http.client
 import json
 import os
 import re
@@ -32,6 +31,7 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
 from results import Results, Skip  # noqa: E402 - found through the path just set
+from client import request  # noqa: E402
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", os.path.join(ROOT, "build/isoserve")))
@@ -56,15 +56,6 @@ def free_ports(n):
     for s in socks:
         s.close()
     return ports
-
-
-def request(port, target, headers=None, method="GET", timeout=60):
-    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=timeout)
-    conn.request(method, target, headers=headers or {})
-    r = conn.getresponse()
-    r.body = r.read()
-    conn.close()
-    return r
 
 
 class Process:
