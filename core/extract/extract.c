@@ -130,8 +130,10 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
         return finish(tree->vol, params->space, 0, mesh, stats, start, err);
     }
     if (params->tolerance > 0) {
-        int rc = iso_lod_extract(tree, params, mesh, stats, err);
-        return rc ? rc : cap_and_finish(tree->vol, params, 0, mesh, stats, start, err);
+        int exact;
+        int rc = iso_lod_extract(tree, params, &exact, mesh, stats, err);
+        if (rc || !exact)
+            return rc ? rc : cap_and_finish(tree->vol, params, 0, mesh, stats, start, err);
     }
     stats->nodes_visited = 1;
     return march_and_finish(tree, params, mesh, stats, start, err);

@@ -649,11 +649,6 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
     return 0;
 }
 
-int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
-                    iso_extract_stats *stats, iso_error *err)
-{
-    return iso_lod_extract_planned(tree, params, NULL, mesh, stats, err);
-}
 
 /* PASS 2: the stride-1 bricks, march.c's kernel on those (with no min/max, on the bricks
  * the level cannot cross too: they are read and give nothing). marked is scratch, a byte
@@ -676,8 +671,20 @@ static int march_fine(lod *c, const iso_extract_params *params, uint8_t *marked,
     return 0;
 }
 
-int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *params, const uint8_t *shift,
-                            iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
+/* 1 if no brick the level crosses is coarse. */
+static int all_fine(const lod *c)
+{
+    const iso_bricks *g = &c->tree->bricks;
+    for (size_t b = 0; b < iso_bricks_total(g); b++)
+        if (g->min[b] <= c->level && c->level < g->max[b] && c->shift[b])
+            return 0;
+    return 1;
+}
+
+/* iso_lod_extract's work, with the plan given or (shift NULL) made; with exact not NULL,
+ * a plan with no coarse brick sets *exact and extracts nothing. */
+static int extract(const iso_tree *tree, const iso_extract_params *params, const uint8_t *shift, int *exact,
+                   iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
 {
     lod c = {.tree = tree, .vol = tree->vol, .level = params->level, .cap = params->cap, .mesh = mesh};
     const iso_bricks *g = &tree->bricks;
@@ -694,6 +701,10 @@ int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *para
         memcpy(c.shift, shift, total);
     else
         plan(&c, params->tolerance);
+    if (!shift && exact && (*exact = all_fine(&c))) {
+        free(c.shift);
+        return 0;
+    }
     iso_march_part *fine = NULL;
     int rc = march_fine(&c, params, c.shift + total, &fine, err);
     for (uint32_t k = 0; k < g->count[2] && !rc; k++)
@@ -723,4 +734,17 @@ int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *para
     if (rc)
         iso_mesh_free(mesh);
     return rc;
+}
+
+int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, int *exact, iso_mesh *mesh,
+                    iso_extract_stats *stats, iso_error *err)
+{
+    *exact = 0;
+    return extract(tree, params, NULL, exact, mesh, stats, err);
+}
+
+int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *params, const uint8_t *shift,
+                            iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
+{
+    return extract(tree, params, shift, NULL, mesh, stats, err);
 }

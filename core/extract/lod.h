@@ -35,10 +35,12 @@
 
 /* Replaces mesh with the surface at params->level within params->tolerance (> 0), in index
  * space, fills stats' counts and error_bound (not triangles, vertices or time). With
- * params->cap the border is joined at stride 1, so the cap (extract.c) seals it. Returns
- * 0, ISO_E_NOMEM, ISO_E_LIMIT (more than 2^32 - 1 vertices) or ISO_E_INTERNAL (a loop that
+ * params->cap the border is joined at stride 1, so the cap (extract.c) seals it. If PASS 1
+ * leaves no brick the level crosses coarse, sets *exact and touches nothing else: the
+ * exact path is then the same surface without this path's index-space detour. Returns 0,
+ * ISO_E_NOMEM, ISO_E_LIMIT (more than 2^32 - 1 vertices) or ISO_E_INTERNAL (a loop that
  * does not close: a bug); the mesh is then empty. */
-int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
+int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, int *exact, iso_mesh *mesh,
                     iso_extract_stats *stats, iso_error *err);
 
 /* The same with the plan given: shift[b] = log2 of brick b's stride (0..ISO_TREE_LEVELS),

@@ -651,6 +651,48 @@ static void test_cthead_guarantee_and_trend(void)
     iso_vol_destroy(vol);
 }
 
+/* A tolerance under every crossed brick's finest level error coarsens nothing: the answer
+ * is the exact path's, byte for byte, in both spaces and capped. */
+static void test_tolerance_that_coarsens_nothing_is_exact(void)
+{
+    double r0;
+    iso_volume *vol = sphere_volume(40, &r0);
+    iso_tree *tree = surface_build(vol);
+    double level = 3, finest = INFINITY;
+    const iso_bricks *g = &tree->bricks;
+    for (size_t b = 0; b < iso_bricks_total(g); b++)
+        if (g->min[b] <= level && level < g->max[b])
+            finest = fmin(finest, iso_tree_level_error(tree, b, 1));
+    CHECKF(finest > 0 && isfinite(finest), "finest level error %g", finest);
+    for (int variant = 0; variant < 3; variant++) {
+        iso_mesh exact, tol;
+        iso_mesh_init(&exact);
+        iso_mesh_init(&tol);
+        iso_extract_stats se, st;
+        iso_error err;
+        iso_extract_params p = {.level = level, .space = variant == 1 ? ISO_SPACE_WORLD : ISO_SPACE_INDEX,
+                                .cap = variant == 2, .threads = 1};
+        CHECK(iso_extract(tree, &p, &exact, &se, &err) == 0);
+        p.tolerance = finest / 2;
+        CHECK(iso_extract(tree, &p, &tol, &st, &err) == 0);
+        CHECK(exact.triangle_count > 0);
+        CHECK_EQ(tol.vertex_count, exact.vertex_count);
+        CHECK_EQ(tol.triangle_count, exact.triangle_count);
+        CHECK(memcmp(tol.positions, exact.positions, 3 * sizeof(float) * exact.vertex_count) == 0);
+        CHECK(memcmp(tol.indices, exact.indices, 3 * sizeof(uint32_t) * exact.triangle_count) == 0);
+        CHECK(st.error_bound == se.error_bound);
+        /* At the finest error one brick coarsens, and the answer is the other path's. */
+        p.tolerance = finest;
+        CHECK(iso_extract(tree, &p, &tol, &st, &err) == 0);
+        CHECK(tol.triangle_count != exact.triangle_count || tol.vertex_count != exact.vertex_count ||
+              memcmp(tol.positions, exact.positions, 3 * sizeof(float) * exact.vertex_count) != 0);
+        iso_mesh_free(&exact);
+        iso_mesh_free(&tol);
+    }
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_mc_table_shapes);
@@ -666,6 +708,7 @@ int main(void)
     CHECK_RUN(test_tree_is_small);
     CHECK_RUN(test_coarse_bricks_join_without_weld);
     CHECK_RUN(test_tolerance_on_one_cell_bricks);
+    CHECK_RUN(test_tolerance_that_coarsens_nothing_is_exact);
     CHECK_RUN(test_level_errors_are_lemma1_per_coarse_cell);
     CHECK_RUN(test_cthead_guarantee_and_trend);
     return check_finish();
