@@ -8,6 +8,7 @@
 #include "mesh/mesh.h"
 
 #include "base/base.h"
+#include "hash.h"
 
 struct srv_cache_item {
     char *key;
@@ -54,14 +55,6 @@ void srv_body_release(srv_body *body)
         pthread_mutex_destroy(&body->gzip_lock);
         free(body);
     }
-}
-
-static uint64_t hash_key(const char *key)
-{
-    uint64_t h = 1469598103934665603ull;
-    for (const unsigned char *c = (const unsigned char *)key; *c; c++)
-        h = (h ^ *c) * 1099511628211ull;
-    return h;
 }
 
 int srv_cache_init(srv_cache *cache, size_t limit_bytes)
@@ -166,7 +159,7 @@ static void free_items(srv_cache_item *items)
 
 srv_body *srv_cache_get(srv_cache *cache, const char *key)
 {
-    uint64_t hash = hash_key(key);
+    uint64_t hash = srv_hash64(key);
     pthread_mutex_lock(&cache->lock);
     srv_cache_item *item = lookup(cache, key, hash);
     srv_body *body = NULL;
@@ -200,7 +193,7 @@ void srv_cache_put(srv_cache *cache, const char *key, srv_body *body)
         return;
     }
     item->key = copy;
-    item->hash = hash_key(key);
+    item->hash = srv_hash64(key);
     item->body = body;
     item->bytes = srv_body_bytes(body);
     srv_body_retain(body);
@@ -225,7 +218,7 @@ void srv_cache_put(srv_cache *cache, const char *key, srv_body *body)
 
 void srv_cache_grew(srv_cache *cache, const char *key, const srv_body *body)
 {
-    uint64_t hash = hash_key(key);
+    uint64_t hash = srv_hash64(key);
     srv_cache_item *evicted = NULL;
     pthread_mutex_lock(&cache->lock);
     srv_cache_item *item = lookup(cache, key, hash);

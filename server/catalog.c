@@ -13,6 +13,7 @@
 #include "io/io.h"
 #include "dicomweb.h"
 #include "fetch.h"
+#include "hash.h"
 #include "orthanc.h"
 
 int srv_catalog_id_valid(const char *id)
@@ -47,9 +48,7 @@ void srv_catalog_free(srv_catalog *catalog)
 
 size_t srv_catalog_hash(const char *id)
 {
-    uint64_t h = 14695981039346656037ull;
-    for (const unsigned char *p = (const unsigned char *)id; *p; p++)
-        h = (h ^ *p) * 1099511628211ull;
+    uint64_t h = srv_hash64(id);
     return (size_t)(h ^ (h >> 32));
 }
 

@@ -59,7 +59,8 @@ int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err);
  * analytic phantoms, each with suggested levels. */
 int srv_catalog_default(srv_catalog *out, iso_error *err);
 
-/* FNV-1a (64 bits) of a string: the id index's hash, also for ids made from UIDs. */
+/* srv_hash64 (hash.h) of an id folded to a size_t: the id index's hash, also for ids made
+ * from UIDs. */
 size_t srv_catalog_hash(const char *id);
 
 /* The index of the entry with this id, or catalog->count: one hash probe sequence, never a

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "base/base.h"
+#include "hash.h"
 
 int srv_fetch_url_valid(const char *url)
 {
@@ -163,10 +164,7 @@ static void remove_dir(const char *dir)
  * be read back as the other's. */
 static void archive_key(const char *url, char key[17])
 {
-    uint64_t h = 14695981039346656037ull;
-    for (const unsigned char *p = (const unsigned char *)url; *p; p++)
-        h = (h ^ *p) * 1099511628211ull;
-    snprintf(key, 17, "%016llx", (unsigned long long)h);
+    snprintf(key, 17, "%016llx", (unsigned long long)srv_hash64(url));
 }
 
 /* Fetches into {final}.partial-PID, then renames it into place; parents made as needed. */

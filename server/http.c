@@ -18,6 +18,7 @@
 
 #include "base/base.h"
 #include "document.h"
+#include "hash.h"
 #include "mesh_job.h"
 #include "query.h"
 #include "static_files.h"
@@ -426,10 +427,7 @@ static enum MHD_Result collect_param(void *cls, enum MHD_ValueKind kind, const c
 /* The strong ETag of a mesh: the volume's version and a hash of the normalised request. */
 static void mesh_etag(const srv_volume *v, const char *normalised, char *etag, size_t size)
 {
-    unsigned long long h = 1469598103934665603ull;
-    for (const unsigned char *p = (const unsigned char *)normalised; *p; p++)
-        h = (h ^ *p) * 1099511628211ull;
-    snprintf(etag, size, "\"%s-%016llx\"", v->version, h);
+    snprintf(etag, size, "\"%s-%016llx\"", v->version, (unsigned long long)srv_hash64(normalised));
 }
 
 /* If-None-Match holds etag (or "*"): RFC 9110's weak comparison, which If-None-Match uses. */

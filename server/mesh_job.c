@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include "base/base.h"
+#include "hash.h"
 #include "pipeline.h"
 #include "status.h"
 
@@ -108,15 +109,6 @@ static void chain_key(const srv_mesh_job *job, char *key, size_t size)
              job->volume->version, r->level, r->tolerance, r->cap);
 }
 
-/* FNV-1a, 64 bits. */
-static uint64_t hash64(const char *s)
-{
-    uint64_t h = 14695981039346656037ull;
-    for (; *s; s++)
-        h = (h ^ (unsigned char)*s) * 1099511628211ull;
-    return h;
-}
-
 /* The chain's file beside the volume's hierarchy file in the cache dir:
  * "<dir>/<id>.<16 hex digits>.isochain", the digits a hash of the level, tolerance and cap
  * (the catalog's ids are file-name safe, so the path stays in the dir). Its identity, which
@@ -131,8 +123,8 @@ static int chain_file(const srv_mesh_job *job, const char *key, char *path, size
     char params[128];
     snprintf(params, sizeof params, "level=%.17g&tolerance=%.17g&cap=%d", r->level, r->tolerance, r->cap);
     int n = snprintf(path, size, "%s/%s.%016llx.isochain", dir, job->volume->entry->id,
-                     (unsigned long long)hash64(params));
-    *identity = hash64(key);
+                     (unsigned long long)srv_hash64(params));
+    *identity = srv_hash64(key);
     return n > 0 && (size_t)n < size;
 }
 
