@@ -29,6 +29,18 @@ iso_volume *surface_make_volume(size_t nx, size_t ny, size_t nz, iso_voxel_type 
     return vol;
 }
 
+iso_volume *surface_random_volume(const size_t n[3], iso_voxel_type type, int steps)
+{
+    iso_volume *vol = surface_make_volume(n[0], n[1], n[2], type);
+    for (size_t k = 0; vol && k < n[2]; k++)
+        for (size_t j = 0; j < n[1]; j++)
+            for (size_t i = 0; i < n[0]; i++)
+                iso_vol_set(vol, i, j, k, steps ? floor(surface_uniform() * 4) : surface_uniform());
+    if (vol)
+        iso_vol_update_stats(vol);
+    return vol;
+}
+
 iso_volume *surface_load_shared(const char *file)
 {
     const char *dir = check_shared_volumes();

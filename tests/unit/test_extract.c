@@ -86,12 +86,7 @@ static void test_mc_random_fields_watertight(void)
 {
     for (int trial = 0; trial < 40 && !check_failed(); trial++) {
         size_t n[3] = {3 + (size_t)(surface_uniform() * 9), 3 + (size_t)(surface_uniform() * 9), 3 + (size_t)(surface_uniform() * 9)};
-        iso_volume *vol = surface_make_volume(n[0], n[1], n[2], ISO_F32);
-        for (size_t k = 0; k < n[2]; k++)
-            for (size_t j = 0; j < n[1]; j++)
-                for (size_t i = 0; i < n[0]; i++)
-                    iso_vol_set(vol, i, j, k, trial % 2 ? floor(surface_uniform() * 4) : surface_uniform());
-        iso_vol_update_stats(vol);
+        iso_volume *vol = surface_random_volume(n, ISO_F32, trial % 2);
         double level = trial % 2 ? 1.5 : 0.5;
         iso_mesh m;
         iso_mesh_init(&m);

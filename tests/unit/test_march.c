@@ -278,12 +278,7 @@ static void test_selected_bricks(void)
         size_t n[3];
         for (int d = 0; d < 3; d++)
             n[d] = 2 + (size_t)(surface_uniform() * 30);
-        iso_volume *vol = surface_make_volume(n[0], n[1], n[2], trial % 2 ? ISO_U8 : ISO_F32);
-        for (size_t k = 0; k < n[2]; k++)
-            for (size_t j = 0; j < n[1]; j++)
-                for (size_t i = 0; i < n[0]; i++)
-                    iso_vol_set(vol, i, j, k, trial % 2 ? floor(surface_uniform() * 4) : surface_uniform());
-        iso_vol_update_stats(vol);
+        iso_volume *vol = surface_random_volume(n, trial % 2 ? ISO_U8 : ISO_F32, trial % 2);
         double level = trial % 2 ? 1 : 0.5;
         iso_bricks bricks;
         iso_error err;
