@@ -4,6 +4,7 @@
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 
 #include "check.h"
 #include "io/io.h"
@@ -27,6 +28,21 @@ iso_volume *surface_make_volume(size_t nx, size_t ny, size_t nz, iso_voxel_type 
     iso_volume *vol = iso_vol_create(dims, type, 0, &err);
     CHECKF(vol != NULL, "iso_vol_create: %s", err.message);
     return vol;
+}
+
+size_t surface_unused_vertices(const iso_mesh *m)
+{
+    uint8_t *used = calloc(m->vertex_count + 1, 1);
+    CHECKF(used != NULL, "no memory to count %zu vertices", m->vertex_count);
+    if (!used)
+        return 0;
+    for (size_t i = 0; i < 3 * m->triangle_count; i++)
+        used[m->indices[i]] = 1;
+    size_t unused = 0;
+    for (size_t v = 0; v < m->vertex_count; v++)
+        unused += !used[v];
+    free(used);
+    return unused;
 }
 
 iso_volume *surface_random_volume(const size_t n[3], iso_voxel_type type, int steps)

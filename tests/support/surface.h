@@ -13,6 +13,8 @@
 double surface_uniform(void);
 /* A zeroed volume (the check fails if it cannot be made). */
 iso_volume *surface_make_volume(size_t nx, size_t ny, size_t nz, iso_voxel_type type);
+/* How many of m's vertices no triangle uses (the check fails if it cannot count). */
+size_t surface_unused_vertices(const iso_mesh *m);
 /* A volume of random samples, x fastest: surface_uniform() values, or with steps their
  * floor(4 u), 0..3, so that a level of 1 meets ties; its stats updated. */
 iso_volume *surface_random_volume(const size_t n[3], iso_voxel_type type, int steps);

@@ -462,13 +462,7 @@ static void test_coarse_bricks_join_without_weld(void)
                   memcmp(two.positions, one.positions, 12 * one.vertex_count) == 0 &&
                   memcmp(five.indices, one.indices, 12 * one.triangle_count) == 0);
             CHECK_EQ(st2.nodes_polygonized, st.nodes_polygonized);
-            uint8_t *used = calloc(one.vertex_count + 1, 1);
-            for (size_t i = 0; i < 3 * one.triangle_count; i++)
-                used[one.indices[i]] = 1;
-            size_t unused = 0;
-            for (size_t v = 0; v < one.vertex_count; v++)
-                unused += !used[v];
-            free(used);
+            size_t unused = surface_unused_vertices(&one);
             CHECKF(unused == 0, "%s tol %g: %zu unused vertices", fields[f], share * range, unused);
             size_t vertices = two.vertex_count, triangles = two.triangle_count;
             CHECK(iso_mesh_weld(&two) == 0);

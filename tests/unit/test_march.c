@@ -325,14 +325,7 @@ static void test_selected_bricks(void)
             free(a);
             free(b);
         }
-        uint8_t *used = calloc(m.vertex_count + 1, 1);
-        for (size_t i = 0; i < 3 * m.triangle_count; i++)
-            used[m.indices[i]] = 1;
-        size_t unused = 0;
-        for (size_t i = 0; i < m.vertex_count; i++)
-            unused += !used[i];
-        CHECK_EQ(unused, 0);
-        free(used);
+        CHECK_EQ(surface_unused_vertices(&m), 0);
         iso_march_part_free(part);
         iso_mesh_free(&m);
         iso_mesh_free(&soup);
