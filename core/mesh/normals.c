@@ -18,6 +18,10 @@
 
 #include "base/base.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 static const char *const order_names[5] = {"none", NULL, "trilinear", "triquadratic", "tricubic"};
 
 int iso_normals_order_from_name(const char *name)
@@ -34,12 +38,23 @@ const char *iso_normals_name(int order)
     return order_names[order];
 }
 
+/* floor(x) without libm's rounding sequence (the baseline x86-64 has no round
+ * instruction): a zero may come out +0 where floor gives -0, which no weight or sum here
+ * can tell apart (every sum starts at +0, and a signed zero added to it changes nothing). */
+static inline double floor_fast(double x)
+{
+    if (!(fabs(x) < 0x1p52))
+        return floor(x);
+    double i = (double)(int64_t)x;
+    return i > x ? i - 1 : i;
+}
+
 /* Weights w and derivative weights d of one axis at coordinate x; *first is the sample of
  * weight 0 (may lie outside 0..n-1: callers clamp). */
 static inline __attribute__((always_inline)) void basis(const int order, double x, size_t n, long *first, double w[4], double d[4])
 {
     if (order == 2) {
-        double i = floor(x);
+        double i = floor_fast(x);
         if (i > (double)n - 2)
             i = (double)n - 2; /* the last sample plane belongs to the last cell */
         if (i < 0)
@@ -49,12 +64,12 @@ static inline __attribute__((always_inline)) void basis(const int order, double 
         w[0] = 1 - t, w[1] = t;
         d[0] = -1, d[1] = 1;
     } else if (order == 3) {
-        double i = floor(x + 0.5), t = x - i;
+        double i = floor_fast(x + 0.5), t = x - i;
         *first = (long)i - 1;
         w[0] = 0.5 * (0.5 - t) * (0.5 - t), w[1] = 0.75 - t * t, w[2] = 0.5 * (0.5 + t) * (0.5 + t);
         d[0] = t - 0.5, d[1] = -2 * t, d[2] = 0.5 + t;
     } else {
-        double i = floor(x), t = x - i, s = 1 - t;
+        double i = floor_fast(x), t = x - i, s = 1 - t;
         *first = (long)i - 1;
         w[0] = s * s * s / 6;
         w[1] = (3 * t * t * t - 6 * t * t + 4) / 6;
@@ -189,7 +204,7 @@ static void gradient_3(const iso_volume *vol, const double p[3], double g[3]) { 
  * plane), 2 the first ((1 - t)^3 / 6, just below one), 0 none. */
 static inline __attribute__((always_inline)) int vanishing_tap(double p)
 {
-    double t = p - floor(p);
+    double t = p - floor_fast(p);
     return t < EDGE_SLACK ? 1 : t > 1 - EDGE_SLACK ? 2 : 0;
 }
 
@@ -253,6 +268,100 @@ static void gradient_4(const iso_volume *vol, const double p[3], double g[3])
         }                                                                                  \
     } while (0)
 
+#if defined(__SSE2__)
+/* The same sums for 8- and 16-bit voxels, four lanes of 32-bit integers at a time (SSE2,
+ * every x86-64): integer sums are exact in any order, so s, dp and dq are the scalar
+ * sums' values. Four samples along x are loaded as one lane vector. */
+static inline __attribute__((always_inline)) __m128i load4(const void *p, const iso_voxel_type type)
+{
+    __m128i z = _mm_setzero_si128(), v;
+    if (type == ISO_U8 || type == ISO_I8) {
+        int32_t word;
+        memcpy(&word, p, sizeof word);
+        v = _mm_cvtsi32_si128(word);
+        v = type == ISO_U8 ? _mm_unpacklo_epi8(v, z) : _mm_srai_epi16(_mm_unpacklo_epi8(v, v), 8);
+    } else {
+        v = _mm_loadl_epi64((const __m128i *)p);
+    }
+    return type == ISO_I8 || type == ISO_I16 ? _mm_srai_epi32(_mm_unpacklo_epi16(v, v), 16)
+                                             : _mm_unpacklo_epi16(v, z);
+}
+
+static inline __m128i x4(__m128i v) { return _mm_slli_epi32(v, 2); }
+
+/* a + 4b + c, lane by lane. */
+static inline __m128i smooth3(__m128i a, __m128i b, __m128i c)
+{
+    return _mm_add_epi32(_mm_add_epi32(a, c), x4(b));
+}
+
+/* An x edge: the four edge samples are adjacent, one lane each; the nine loads are the
+ * 3 x 3 cross-section's rows along x. */
+static inline __attribute__((always_inline)) void edge_sums_x(const char *v0, const iso_voxel_type type,
+                                                              size_t bytes, size_t sp, size_t sq,
+                                                              int32_t s[4], int32_t dp[4], int32_t dq[4])
+{
+    __m128i u[3], dv[3];
+    for (int c = 0; c < 3; c++) {
+        const char *r = v0 + c * sq * bytes;
+        __m128i f0 = load4(r, type), f1 = load4(r + sp * bytes, type), f2 = load4(r + 2 * sp * bytes, type);
+        u[c] = smooth3(f0, f1, f2);
+        dv[c] = _mm_sub_epi32(f2, f0);
+    }
+    _mm_storeu_si128((__m128i *)s, smooth3(u[0], u[1], u[2]));
+    _mm_storeu_si128((__m128i *)dp, smooth3(dv[0], dv[1], dv[2]));
+    _mm_storeu_si128((__m128i *)dq, _mm_sub_epi32(u[2], u[0]));
+}
+
+/* Rows r0..r3 as columns: out[b] holds element b of each row. */
+static inline void transpose4(const __m128i r[4], __m128i out[3])
+{
+    __m128i t0 = _mm_unpacklo_epi32(r[0], r[1]), t1 = _mm_unpacklo_epi32(r[2], r[3]);
+    __m128i t2 = _mm_unpackhi_epi32(r[0], r[1]), t3 = _mm_unpackhi_epi32(r[2], r[3]);
+    out[0] = _mm_unpacklo_epi64(t0, t1);
+    out[1] = _mm_unpackhi_epi64(t0, t1);
+    out[2] = _mm_unpacklo_epi64(t2, t3);
+}
+
+/* A y or z edge: the plane axis along x is the lanes (the fourth is unused: the caller
+ * checks that it lies inside the volume); per edge sample, the three rows are combined
+ * across the other plane axis, then the 4 x 4 block is turned so that lanes are the edge
+ * samples again. */
+static inline __attribute__((always_inline)) void edge_sums_yz(const char *v0, const iso_voxel_type type,
+                                                               size_t bytes, size_t se, size_t sq,
+                                                               int32_t s[4], int32_t dp[4], int32_t dq[4])
+{
+    __m128i across[4], diff[4], c_across[3], c_diff[3];
+    for (int a = 0; a < 4; a++) {
+        const char *r = v0 + a * se * bytes;
+        __m128i f0 = load4(r, type), f1 = load4(r + sq * bytes, type), f2 = load4(r + 2 * sq * bytes, type);
+        across[a] = smooth3(f0, f1, f2);
+        diff[a] = _mm_sub_epi32(f2, f0);
+    }
+    transpose4(across, c_across);
+    transpose4(diff, c_diff);
+    _mm_storeu_si128((__m128i *)s, smooth3(c_across[0], c_across[1], c_across[2]));
+    _mm_storeu_si128((__m128i *)dp, _mm_sub_epi32(c_across[2], c_across[0]));
+    _mm_storeu_si128((__m128i *)dq, smooth3(c_diff[0], c_diff[1], c_diff[2]));
+}
+
+static inline __attribute__((always_inline)) void edge_sums_vector(const iso_volume *vol, const iso_voxel_type type,
+                                                                   size_t base, int e, size_t se, size_t sp,
+                                                                   size_t sq, double s[4], double dp[4],
+                                                                   double dq[4])
+{
+    size_t bytes = type == ISO_U8 || type == ISO_I8 ? 1 : 2;
+    const char *v0 = (const char *)vol->data + base * bytes;
+    int32_t si[4], dpi[4], dqi[4];
+    if (e == 0)
+        edge_sums_x(v0, type, bytes, sp, sq, si, dpi, dqi);
+    else
+        edge_sums_yz(v0, type, bytes, se, sq, si, dpi, dqi);
+    for (int a = 0; a < 4; a++)
+        s[a] = si[a], dp[a] = dpi[a], dq[a] = dqi[a];
+}
+#endif
+
 /* The gradient at p when p is on a grid edge whose 4 x 3 x 3 support lies inside the
  * volume (and the volume has no NaN): 0; else -1 and g untouched. */
 static int edge_gradient(const iso_volume *vol, const double p[3], double g[3])
@@ -260,7 +369,7 @@ static int edge_gradient(const iso_volume *vol, const double p[3], double g[3])
     long at[3];
     unsigned planes = 0;
     for (int a = 0; a < 3; a++) {
-        double r = floor(p[a] + 0.5);
+        double r = floor_fast(p[a] + 0.5);
         at[a] = (long)r;
         planes |= (unsigned)(fabs(p[a] - r) < EDGE_SLACK) << a;
     }
@@ -279,11 +388,25 @@ static int edge_gradient(const iso_volume *vol, const double p[3], double g[3])
     const size_t se = stride[e], sp = stride[pa], sq = stride[qa];
     const size_t base = (size_t)first * se + (size_t)(at[pa] - 1) * sp + (size_t)(at[qa] - 1) * sq;
     double s[4], dp[4], dq[4];
+#if defined(__SSE2__)
+    /* Along x four samples are loaded where a y or z edge uses three: the fourth must be
+     * inside the volume. */
+    int vector = e == 0 || (size_t)at[0] + 2 < dims[0];
+#else
+    int vector = 0;
+#endif
     switch (vol->type) {
-    case ISO_U8: EDGE_SUMS(uint8_t, int32_t); break;
+#if defined(__SSE2__)
+    case ISO_U8: if (vector) edge_sums_vector(vol, ISO_U8, base, e, se, sp, sq, s, dp, dq); else EDGE_SUMS(uint8_t, int32_t); break;
+    case ISO_I8: if (vector) edge_sums_vector(vol, ISO_I8, base, e, se, sp, sq, s, dp, dq); else EDGE_SUMS(int8_t, int32_t); break;
+    case ISO_U16: if (vector) edge_sums_vector(vol, ISO_U16, base, e, se, sp, sq, s, dp, dq); else EDGE_SUMS(uint16_t, int32_t); break;
+    case ISO_I16: if (vector) edge_sums_vector(vol, ISO_I16, base, e, se, sp, sq, s, dp, dq); else EDGE_SUMS(int16_t, int32_t); break;
+#else
+    case ISO_U8: (void)vector; EDGE_SUMS(uint8_t, int32_t); break;
     case ISO_I8: EDGE_SUMS(int8_t, int32_t); break;
     case ISO_U16: EDGE_SUMS(uint16_t, int32_t); break;
     case ISO_I16: EDGE_SUMS(int16_t, int32_t); break;
+#endif
     case ISO_U32: EDGE_SUMS(uint32_t, double); break;
     case ISO_I32: EDGE_SUMS(int32_t, double); break;
     case ISO_F32: EDGE_SUMS(float, double); break;

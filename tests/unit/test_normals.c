@@ -179,8 +179,31 @@ static void check_tricubic_on_grid_edges(const iso_volume *vol)
     iso_mesh_free(&mesh);
 }
 
-/* The Marschner-Lobb field as floats, and as 16-bit integers (unsigned and signed: the
- * integer sums of normals.c). */
+/* The normals at check_tricubic_on_grid_edges' points, into out (3 per point). */
+static void grid_edge_normals(const iso_volume *vol, float *out, size_t n)
+{
+    iso_error err;
+    iso_mesh mesh;
+    iso_mesh_init(&mesh);
+    CHECK_OK(iso_mesh_reserve(&mesh, n, 1), &err);
+    size_t v = 0;
+    for (size_t k = 1; k + 2 < vol->dims[2] && v < n; k += 3)
+        for (size_t j = 0; j < vol->dims[1] && v < n; j++)
+            for (int axis = 0; axis < 3 && v < n; axis++, v++)
+                for (int a = 0; a < 3; a++) /* along each axis from (j, j, k), to the last samples */
+                    mesh.positions[3 * v + a] = (float)(a == axis ? fmin((a == 2 ? k : j) + 0.37, vol->dims[a] - 1.0)
+                                                                  : a == 2 ? (double)k : (double)j);
+    mesh.vertex_count = v;
+    CHECK_OK(iso_normals_compute(vol, &mesh, 4, ISO_SPACE_INDEX, 1, &err), &err);
+    if (mesh.normals)
+        memcpy(out, mesh.normals, v * 3 * sizeof *out);
+    iso_mesh_free(&mesh);
+}
+
+/* The Marschner-Lobb field as floats, and as 8- and 16-bit integers (unsigned and signed:
+ * the vector integer sums of normals.c). The integer volumes' normals are also the same,
+ * bit for bit, as those of the same values stored as floats (summed one by one in doubles,
+ * exactly for such values), on edges along every axis up to the volume's last samples. */
 static void test_tricubic_on_grid_edges(void)
 {
     iso_error err;
@@ -190,19 +213,38 @@ static void test_tricubic_on_grid_edges(void)
         return;
     iso_vol_update_stats(vol);
     check_tricubic_on_grid_edges(vol);
-    for (int t = 0; t < 2; t++) {
-        iso_volume *ints = iso_vol_create(vol->dims, t ? ISO_I16 : ISO_U16, 0, &err);
-        CHECK(ints != NULL);
-        if (!ints)
+    const iso_voxel_type types[] = {ISO_U16, ISO_I16, ISO_U8, ISO_I8};
+    const double range[] = {60000, 60000, 250, 250}, low[] = {0, -30000, 0, -125};
+    enum { EDGE_POINTS = 3 * 20 * 6 };
+    for (int t = 0; t < 4; t++) {
+        iso_volume *ints = iso_vol_create(vol->dims, types[t], 0, &err);
+        iso_volume *floats = iso_vol_create(vol->dims, ISO_F32, 0, &err);
+        CHECK(ints != NULL && floats != NULL);
+        if (!ints || !floats) {
+            iso_vol_destroy(ints);
+            iso_vol_destroy(floats);
             break;
-        double scale = 60000 / (vol->value_max - vol->value_min), shift = t ? -30000 : 0;
+        }
+        double scale = range[t] / (vol->value_max - vol->value_min);
         for (size_t k = 0; k < vol->dims[2]; k++)
             for (size_t j = 0; j < vol->dims[1]; j++)
-                for (size_t i = 0; i < vol->dims[0]; i++)
-                    iso_vol_set(ints, i, j, k, round((iso_vol_get(vol, i, j, k) - vol->value_min) * scale + shift));
+                for (size_t i = 0; i < vol->dims[0]; i++) {
+                    double f = round((iso_vol_get(vol, i, j, k) - vol->value_min) * scale + low[t]);
+                    iso_vol_set(ints, i, j, k, f);
+                    iso_vol_set(floats, i, j, k, f);
+                }
         iso_vol_update_stats(ints);
+        iso_vol_update_stats(floats);
         check_tricubic_on_grid_edges(ints);
+        static float from_ints[EDGE_POINTS * 3], from_floats[EDGE_POINTS * 3];
+        memset(from_ints, 0, sizeof from_ints);
+        memset(from_floats, 0xff, sizeof from_floats);
+        grid_edge_normals(ints, from_ints, EDGE_POINTS);
+        grid_edge_normals(floats, from_floats, EDGE_POINTS);
+        CHECKF(!memcmp(from_ints, from_floats, sizeof from_ints), "voxel type %d: normals differ from the float copy's",
+               (int)types[t]);
         iso_vol_destroy(ints);
+        iso_vol_destroy(floats);
     }
     iso_vol_destroy(vol);
 }
