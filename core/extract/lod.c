@@ -12,9 +12,11 @@
 #include "mc.h"
 
 #define BRICK_SAMPLES (ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES)
-/* Bisection steps placing a loop's centre on the level: 2^-28 of a brick's diagonal is
- * below a float's resolution at any index past 1. */
+/* Steps placing a loop's centre on the level: 28 bisections leave 2^-28 of a brick's
+ * diagonal, below a float's resolution at any index past 1; false position stops earlier,
+ * once |f - level| is below 2^-32 of the values at its bracket's two ends. */
 #define CENTRE_STEPS 28
+#define CENTRE_STOP 0x1p-32
 
 /* Vertex ids by lattice segment, open addressing; key 0 marks a free slot. */
 typedef struct vertex_map {
@@ -24,7 +26,7 @@ typedef struct vertex_map {
 } vertex_map;
 
 /* One iso-segment on a transition cell's boundary, between two crossings' vertices, and
- * the sample points on either side of its end's crossing (for the centre's bisection). */
+ * the sample points on either side of its end's crossing (for the centre's root finder). */
 typedef struct loop_segment {
     uint32_t from, to;
     uint32_t above[3], below[3];
@@ -82,34 +84,32 @@ static void plan(lod *c, double tolerance)
  * volume's border has stride 1: the cap's cells are data cells. */
 static void brick_around(lod *c, const uint32_t b[3])
 {
+    /* The 3x3x3 bricks around b (b at the middle), ISO_TREE_LEVELS where there is none. */
+    uint8_t near[27];
+    for (int k = 0; k < 27; k++) {
+        int64_t q[3] = {(int64_t)b[0] + k % 3 - 1, (int64_t)b[1] + k / 3 % 3 - 1, (int64_t)b[2] + k / 9 - 1};
+        int inside = 1;
+        for (int d = 0; d < 3; d++)
+            inside &= q[d] >= 0 && q[d] < (int64_t)c->count[d];
+        near[k] = inside ? c->shift[((size_t)q[2] * c->count[1] + (size_t)q[1]) * c->count[0] + (size_t)q[0]]
+                         : ISO_TREE_LEVELS;
+    }
     for (int cls = 0; cls < 27; cls++) {
         int where[3] = {cls % 3, cls / 3 % 3, cls / 9};
-        uint32_t lo[3], hi[3];
+        int lo[3], hi[3];
         unsigned best = ISO_TREE_LEVELS;
         for (int d = 0; d < 3; d++) {
-            lo[d] = where[d] == 0 && b[d] > 0 ? b[d] - 1 : b[d];
-            hi[d] = where[d] == 2 && b[d] + 1 < c->count[d] ? b[d] + 1 : b[d];
+            lo[d] = where[d] == 0 ? 0 : 1;
+            hi[d] = where[d] == 2 ? 2 : 1;
             if (c->cap && ((where[d] == 0 && b[d] == 0) || (where[d] == 2 && b[d] + 1 == c->count[d])))
                 best = 0;
         }
-        for (uint32_t k = lo[2]; k <= hi[2]; k++)
-            for (uint32_t j = lo[1]; j <= hi[1]; j++)
-                for (uint32_t i = lo[0]; i <= hi[0]; i++) {
-                    unsigned s = c->shift[((size_t)k * c->count[1] + j) * c->count[0] + i];
-                    best = s < best ? s : best;
-                }
+        for (int k = lo[2]; k <= hi[2]; k++)
+            for (int j = lo[1]; j <= hi[1]; j++)
+                for (int i = lo[0]; i <= hi[0]; i++)
+                    best = near[k * 9 + j * 3 + i] < best ? near[k * 9 + j * 3 + i] : best;
         c->around[cls] = (uint8_t)best;
     }
-}
-
-/* The stride (log2) of the lattice set (face, edge or segment) in the brick at hand whose
- * midpoint is twice[] / 2. */
-static unsigned set_shift(const lod *c, const uint32_t twice[3])
-{
-    int cls = 0, scale = 1;
-    for (int d = 0; d < 3; d++, scale *= 3)
-        cls += scale * (twice[d] == 2 * c->lo[d] ? 0 : twice[d] == 2 * c->hi[d] ? 2 : 1);
-    return c->around[cls];
 }
 
 /* ---- PASS 3: the coarse bricks (PASS 2, march_fine, is below) ---- */
@@ -147,12 +147,13 @@ static void classify_whole(lod *c)
     iso_march_inside_rows(c->vol, c->level, lo, n, c->rows);
 }
 
-/* 1 if the cell at o has samples on both sides of the level. */
-static int cell_mixed(const lod *c, const uint32_t o[3], const uint32_t size[3])
+/* 1 if the box [lo, hi] (samples, inside the brick at hand) has samples on both sides of
+ * the level. */
+static int box_mixed(const lod *c, const uint32_t lo[3], const uint32_t hi[3])
 {
-    unsigned x = o[0] - c->lo[0], mask = ((1u << (size[0] + 1)) - 1) << x, any = 0, all = mask;
-    for (uint32_t z = o[2] - c->lo[2]; z <= o[2] - c->lo[2] + size[2]; z++)
-        for (uint32_t y = o[1] - c->lo[1]; y <= o[1] - c->lo[1] + size[1]; y++) {
+    unsigned x = lo[0] - c->lo[0], mask = ((1u << (hi[0] - lo[0] + 1)) - 1) << x, any = 0, all = mask;
+    for (uint32_t z = lo[2] - c->lo[2]; z <= hi[2] - c->lo[2]; z++)
+        for (uint32_t y = lo[1] - c->lo[1]; y <= hi[1] - c->lo[1]; y++) {
             unsigned row = c->rows[z * ISO_BRICK_SAMPLES + y] & mask;
             any |= row;
             all &= row;
@@ -173,7 +174,7 @@ static double value_at(lod *c, const double x[3])
         cell[d] = c->lo[d] + i;
         u[d] = x[d] - cell[d];
     }
-    /* A centre's bisection evaluates one data cell many times over. */
+    /* A centre's root finder evaluates one data cell many times over. */
     if (c->corner_stamp != c->stamp || memcmp(cell, c->corner_cell, sizeof cell)) {
         for (int k = 0; k < 8; k++) {
             uint32_t p[3] = {cell[0] + (k & 1), cell[1] + ((k >> 1) & 1), cell[2] + ((k >> 2) & 1)};
@@ -314,15 +315,21 @@ static int regular_cell(lod *c, const uint32_t o[3], const uint32_t size[3])
         index |= (unsigned)above(c, p) << k;
     }
     const iso_mc_case *cs = iso_mc_cases() + index;
+    uint32_t edge_id[12];
+    unsigned known = 0; /* bit e: edge_id[e] is the crossing's vertex */
     for (int t = 0; t < cs->triangle_count; t++) {
         uint32_t id[3];
         for (int i = 0; i < 3; i++) {
             int e = cs->edges[3 * t + i], lo = iso_mc_edge_corner[e][0];
-            uint32_t p[3] = {o[0] + (lo & 1) * size[0], o[1] + ((lo >> 1) & 1) * size[1],
-                             o[2] + ((lo >> 2) & 1) * size[2]};
-            int rc = crossing(c, p, e / 4, size[e / 4], &id[i]);
-            if (rc)
-                return rc;
+            if (!(known >> e & 1)) {
+                uint32_t p[3] = {o[0] + (lo & 1) * size[0], o[1] + ((lo >> 1) & 1) * size[1],
+                                 o[2] + ((lo >> 2) & 1) * size[2]};
+                int rc = crossing(c, p, e / 4, size[e / 4], &edge_id[e]);
+                if (rc)
+                    return rc;
+                known |= 1u << e;
+            }
+            id[i] = edge_id[e];
         }
         int rc = add_triangle(c, id[0], id[1], id[2]);
         if (rc)
@@ -331,27 +338,41 @@ static int regular_cell(lod *c, const uint32_t o[3], const uint32_t size[3])
     return 0;
 }
 
+/* The strides (log2) of the cell at o's sets: face[2 * a + side] the face across axis a
+ * (side 1 the high one), edge[a][k] the edge along axis a whose other two coordinates are
+ * high where bit d of k is set (k = sum of (p[d] != o[d]) << d). A set's stride is
+ * around[] of where it lies per axis (brick_around): on the brick's low plane (0), strictly
+ * inside (1), on its high plane (2); a cell's face or edge spans the inside of every axis
+ * it runs along. */
+static void cell_sets(const lod *c, const uint32_t o[3], const uint32_t size[3], uint8_t face[6], uint8_t edge[3][8])
+{
+    int where[3][2], scale[3] = {1, 3, 9};
+    for (int d = 0; d < 3; d++) {
+        where[d][0] = o[d] == c->lo[d] ? 0 : 1;
+        where[d][1] = o[d] + size[d] == c->hi[d] ? 2 : 1;
+    }
+    for (int a = 0; a < 3; a++) {
+        int b = (a + 1) % 3, d2 = (a + 2) % 3;
+        for (int side = 0; side < 2; side++)
+            face[2 * a + side] = c->around[scale[a] * where[a][side] + scale[b] + scale[d2]];
+        for (int k = 0; k < 4; k++)
+            edge[a][(k & 1) << b | (k >> 1) << d2] =
+                c->around[scale[a] + scale[b] * where[b][k & 1] + scale[d2] * where[d2][k >> 1]];
+    }
+}
+
 /* 1 if every face and edge of the cell at o has the cell's own stride. */
 static int cell_is_regular(const lod *c, const uint32_t o[3], const uint32_t size[3], unsigned shift)
 {
+    uint8_t face[6], edge[3][8];
+    cell_sets(c, o, size, face, edge);
+    for (int f = 0; f < 6; f++)
+        if (face[f] != shift)
+            return 0;
     for (int a = 0; a < 3; a++)
-        for (int side = 0; side < 2; side++) {
-            uint32_t face[3];
-            for (int d = 0; d < 3; d++)
-                face[d] = 2 * o[d] + (d == a ? 2 * size[d] * (uint32_t)side : size[d]);
-            if (set_shift(c, face) != shift)
+        for (int k = 0; k < 8; k++)
+            if (!(k >> a & 1) && edge[a][k] != shift)
                 return 0;
-        }
-    for (int a = 0; a < 3; a++)
-        for (int k = 0; k < 4; k++) {
-            uint32_t edge[3];
-            int b = (a + 1) % 3, d2 = (a + 2) % 3;
-            edge[a] = 2 * o[a] + size[a];
-            edge[b] = 2 * o[b] + 2 * size[b] * (uint32_t)(k & 1);
-            edge[d2] = 2 * o[d2] + 2 * size[d2] * (uint32_t)(k >> 1);
-            if (set_shift(c, edge) != shift)
-                return 0;
-        }
     return 1;
 }
 
@@ -374,30 +395,24 @@ static int add_segment(lod *c, loop_segment s)
 #define MAX_POLYGON (4 * ISO_BRICK_CELLS)
 
 /* The segments of one square of a transition cell's face, by mc.h's face rule on its
- * polygon. corner[4]: the square's corners in order. A side is split at the multiples of
- * its own stride (the volume's last sample may end it off them). */
-static int square_segments(lod *c, const uint32_t corner[4][3])
+ * polygon. corner[4]: the square's corners in order; step[k] the stride of the side from
+ * corner k to the next, at whose multiples it is split (the volume's last sample may end
+ * it off them). */
+static int square_segments(lod *c, const uint32_t corner[4][3], const uint32_t step[4])
 {
     uint32_t points[MAX_POLYGON][3];
     int m = 0;
     for (int k = 0; k < 4; k++) {
         const uint32_t *p = corner[k], *q = corner[(k + 1) % 4];
-        uint32_t mid[3];
-        int axis = 0;
-        for (int d = 0; d < 3; d++) {
-            mid[d] = p[d] + q[d];
-            if (p[d] != q[d])
-                axis = d;
-        }
-        uint32_t step = 1u << set_shift(c, mid);
+        int axis = p[0] != q[0] ? 0 : p[1] != q[1] ? 1 : 2;
         memcpy(points[m++], p, sizeof points[0]);
         if (q[axis] > p[axis]) {
-            for (uint32_t x = (p[axis] / step + 1) * step; x < q[axis]; x += step) {
+            for (uint32_t x = (p[axis] / step[k] + 1) * step[k]; x < q[axis]; x += step[k]) {
                 memcpy(points[m], p, sizeof points[0]);
                 points[m++][axis] = x;
             }
         } else {
-            for (uint32_t x = (p[axis] - 1) / step * step; x > q[axis]; x -= step) {
+            for (uint32_t x = (p[axis] - 1) / step[k] * step[k]; x > q[axis]; x -= step[k]) {
                 memcpy(points[m], p, sizeof points[0]);
                 points[m++][axis] = x;
             }
@@ -445,11 +460,52 @@ static int square_segments(lod *c, const uint32_t corner[4][3])
     return 0;
 }
 
+/* The point on the segment from a (strictly inside the cell, fa = f(a) - level) to the
+ * loop sample b (fb = f(b) - level of the other sign) where f = level, by false position
+ * with the Illinois rule (the end that stays is halved in weight, so both ends close in):
+ * a few trilinear evaluations where bisection takes CENTRE_STEPS. Every point tried lies
+ * strictly between a and b, hence strictly inside the cell; the one nearest the level is
+ * kept. */
+static void centre_root(lod *c, const double a[3], double fa, const double b[3], double fb, double x[3])
+{
+    double s0 = 0, s1 = 1, g0 = fa, g1 = fb, best = fabs(fa), stop = CENTRE_STOP * (fabs(fa) + fabs(fb));
+    int kept = 0; /* which end stayed last: -1 the low one, +1 the high one */
+    memcpy(x, a, 3 * sizeof *x);
+    for (int step = 0; step < CENTRE_STEPS && best > stop; step++) {
+        double s = (s0 * g1 - s1 * g0) / (g1 - g0), p[3];
+        if (!(s > s0 && s < s1))
+            s = 0.5 * (s0 + s1);
+        if (!(s > s0 && s < s1))
+            break; /* the bracket is below a double's resolution */
+        for (int d = 0; d < 3; d++)
+            p[d] = a[d] + s * (b[d] - a[d]);
+        double g = value_at(c, p) - c->level;
+        if (fabs(g) < best) {
+            best = fabs(g);
+            memcpy(x, p, 3 * sizeof *x);
+        }
+        if ((g > 0) == (g0 > 0)) {
+            s0 = s;
+            g0 = g;
+            if (kept > 0)
+                g1 *= 0.5;
+            kept = 1;
+        } else {
+            s1 = s;
+            g1 = g;
+            if (kept < 0)
+                g0 *= 0.5;
+            kept = -1;
+        }
+    }
+}
+
 /* A point on f = level for a loop: its vertices' mean pulled a quarter of the way to the
- * cell's centre (strictly inside the cell), then bisected toward the nearest of the loop's
- * samples strictly on the other side of the level. The root is then strictly inside too,
- * never on a face, so no fan triangle lies flat in one. A sample exactly on the level
- * (a tie) is approached only to ISO_MC_END_GAP of the way, as crossings are. */
+ * cell's centre (strictly inside the cell), then moved toward the nearest of the loop's
+ * samples strictly on the other side of the level (centre_root). The root is then strictly
+ * inside too, never on a face, so no fan triangle lies flat in one. Without such a sample
+ * (a tie: a sample exactly on the level) the nearest sample is approached by bisection only
+ * to ISO_MC_END_GAP of the way, as crossings are. */
 static void place_centre(lod *c, const uint32_t *loop, size_t n, const loop_segment *const *ends,
                          const double middle[3], double x[3])
 {
@@ -460,7 +516,7 @@ static void place_centre(lod *c, const uint32_t *loop, size_t n, const loop_segm
             a[d] += pos[3 * loop[i] + d];
     for (int d = 0; d < 3; d++)
         a[d] = 0.75 * a[d] / (double)n + 0.25 * middle[d];
-    double fa = value_at(c, a) - c->level;
+    double fa = value_at(c, a) - c->level, fb = 0;
     int a_above = fa > 0;
     double best = INFINITY, b[3] = {a[0], a[1], a[2]};
     int strict = 0;
@@ -475,9 +531,14 @@ static void place_centre(lod *c, const uint32_t *loop, size_t n, const loop_segm
         if (dist < best || (opposite && !strict)) {
             best = dist;
             strict = opposite;
+            fb = fp;
             for (int d = 0; d < 3; d++)
                 b[d] = opposite ? p[d] : a[d] + (1 - ISO_MC_END_GAP) * (p[d] - a[d]);
         }
+    }
+    if (strict) {
+        centre_root(c, a, fa, b, fb, x);
+        return;
     }
     for (int step = 0; step < CENTRE_STEPS && fa != 0; step++) {
         double mid[3];
@@ -538,7 +599,7 @@ static int fan_loops(lod *c, const double middle[3], iso_error *err)
         if (n == 3) {
             rc = add_triangle(c, r[0], r[1], r[2]);
         } else {
-            /* The segments whose ends these loop vertices are, for the bisection. */
+            /* The segments whose ends these loop vertices are, for the centre. */
             const loop_segment *seg[64];
             size_t m = 0;
             for (size_t k = 0; k < count && m < 64; k++)
@@ -562,22 +623,28 @@ static int fan_loops(lod *c, const double middle[3], iso_error *err)
     return 0;
 }
 
-/* A cell whose faces or edges are finer than itself: face squares, loops, fans. */
+/* A cell whose faces or edges are finer than itself: face squares, loops, fans. A face
+ * whose samples all lie on one side of the level holds no segment and is skipped. */
 static int transition_cell(lod *c, const uint32_t o[3], const uint32_t size[3], iso_error *err)
 {
-
     static const int bc[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+    uint8_t face_shift[6], edge_shift[3][8];
+    cell_sets(c, o, size, face_shift, edge_shift);
     c->segment_count = 0;
     for (int a = 0; a < 3; a++)
         for (int side = 0; side < 2; side++) {
             int b = (a + 1) % 3, d2 = (a + 2) % 3;
-            uint32_t face[3];
-            for (int d = 0; d < 3; d++)
-                face[d] = 2 * o[d] + (d == a ? 2 * size[d] * (uint32_t)side : size[d]);
-            uint32_t f = 1u << set_shift(c, face);
+            uint32_t lo[3], hi[3];
+            for (int d = 0; d < 3; d++) {
+                lo[d] = d == a ? o[d] + size[d] * (uint32_t)side : o[d];
+                hi[d] = d == a ? lo[d] : o[d] + size[d];
+            }
+            if (!box_mixed(c, lo, hi))
+                continue;
+            uint32_t f = 1u << face_shift[2 * a + side];
             for (uint32_t jc = 0; jc < size[d2]; jc += f)
                 for (uint32_t jb = 0; jb < size[b]; jb += f) {
-                    uint32_t corner[4][3], wb = size[b] - jb < f ? size[b] - jb : f;
+                    uint32_t corner[4][3], step[4], wb = size[b] - jb < f ? size[b] - jb : f;
                     uint32_t wc = size[d2] - jc < f ? size[d2] - jc : f;
                     for (int k = 0; k < 4; k++) {
                         int q = side ? k : 3 - k; /* (b, c, a) is right-handed: reversed below */
@@ -585,7 +652,24 @@ static int transition_cell(lod *c, const uint32_t o[3], const uint32_t size[3], 
                         corner[k][b] = o[b] + jb + wb * (uint32_t)bc[q][0];
                         corner[k][d2] = o[d2] + jc + wc * (uint32_t)bc[q][1];
                     }
-                    int rc = square_segments(c, (const uint32_t(*)[3])corner);
+                    /* A side inside the face has the face's stride; one on the face's
+                     * border lies on one of the cell's edges and has that edge's. */
+                    for (int k = 0; k < 4; k++) {
+                        const uint32_t *p = corner[k], *q = corner[(k + 1) % 4];
+                        int axis = p[b] != q[b] ? b : d2, other = axis == b ? d2 : b;
+                        step[k] = f;
+                        if (p[other] == o[other] || p[other] == o[other] + size[other])
+                            step[k] = 1u << edge_shift[axis][(unsigned)side << a |
+                                                             (unsigned)(p[other] != o[other]) << other];
+                    }
+                    uint32_t box_lo[3], box_hi[3];
+                    for (int d = 0; d < 3; d++) {
+                        box_lo[d] = corner[0][d] < corner[2][d] ? corner[0][d] : corner[2][d];
+                        box_hi[d] = corner[0][d] < corner[2][d] ? corner[2][d] : corner[0][d];
+                    }
+                    if (!box_mixed(c, box_lo, box_hi))
+                        continue; /* no crossing on its sides */
+                    int rc = square_segments(c, (const uint32_t(*)[3])corner, step);
                     if (rc)
                         return iso_error_set(err, rc, "out of memory extracting the surface");
                 }
@@ -627,10 +711,11 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
     for (uint32_t z = 0; z + 1 < c->n[2]; z += s)
         for (uint32_t y = 0; y + 1 < c->n[1]; y += s)
             for (uint32_t x = 0; x + 1 < c->n[0]; x += s) {
-                uint32_t o[3] = {c->lo[0] + x, c->lo[1] + y, c->lo[2] + z}, size[3];
+                uint32_t o[3] = {c->lo[0] + x, c->lo[1] + y, c->lo[2] + z}, size[3], far[3];
                 unsigned touch = 0;
                 for (int d = 0; d < 3; d++) {
                     size[d] = c->hi[d] - o[d] < s ? c->hi[d] - o[d] : s; /* the last may be narrower */
+                    far[d] = o[d] + size[d];
                     touch |= (unsigned)(o[d] == c->lo[d]) << (2 * d) | (unsigned)(o[d] + size[d] == c->hi[d]) << (2 * d + 1);
                 }
                 c->cells++;
@@ -642,7 +727,7 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
                     if (rc)
                         return iso_error_set(err, rc, rc == ISO_E_LIMIT ? "more than 2^32 - 1 vertices"
                                                                          : "out of memory extracting the surface");
-                } else if (cell_mixed(c, o, size) && (rc = transition_cell(c, o, size, err))) {
+                } else if (box_mixed(c, o, far) && (rc = transition_cell(c, o, size, err))) {
                     return rc;
                 }
             }

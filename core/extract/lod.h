@@ -24,7 +24,7 @@
  *
  * The value bound: a crossing on a lattice segment of stride 2^l lies on a grid edge of a
  * brick at level l, where |f - T_l| <= err_l <= tolerance (Lemma 1), T_l linear along the
- * edge; centres are placed by bisection on f itself. The error reported is the largest
+ * edge; centres are placed by false position on f itself. The error reported is the largest
  * |f(v) - level| measured over the vertices. */
 #ifndef ISO_LOD_H
 #define ISO_LOD_H

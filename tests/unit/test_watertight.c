@@ -225,6 +225,61 @@ static void test_random_plans(void)
     iso_vol_destroy(vol);
 }
 
+/* A trilinear field, f = (x - 7.3)(y - 5.6)(z - 4.1) + 0.37 x, under random plans: every
+ * coarse grid reproduces it exactly (level errors 0), so the data's interpolant is f
+ * itself. The loop centres (the vertices off every lattice line: two or more coordinates
+ * off the integers) are placed by a root finder on a line along which f is cubic; each
+ * must lie on the level to within the float rounding of its position, on a watertight
+ * mesh with every vertex within the reported bound. */
+static double trilinear_field(double x, double y, double z)
+{
+    return (x - 7.3) * (y - 5.6) * (z - 4.1) + 0.37 * x;
+}
+
+static void test_centres_on_a_trilinear_field(void)
+{
+    iso_volume *vol = surface_make_volume(31, 17, 12, ISO_F64);
+    for (size_t k = 0; k < 12; k++)
+        for (size_t j = 0; j < 17; j++)
+            for (size_t i = 0; i < 31; i++)
+                iso_vol_set(vol, i, j, k, trilinear_field((double)i, (double)j, (double)k));
+    iso_vol_update_stats(vol);
+    iso_error err;
+    iso_tree *tree;
+    CHECK_OK(iso_tree_build(vol, 1, NULL, NULL, &tree, &err), &err);
+    uint8_t plan[4 * 3 * 2];
+    size_t centres = 0;
+    double worst = 0, slack = surface_rounding_slack(vol);
+    for (int trial = 0; trial < 400 && tree && !check_failed(); trial++) {
+        for (size_t b = 0; b < sizeof plan; b++)
+            plan[b] = (uint8_t)(surface_uniform() * 4);
+        double level = vol->value_min + (vol->value_max - vol->value_min) * (0.3 + 0.4 * surface_uniform());
+        iso_extract_params p = {.level = level, .tolerance = 1, .cap = trial & 1, .space = ISO_SPACE_INDEX};
+        iso_mesh m;
+        iso_mesh_init(&m);
+        iso_extract_stats st = {0};
+        CHECK_OK(iso_lod_extract_planned(tree, &p, plan, &m, &st, &err), &err);
+        char what[64];
+        snprintf(what, sizeof what, "trilinear plan %d", trial);
+        check_sound(vol, &m, &st, level, st.error_bound, 0, what);
+        for (size_t v = 0; v < m.vertex_count; v++) {
+            const float *x = m.positions + 3 * v;
+            int off = (x[0] != floorf(x[0])) + (x[1] != floorf(x[1])) + (x[2] != floorf(x[2]));
+            if (off < 2)
+                continue;
+            centres++;
+            worst = fmax(worst, fabs(trilinear_field(x[0], x[1], x[2]) - level));
+        }
+        iso_mesh_free(&m);
+    }
+    printf("  info: 400 plans on a trilinear field, %zu centres, largest |f - level| %.3g (slack %.3g)\n",
+           centres, worst, slack);
+    CHECK(centres >= 40);
+    CHECKF(worst <= slack, "a centre off the level by %g", worst);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
 /* ---- property test ---- */
 
 /* A few Gaussian blobs over a tilted ramp, optionally rounded to integers (ties). */
@@ -452,6 +507,7 @@ int main(void)
     CHECK_RUN(test_coarse_bricks_meet_cells);
     CHECK_RUN(test_transition_cell_every_pattern);
     CHECK_RUN(test_random_plans);
+    CHECK_RUN(test_centres_on_a_trilinear_field);
     CHECK_RUN(test_random_fields_property);
     CHECK_RUN(test_analytic_fields_property);
     CHECK_RUN(test_mricron_brain);
