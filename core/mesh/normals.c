@@ -49,6 +49,20 @@ static inline double floor_fast(double x)
     return i > x ? i - 1 : i;
 }
 
+/* *qa = a / by_a and *qb = b / by_b, both in one instruction where there is one (the
+ * quotients are the same: each is correctly rounded). */
+static inline void div2(double a, double by_a, double b, double by_b, double *qa, double *qb)
+{
+#if defined(__SSE2__)
+    __m128d q = _mm_div_pd(_mm_set_pd(b, a), _mm_set_pd(by_b, by_a));
+    *qa = _mm_cvtsd_f64(q);
+    *qb = _mm_cvtsd_f64(_mm_unpackhi_pd(q, q));
+#else
+    *qa = a / by_a;
+    *qb = b / by_b;
+#endif
+}
+
 /* Weights w and derivative weights d of one axis at coordinate x; *first is the sample of
  * weight 0 (may lie outside 0..n-1: callers clamp). */
 static inline __attribute__((always_inline)) void basis(const int order, double x, size_t n, long *first, double w[4], double d[4])
@@ -71,10 +85,8 @@ static inline __attribute__((always_inline)) void basis(const int order, double 
     } else {
         double i = floor_fast(x), t = x - i, s = 1 - t;
         *first = (long)i - 1;
-        w[0] = s * s * s / 6;
-        w[1] = (3 * t * t * t - 6 * t * t + 4) / 6;
-        w[2] = (-3 * t * t * t + 3 * t * t + 3 * t + 1) / 6;
-        w[3] = t * t * t / 6;
+        div2(s * s * s, 6, 3 * t * t * t - 6 * t * t + 4, 6, &w[0], &w[1]);
+        div2(-3 * t * t * t + 3 * t * t + 3 * t + 1, 6, t * t * t, 6, &w[2], &w[3]);
         d[0] = -s * s / 2;
         d[1] = (3 * t * t - 4 * t) / 2;
         d[2] = (-3 * t * t + 2 * t + 1) / 2;
@@ -363,8 +375,10 @@ static inline __attribute__((always_inline)) void edge_sums_vector(const iso_vol
 #endif
 
 /* The gradient at p when p is on a grid edge whose 4 x 3 x 3 support lies inside the
- * volume (and the volume has no NaN): 0; else -1 and g untouched. */
-static int edge_gradient(const iso_volume *vol, const double p[3], double g[3])
+ * volume (and the volume has no NaN): 0; else -1 and g untouched. type is vol->type
+ * (a constant where the caller is specialised for it). */
+static inline __attribute__((always_inline)) int edge_gradient_of(const iso_volume *vol, const iso_voxel_type type,
+                                                                  const double p[3], double g[3])
 {
     long at[3];
     unsigned planes = 0;
@@ -395,7 +409,7 @@ static int edge_gradient(const iso_volume *vol, const double p[3], double g[3])
 #else
     int vector = 0;
 #endif
-    switch (vol->type) {
+    switch (type) {
 #if defined(__SSE2__)
     case ISO_U8: if (vector) edge_sums_vector(vol, ISO_U8, base, e, se, sp, sq, s, dp, dq); else EDGE_SUMS(uint8_t, int32_t); break;
     case ISO_I8: if (vector) edge_sums_vector(vol, ISO_I8, base, e, se, sp, sq, s, dp, dq); else EDGE_SUMS(int8_t, int32_t); break;
@@ -419,10 +433,14 @@ static int edge_gradient(const iso_volume *vol, const double p[3], double g[3])
         gp += w[a] * dp[a];
         gq += w[a] * dq[a];
     }
-    g[e] = ge / 36;
-    g[pa] = gp / 12;
+    div2(ge, 36, gp, 12, &g[e], &g[pa]);
     g[qa] = gq / 12;
     return 0;
+}
+
+static int edge_gradient(const iso_volume *vol, const double p[3], double g[3])
+{
+    return edge_gradient_of(vol, vol->type, p, g);
 }
 
 static void gradient(const iso_volume *vol, int order, const double p[3], double g[3])
@@ -468,10 +486,10 @@ typedef struct normals_job {
     double inv[3][3], origin[3];
 } normals_job;
 
-static void normal_at(const normals_job *job, size_t v)
+/* Vertex v's position in index space. */
+static inline __attribute__((always_inline)) void index_point(const normals_job *job, size_t v, double p[3])
 {
     const float *q = job->mesh->positions + 3 * v;
-    double p[3], g[3], n[3];
     if (job->space == ISO_SPACE_WORLD)
         for (int r = 0; r < 3; r++)
             p[r] = job->inv[r][0] * (q[0] - job->origin[0]) + job->inv[r][1] * (q[1] - job->origin[1]) +
@@ -479,10 +497,12 @@ static void normal_at(const normals_job *job, size_t v)
     else
         for (int c = 0; c < 3; c++)
             p[c] = q[c];
-    gradient(job->vol, job->order, p, g);
-    if (g[0] == 0 && g[1] == 0 && g[2] == 0 && job->order != 2)
-        gradient(job->vol, 2, p, g);
-    /* World gradient = A^-T times the index gradient. */
+}
+
+/* Vertex v's unit normal from the index-space gradient g: world gradient = A^-T g. */
+static inline __attribute__((always_inline)) void unit_normal(const normals_job *job, size_t v, const double g[3])
+{
+    double n[3];
     for (int c = 0; c < 3; c++)
         n[c] = job->space == ISO_SPACE_WORLD
                    ? -(job->inv[0][c] * g[0] + job->inv[1][c] * g[1] + job->inv[2][c] * g[2])
@@ -491,8 +511,38 @@ static void normal_at(const normals_job *job, size_t v)
     if (!(len > 0) || !isfinite(len)) {
         n[0] = n[1] = 0, n[2] = 1, len = 1;
     }
-    for (int c = 0; c < 3; c++)
-        job->mesh->normals[3 * v + c] = (float)(n[c] / len);
+    float *out = job->mesh->normals + 3 * v;
+    double n0, n1;
+    div2(n[0], len, n[1], len, &n0, &n1);
+    out[0] = (float)n0;
+    out[1] = (float)n1;
+    out[2] = (float)(n[2] / len);
+}
+
+static void normal_at(const normals_job *job, size_t v)
+{
+    double p[3], g[3];
+    index_point(job, v, p);
+    gradient(job->vol, job->order, p, g);
+    if (g[0] == 0 && g[1] == 0 && g[2] == 0 && job->order != 2)
+        gradient(job->vol, 2, p, g);
+    unit_normal(job, v, g);
+}
+
+/* Vertices begin..end of a tricubic job on a volume of `type` (a constant here, so that
+ * the edge path is compiled for it): the edge path, and normal_at for the vertices it
+ * does not take (off an edge, near the border, a zero gradient). */
+static inline __attribute__((always_inline)) void tricubic_range(const normals_job *job, const iso_voxel_type type,
+                                                                 size_t begin, size_t end)
+{
+    for (size_t v = begin; v < end; v++) {
+        double p[3], g[3];
+        index_point(job, v, p);
+        if (edge_gradient_of(job->vol, type, p, g) || (g[0] == 0 && g[1] == 0 && g[2] == 0))
+            normal_at(job, v);
+        else
+            unit_normal(job, v, g);
+    }
 }
 
 /* Thread t of threads: a contiguous share of the vertices (each normal depends only on
@@ -502,6 +552,14 @@ static void normals_share(void *context, int t, int threads)
     const normals_job *job = context;
     size_t n = job->mesh->vertex_count;
     size_t begin = n * (size_t)t / (size_t)threads, end = n * (size_t)(t + 1) / (size_t)threads;
+    if (job->order == 4 && !job->vol->has_nan)
+        switch (job->vol->type) {
+        case ISO_U8: tricubic_range(job, ISO_U8, begin, end); return;
+        case ISO_I8: tricubic_range(job, ISO_I8, begin, end); return;
+        case ISO_U16: tricubic_range(job, ISO_U16, begin, end); return;
+        case ISO_I16: tricubic_range(job, ISO_I16, begin, end); return;
+        default: tricubic_range(job, job->vol->type, begin, end); return;
+        }
     for (size_t v = begin; v < end; v++)
         normal_at(job, v);
 }
