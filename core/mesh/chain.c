@@ -3,13 +3,8 @@
  * Passes of iso_mesh_chain_build:
  *   1. keep: the exact surface's positions and triangles become level 0;
  *   2. simplify: level k (k = 1..ISO_CHAIN_LEVELS) is level k - 1 simplified to half its
- *      triangles (iso_simplify_manifold, borders locked), in parts, each gathered over
- *      compact vertices and mapped back to the chain's (so that every level indexes the
- *      one position array): on a large level and several threads, first (2a) slabs across
- *      one axis, one per thread, each with its cut locked (the cut's edges are open in the
- *      slab), making half of the level's collapses, then (2b) the joined level with the
- *      cuts free makes the rest, by error over the whole surface; a small level, or one
- *      thread, is one part;
+ *      triangles (iso_simplify_manifold, borders locked), gathered over compact vertices
+ *      and mapped back to the chain's (so that every level indexes the one position array);
  *   3. measure: each level's distance from level 0 (iso_mesh_distance_between, samples three
  *      voxels apart, against level 0's grid built once for all levels), so the answers
  *      below rest on measurements, not on estimates. */
@@ -53,162 +48,49 @@ static size_t used_vertices(const iso_mesh *m, unsigned char *seen)
     return n;
 }
 
-/* One part of a level, simplified on its own thread (PASS 2a, 2b). */
-typedef struct part {
-    iso_mesh mesh;          /* its triangles over its own vertices */
-    uint32_t *global;       /* its vertex i is the chain's vertex global[i] */
-    size_t triangles;       /* the source's triangles in it */
-    size_t target;
-    iso_simplify_result result;
-    int rc;
-    iso_error err;
-} part;
-
-typedef struct part_job {
-    const iso_mesh_chain *chain;
-    const iso_mesh *source;
-    const int *part_of;     /* per source triangle: its part, or -1 (kept as it is) */
-    part *parts;
-    int count;
-} part_job;
-
-/* One part on one thread: its triangles gathered over compact vertices (so that its cost
- * follows its own size, not the chain's vertex count), then simplified with every vertex
- * on an open edge, which is where the part was cut out, locked. */
-static void simplify_part(void *context, int thread, int threads)
-{
-    part_job *job = context;
-    const iso_mesh *m = job->source;
-    for (int s = thread; s < job->count; s += threads) {
-        part *pt = &job->parts[s];
-        size_t n = pt->triangles;
-        uint32_t *local = malloc((m->vertex_count ? m->vertex_count : 1) * sizeof *local);
-        iso_mesh_init(&pt->mesh);
-        if (!local || iso_mesh_reserve(&pt->mesh, 3 * n, n) ||
-            !(pt->global = malloc((3 * n + 1) * sizeof *pt->global))) {
-            free(local);
-            pt->rc = iso_error_set(&pt->err, ISO_E_NOMEM, "chain: no memory for a part of %zu triangles", n);
-            continue;
-        }
-        memset(local, 0xff, m->vertex_count * sizeof *local);
-        size_t v = 0, i = 0;
-        for (size_t t = 0; t < m->triangle_count; t++) {
-            if (job->part_of[t] != s)
-                continue;
-            for (int k = 0; k < 3; k++) {
-                uint32_t g = m->indices[3 * t + k];
-                if (local[g] == UINT32_MAX) {
-                    local[g] = (uint32_t)v;
-                    pt->global[v] = g;
-                    memcpy(pt->mesh.positions + 3 * v++, m->positions + 3 * (size_t)g, 3 * sizeof(float));
-                }
-                pt->mesh.indices[i++] = local[g];
-            }
-        }
-        free(local);
-        pt->mesh.vertex_count = v;
-        pt->mesh.triangle_count = n;
-        iso_simplify_params sp = {.target_triangles = pt->target ? pt->target : 1,
-                                  .target_error = INFINITY, .voxel_size = job->chain->voxel_size,
-                                  .lock_border = 1, .keep_vertices = 1};
-        pt->rc = iso_simplify_manifold(&pt->mesh, &sp, &pt->result, &pt->err);
-    }
-}
-
-/* Simplifies the parts of m (part_of, parts[s].target set) on `threads` and joins them
- * into m: first the triangles of no part, as they were, then each part's. */
-static int run_parts(part_job *job, iso_mesh *m, int threads, iso_simplify_result *r, iso_error *err)
-{
-    iso_parallel_run(threads < job->count ? threads : job->count, simplify_part, job);
-    int rc = 0;
-    size_t joined = 0;
-    for (int s = 0; s < job->count; s++)
-        if (job->parts[s].rc && !rc) {
-            rc = job->parts[s].rc;
-            if (err)
-                *err = job->parts[s].err;
-        }
-    for (size_t t = 0; !rc && t < m->triangle_count; t++)
-        if (job->part_of[t] < 0)
-            memmove(m->indices + 3 * joined, m->indices + 3 * t, 3 * sizeof *m->indices), joined++;
-    for (int s = 0; s < job->count; s++) {
-        part *pt = &job->parts[s];
-        for (size_t i = 0; !rc && i < 3 * pt->mesh.triangle_count; i++)
-            m->indices[3 * joined + i] = pt->global[pt->mesh.indices[i]];
-        joined += rc ? 0 : pt->mesh.triangle_count;
-        r->error = fmax(r->error, pt->result.error);
-        r->folds_dropped += pt->result.folds_dropped;
-        iso_mesh_free(&pt->mesh);
-        free(pt->global);
-        pt->global = NULL;
-    }
-    if (!rc)
-        m->triangle_count = joined;
-    return rc;
-}
-
-/* A triangle's centroid along an axis. */
-static float centre_of(const iso_mesh *m, size_t t, int axis)
-{
-    float c = 0;
-    for (int k = 0; k < 3; k++)
-        c += m->positions[3 * (size_t)m->indices[3 * t + k] + (size_t)axis];
-    return c / 3;
-}
-
-/* PASS 2 for level k: m (level k - 1's triangles) simplified to `target`. On several
- * threads, in slabs (2a) across an axis (the longest side on even levels, the next on odd
- * ones), one per thread, each with its cut locked, making half of the level's collapses
- * (each slab its share); then (2b) the joined level with the cuts free makes the other half,
- * chosen by error over the whole surface: slabs sent all the way to their shares of the
- * target spend collapses where a slab's own share forces them, not where they cost least
- * (docs/performance.md). A small level, or one thread, is one part. */
+/* PASS 2 for level k: m (level k - 1's triangles) simplified to `target` with its border
+ * locked (iso_simplify_manifold), over compact vertices gathered from the chain's (so that
+ * a small level costs its own size, not the exact surface's vertex count) and mapped back.
+ * One thread: the collapses run cheapest first over the whole level, and cuts into parts
+ * would either hold vertices still or need a joined pass of their own. */
 static int simplify_level(const iso_mesh_chain *chain, iso_mesh *m, int k, size_t target,
-                          int threads, iso_simplify_result *r, iso_error *err)
+                          iso_simplify_result *r, iso_error *err)
 {
-    size_t T = m->triangle_count;
-    int slabs = threads > 1 && T >= (size_t)threads * ISO_CHAIN_SLAB_MIN ? threads : 1;
-    slabs = slabs < ISO_CHAIN_SLABS_MAX ? slabs : ISO_CHAIN_SLABS_MAX;
-    *r = (iso_simplify_result){.triangles_in = T, .vertices_in = m->vertex_count};
-    int *part_of = malloc((T ? T : 1) * sizeof *part_of);
-    part *parts = calloc((size_t)slabs, sizeof *parts);
-    if (!part_of || !parts) {
-        free(part_of);
-        free(parts);
-        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for the parts of level %d", k);
+    size_t n = m->triangle_count;
+    iso_mesh part;
+    iso_mesh_init(&part);
+    uint32_t *local = malloc((m->vertex_count ? m->vertex_count : 1) * sizeof *local);
+    uint32_t *global = malloc((3 * n + 1) * sizeof *global);
+    if (!local || !global || iso_mesh_reserve(&part, 3 * n, n)) {
+        free(local);
+        free(global);
+        iso_mesh_free(&part);
+        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for level %d (%zu triangles)", k, n);
     }
-    float lo[3], hi[3];
-    iso_mesh_bounds(m, lo, hi);
-    int order[3] = {0, 1, 2};
-    for (int a = 0; a < 3; a++)
-        for (int b = a + 1; b < 3; b++)
-            if (hi[order[b]] - lo[order[b]] > hi[order[a]] - lo[order[a]]) {
-                int swap = order[a];
-                order[a] = order[b], order[b] = swap;
-            }
-    int axis = order[k % 2];
-    double side = (double)hi[axis] - lo[axis];
-    for (size_t t = 0; t < T; t++) {
-        int s = (int)(((double)centre_of(m, t, axis) - lo[axis]) / side * slabs);
-        part_of[t] = s < 0 ? 0 : s >= slabs ? slabs - 1 : s;
-        parts[part_of[t]].triangles++;
+    memset(local, 0xff, m->vertex_count * sizeof *local);
+    size_t v = 0;
+    for (size_t i = 0; i < 3 * n; i++) {
+        uint32_t g = m->indices[i];
+        if (local[g] == UINT32_MAX) {
+            local[g] = (uint32_t)v;
+            global[v] = g;
+            memcpy(part.positions + 3 * v++, m->positions + 3 * (size_t)g, 3 * sizeof(float));
+        }
+        part.indices[i] = local[g];
     }
-    size_t goal = slabs > 1 && T > target ? target + (T - target) / 2 : target;
-    for (int s = 0; s < slabs; s++)
-        parts[s].target = (size_t)((double)goal * (double)parts[s].triangles / (double)(T ? T : 1));
-    part_job job = {.chain = chain, .source = m, .part_of = part_of, .parts = parts, .count = slabs};
-    int rc = run_parts(&job, m, threads, r, err); /* PASS 2a */
-    if (!rc && slabs > 1 && m->triangle_count > target) {
-        /* PASS 2b: the joined level as one part, the cuts free. */
-        memset(parts, 0, sizeof *parts);
-        memset(part_of, 0, m->triangle_count * sizeof *part_of);
-        parts[0].triangles = m->triangle_count, parts[0].target = target;
-        job.count = 1;
-        rc = run_parts(&job, m, threads, r, err);
+    free(local);
+    part.vertex_count = v;
+    part.triangle_count = n;
+    iso_simplify_params sp = {.target_triangles = target, .target_error = INFINITY,
+                              .voxel_size = chain->voxel_size, .lock_border = 1, .keep_vertices = 1};
+    int rc = iso_simplify_manifold(&part, &sp, r, err);
+    if (!rc) {
+        for (size_t i = 0; i < 3 * part.triangle_count; i++)
+            m->indices[i] = global[part.indices[i]];
+        m->triangle_count = part.triangle_count;
     }
-    r->triangles = m->triangle_count;
-    free(part_of);
-    free(parts);
+    free(global);
+    iso_mesh_free(&part);
     return rc;
 }
 
@@ -253,7 +135,7 @@ static int add_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int
     target = target ? target : 1;
     iso_simplify_result r;
     double start = iso_clock_ms();
-    int rc = simplify_level(chain, &m, k, target, iso_parallel_threads(threads), &r, err);
+    int rc = simplify_level(chain, &m, k, target, &r, err);
     if (rc) {
         free(m.indices);
         return rc;

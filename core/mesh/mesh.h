@@ -213,8 +213,7 @@ int iso_normals_compute(const iso_volume *vol, iso_mesh *mesh, int order, iso_sp
  * each other (a fold: same corners, opposite windings; dropped here, which keeps every
  * balance) or pinch the sheets onto one edge of four triangles, which stays and is counted
  * in result->nonmanifold_edges (a few in 10,000 edges on CT skin; docs/performance.md).
- * iso_simplify_manifold (below) prevents those pinches by locking vertices and
- * simplifying again. */
+ * iso_simplify_manifold (below) makes neither. */
 
 typedef struct iso_simplify_params {
     size_t target_triangles; /* at most this many triangles (>= 1) */
@@ -242,7 +241,8 @@ typedef struct iso_simplify_result {
     size_t nonmanifold_edges;    /* edges of the result used by 3 or more triangles */
     size_t pinch_vertices;       /* vertices whose triangles make two fans or more
                                   * (iso_simplify_manifold only; 0 from iso_simplify) */
-    size_t locked_vertices;      /* vertices iso_simplify_manifold kept from moving */
+    size_t locked_vertices;      /* vertices left that iso_simplify_manifold refused a
+                                  * collapse for its topology */
     size_t unpaired_edges;       /* edges used twice or more, not as often in each direction
                                   * (0 whenever the input had none: the tests check it) */
     int measured;                /* distance below was measured (params->measure) */
@@ -279,18 +279,20 @@ typedef struct iso_mesh_pinches {
  * below vertex_count). */
 int iso_mesh_find_pinches(const iso_mesh *mesh, unsigned char *mark, iso_mesh_pinches *out);
 
-/* iso_simplify that makes no pinch the input did not have, where it can: the result's
- * new pinches are found, the input's vertices within the reach of the collapses that made
- * them are locked (they do not move; collapses onto them stay allowed) and the input is
- * simplified again with no more error than ISO_MANIFOLD_ERROR_GROWTH times the first
- * round's (so the result may keep more triangles than the target), at most
- * ISO_MANIFOLD_ROUNDS times; pinches still left are counted in result->nonmanifold_edges
- * and pinch_vertices. Every vertex is still an input vertex, the result watertight
- * wherever the input was. Needs params->lock_border (without it, this is iso_simplify).
- * Costs one simplification, plus a pinch search and another simplification per round
- * that found pinches; allocates about 60 bytes per triangle for the call. Errors as
- * iso_simplify's (the mesh unchanged). */
-#define ISO_MANIFOLD_ROUNDS 4
+/* iso_simplify that makes no pinch and no fold (collapse.c, not meshoptimizer): half-edge
+ * collapses, cheapest first by the same quadric measure as meshoptimizer's (so
+ * result->error compares with iso_simplify's), each refused where it would break the link
+ * condition (the edge's two ends may share no neighbour but the edge's two opposite
+ * corners) or turn a triangle over. Vertices on open edges, on edges not used once each
+ * way, or whose triangles make more than one fan, do not move (collapses onto them stay
+ * allowed), so the input's pinches stay as they were and are counted in
+ * result->nonmanifold_edges and pinch_vertices. A lone tetrahedron (a speck) may go
+ * whole. Every vertex is still an input vertex, the result watertight wherever the input
+ * was; where topology allows no more collapses, more triangles than the target remain.
+ * result->locked_vertices counts the vertices left that had a collapse refused. Needs
+ * params->lock_border (without it, this is iso_simplify). O(T log T), allocates about 120
+ * bytes per vertex and 25 per triangle for the call. Errors as iso_simplify's (the mesh
+ * unchanged). */
 int iso_simplify_manifold(iso_mesh *mesh, const iso_simplify_params *params,
                           iso_simplify_result *result, iso_error *err);
 
@@ -313,10 +315,8 @@ double iso_mesh_value_error(const iso_volume *vol, const iso_mesh *mesh, iso_spa
  *
  * Level 0 is the surface given (the exact one); level k halves level k - 1's triangles
  * (iso_simplify_manifold with borders locked: 50%, 25%, 12.5%, ... of level 0), each from
- * the one before, so the chain costs little more than its first step; a level of at least
- * ISO_CHAIN_SLAB_MIN triangles per thread is simplified halfway in slabs on all threads,
- * each with its cut locked, then the rest of the way joined, with the cuts free (chain.c);
- * each part is simplified over its own compact vertices. Every level indexes the one
+ * the one before, so the chain costs little more than its first step; each level is
+ * simplified on one thread over its own compact vertices (chain.c). Every level indexes the one
  * position array, a copy of level 0's: every vertex of every level is a vertex of the
  * exact surface, so its value error is the exact surface's, with one exception: on a
  * closed surface, collapses cut chords and a coarse level encloses less (2-3% on a blob
@@ -329,8 +329,6 @@ double iso_mesh_value_error(const iso_volume *vol, const iso_mesh *mesh, iso_spa
  * samples three voxels apart), and meshoptimizer's estimate beside it. A built chain is read-only:
  * any number of threads may pick from it and copy meshes out of it at once. */
 #define ISO_CHAIN_LEVELS 6
-#define ISO_CHAIN_SLABS_MAX 64  /* a level is simplified in at most this many slabs */
-#define ISO_CHAIN_SLAB_MIN 20000 /* triangles per slab, at least, else one thread */
 #define ISO_CHAIN_SPACING_VOXELS 3 /* the measures' sample spacing */
 #define ISO_CHAIN_VOLUME_SLACK 1e-3 /* a closed level whose enclosed volume strays further
                                      * (relative) is moved along its normals */

@@ -1,0 +1,530 @@
+/* collapse.c: simplification that makes no pinch (iso_simplify_manifold, see mesh.h):
+ * half-edge collapses, cheapest first by quadric error, each refused where it would break
+ * the link condition (and so pinch two sheets together or lay one triangle onto another)
+ * or turn a triangle over. Every vertex left is an input vertex where it was.
+ *
+ * Passes of iso_simplify_manifold:
+ *   1. adjacency: each vertex's corners, a linked list through the triangles' corners;
+ *   2. lock: a vertex on an edge not used exactly once each way (an open edge: the border)
+ *      or whose triangles make more than one fan stays where it is (collapses onto it are
+ *      allowed);
+ *   3. quadrics: each vertex gets the area-weighted plane quadrics of its triangles;
+ *   4. order: each free vertex's cheapest collapse onto a neighbour goes into a heap, its
+ *      cost the vertex's quadric at the neighbour per unit of area (meshoptimizer's
+ *      measure, so the errors compare with iso_simplify's);
+ *   5. collapse: the cheapest is checked (its edge has two triangles, its ends share no
+ *      neighbour but their two opposite corners, no triangle turns over) and made: the
+ *      removed vertex's quadric joins the kept one's and the kept vertex and its neighbours
+ *      are costed again. A refused one goes back with its cheapest allowed collapse, or
+ *      waits until its neighbourhood changes. Until the target count, or the next
+ *      collapse would exceed the target error;
+ *   6. write: the triangles left, in their input order. */
+#include "mesh.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "base/base.h"
+
+#define NONE UINT32_MAX
+#define LOCKED 1u
+#define REMOVED 2u
+#define CHECKED 4u /* the vertex's key is its cheapest allowed collapse's, not a bound */
+
+typedef struct quadric {
+    double a00, a01, a02, a11, a12, a22, b0, b1, b2, c, w;
+} quadric;
+
+typedef struct collapser {
+    const float *pos;
+    uint32_t *tri;           /* the triangles' corners, relabelled as vertices collapse */
+    unsigned char *dead;     /* per triangle */
+    uint32_t *head, *next;   /* per vertex its first corner, per corner the next (NONE ends) */
+    unsigned char *flags;    /* per vertex: LOCKED, REMOVED */
+    quadric *q;
+    uint32_t *heap, *slot;   /* a binary min-heap of vertices, each vertex's place in it */
+    double *key;             /* per vertex: its cheapest collapse's cost */
+    uint32_t *to;            /* per vertex: that collapse's target */
+    size_t heap_count;
+    uint32_t *mark, stamp;   /* per vertex: scratch marks */
+    unsigned char *refused;  /* per vertex: a collapse of it was refused for its topology */
+    size_t alive;
+    double worst;            /* the largest cost collapsed */
+} collapser;
+
+static void collapser_free(collapser *c)
+{
+    free(c->tri);
+    free(c->dead);
+    free(c->head);
+    free(c->next);
+    free(c->flags);
+    free(c->q);
+    free(c->heap);
+    free(c->slot);
+    free(c->key);
+    free(c->to);
+    free(c->mark);
+    free(c->refused);
+}
+
+/* ---- the heap ---- */
+
+static void heap_place(collapser *c, size_t i, uint32_t v)
+{
+    c->heap[i] = v;
+    c->slot[v] = (uint32_t)i;
+}
+
+static void heap_up(collapser *c, size_t i)
+{
+    uint32_t v = c->heap[i];
+    while (i > 0) {
+        size_t parent = (i - 1) / 2;
+        if (!(c->key[c->heap[parent]] > c->key[v]))
+            break;
+        heap_place(c, i, c->heap[parent]);
+        i = parent;
+    }
+    heap_place(c, i, v);
+}
+
+static void heap_down(collapser *c, size_t i)
+{
+    uint32_t v = c->heap[i];
+    for (;;) {
+        size_t child = 2 * i + 1;
+        if (child >= c->heap_count)
+            break;
+        if (child + 1 < c->heap_count && c->key[c->heap[child + 1]] < c->key[c->heap[child]])
+            child++;
+        if (!(c->key[c->heap[child]] < c->key[v]))
+            break;
+        heap_place(c, i, c->heap[child]);
+        i = child;
+    }
+    heap_place(c, i, v);
+}
+
+/* v enters the heap, or moves in it, with cost key. */
+static void heap_set(collapser *c, uint32_t v, double key)
+{
+    if (c->slot[v] == NONE) {
+        c->key[v] = key;
+        heap_place(c, c->heap_count++, v);
+        heap_up(c, c->heap_count - 1);
+        return;
+    }
+    double old = c->key[v];
+    c->key[v] = key;
+    if (key < old)
+        heap_up(c, c->slot[v]);
+    else
+        heap_down(c, c->slot[v]);
+}
+
+static void heap_remove(collapser *c, uint32_t v)
+{
+    size_t i = c->slot[v];
+    if (i == NONE)
+        return;
+    c->slot[v] = NONE;
+    uint32_t last = c->heap[--c->heap_count];
+    if (i == c->heap_count)
+        return;
+    heap_place(c, i, last);
+    heap_up(c, i);
+    heap_down(c, c->slot[last]);
+}
+
+/* ---- quadrics ---- */
+
+static void quadric_add_triangle(quadric *q, const float *p0, const float *p1, const float *p2)
+{
+    double e1[3], e2[3], n[3];
+    for (int d = 0; d < 3; d++)
+        e1[d] = (double)p1[d] - p0[d], e2[d] = (double)p2[d] - p0[d];
+    n[0] = e1[1] * e2[2] - e1[2] * e2[1];
+    n[1] = e1[2] * e2[0] - e1[0] * e2[2];
+    n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    double length = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!(length > 0))
+        return;
+    for (int d = 0; d < 3; d++)
+        n[d] /= length;
+    double dist = -(n[0] * p0[0] + n[1] * p0[1] + n[2] * p0[2]), w = 0.5 * length;
+    q->a00 += w * n[0] * n[0], q->a01 += w * n[0] * n[1], q->a02 += w * n[0] * n[2];
+    q->a11 += w * n[1] * n[1], q->a12 += w * n[1] * n[2], q->a22 += w * n[2] * n[2];
+    q->b0 += w * dist * n[0], q->b1 += w * dist * n[1], q->b2 += w * dist * n[2];
+    q->c += w * dist * dist, q->w += w;
+}
+
+static void quadric_join(quadric *into, const quadric *q)
+{
+    into->a00 += q->a00, into->a01 += q->a01, into->a02 += q->a02;
+    into->a11 += q->a11, into->a12 += q->a12, into->a22 += q->a22;
+    into->b0 += q->b0, into->b1 += q->b1, into->b2 += q->b2;
+    into->c += q->c, into->w += q->w;
+}
+
+/* The mean squared distance of q's planes from p, weighted by area. */
+static double quadric_error(const quadric *q, const float *p)
+{
+    double x = p[0], y = p[1], z = p[2];
+    double e = q->a00 * x * x + q->a11 * y * y + q->a22 * z * z +
+               2 * (q->a01 * x * y + q->a02 * x * z + q->a12 * y * z) +
+               2 * (q->b0 * x + q->b1 * y + q->b2 * z) + q->c;
+    return q->w > 0 ? fabs(e) / q->w : 0;
+}
+
+static double cost_of(const collapser *c, uint32_t u, uint32_t v)
+{
+    return quadric_error(&c->q[u], c->pos + 3 * (size_t)v);
+}
+
+/* The corner after and before corner k of its triangle. */
+static uint32_t after(const collapser *c, uint32_t k)
+{
+    return c->tri[k - k % 3 + (k % 3 + 1) % 3];
+}
+
+static uint32_t before(const collapser *c, uint32_t k)
+{
+    return c->tri[k - k % 3 + (k % 3 + 2) % 3];
+}
+
+/* PASS 4: u's cheapest collapse, its topology not checked (a lower bound of the allowed
+ * ones'), into the heap; a locked or isolated vertex stays out. */
+static void order(collapser *c, uint32_t u)
+{
+    c->flags[u] &= (unsigned char)~CHECKED;
+    if (c->flags[u]) {
+        heap_remove(c, u);
+        return;
+    }
+    double best = INFINITY;
+    uint32_t to = NONE;
+    for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
+        uint32_t x = after(c, k);
+        double e = cost_of(c, u, x);
+        if (e < best)
+            best = e, to = x;
+    }
+    if (to == NONE) {
+        heap_remove(c, u);
+        return;
+    }
+    c->to[u] = to;
+    heap_set(c, u, best);
+}
+
+/* Whether the edge u->v's collapse keeps the surface a manifold without turning a
+ * triangle over: 1 yes, 0 no, 2 the two ends are corners of a lone tetrahedron (the
+ * collapse would fold it: it goes whole). a and b receive the edge's opposite corners. */
+static int allowed(collapser *c, uint32_t u, uint32_t v, uint32_t *a, uint32_t *b)
+{
+    if (c->flags[v] & REMOVED)
+        return 0;
+    uint32_t stamp = ++c->stamp, apex[2] = {NONE, NONE};
+    int shared = 0;
+    size_t valence_u = 0, valence_v = 0;
+    for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
+        uint32_t x = after(c, k), y = before(c, k);
+        c->mark[x] = c->mark[y] = stamp;
+        valence_u++;
+        if (x == v || y == v) {
+            if (shared < 2)
+                apex[shared] = x == v ? y : x;
+            shared++;
+        }
+    }
+    if (shared != 2 || apex[0] == apex[1])
+        return 0;
+    *a = apex[0], *b = apex[1];
+    /* The link condition: the ends' only common neighbours are the opposite corners. */
+    int tetrahedron = 0;
+    for (uint32_t k = c->head[v]; k != NONE; k = c->next[k]) {
+        uint32_t x = after(c, k), y = before(c, k);
+        valence_v++;
+        if ((c->mark[x] == stamp && x != u && x != *a && x != *b) ||
+            (c->mark[y] == stamp && y != u && y != *a && y != *b))
+            return 0;
+        tetrahedron |= (x == *a && y == *b) || (x == *b && y == *a);
+    }
+    const float *pu = c->pos + 3 * (size_t)u, *pv = c->pos + 3 * (size_t)v;
+    for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
+        uint32_t x = after(c, k), y = before(c, k);
+        if (x == v || y == v)
+            continue;
+        if (((x == *a && y == *b) || (x == *b && y == *a)) && tetrahedron)
+            return valence_u == 3 && valence_v == 3 ? 2 : 0;
+        /* The triangle (u, x, y) moved to (v, x, y) must face the same side. */
+        const float *px = c->pos + 3 * (size_t)x, *py = c->pos + 3 * (size_t)y;
+        double ex[3], ey[3], fx[3], fy[3];
+        for (int d = 0; d < 3; d++) {
+            ex[d] = (double)px[d] - pu[d], ey[d] = (double)py[d] - pu[d];
+            fx[d] = (double)px[d] - pv[d], fy[d] = (double)py[d] - pv[d];
+        }
+        double n0[3] = {ex[1] * ey[2] - ex[2] * ey[1], ex[2] * ey[0] - ex[0] * ey[2], ex[0] * ey[1] - ex[1] * ey[0]};
+        double n1[3] = {fx[1] * fy[2] - fx[2] * fy[1], fx[2] * fy[0] - fx[0] * fy[2], fx[0] * fy[1] - fx[1] * fy[0]};
+        if (n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2] <= 0)
+            return 0;
+    }
+    return 1;
+}
+
+/* x's corner list without the dead triangles' corners. */
+static void compact(collapser *c, uint32_t x)
+{
+    uint32_t *link = &c->head[x];
+    while (*link != NONE) {
+        if (c->dead[*link / 3])
+            *link = c->next[*link];
+        else
+            link = &c->next[*link];
+    }
+}
+
+static void remove_vertex(collapser *c, uint32_t v)
+{
+    c->flags[v] |= REMOVED;
+    c->head[v] = NONE;
+    heap_remove(c, v);
+}
+
+/* The lone tetrahedron of u, v, a and b goes whole: u's and v's triangles are its four. */
+static void drop_tetrahedron(collapser *c, uint32_t u, uint32_t v, uint32_t a, uint32_t b)
+{
+    uint32_t ends[2] = {u, v};
+    for (int i = 0; i < 2; i++)
+        for (uint32_t k = c->head[ends[i]]; k != NONE; k = c->next[k])
+            if (!c->dead[k / 3])
+                c->dead[k / 3] = 1, c->alive--;
+    remove_vertex(c, u);
+    remove_vertex(c, v);
+    uint32_t corners[2] = {a, b};
+    for (int i = 0; i < 2; i++) {
+        compact(c, corners[i]);
+        if (c->head[corners[i]] == NONE)
+            remove_vertex(c, corners[i]);
+        else
+            order(c, corners[i]);
+    }
+}
+
+/* PASS 5: u onto v, the edge's opposite corners a and b. */
+static void collapse(collapser *c, uint32_t u, uint32_t v, uint32_t a, uint32_t b)
+{
+    uint32_t last = NONE;
+    for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
+        uint32_t t = k / 3;
+        if (c->tri[3 * t] == v || c->tri[3 * t + 1] == v || c->tri[3 * t + 2] == v) {
+            c->dead[t] = 1;
+            c->alive--;
+        } else {
+            c->tri[k] = v;
+        }
+        last = k;
+    }
+    if (last != NONE) { /* u's corners join v's */
+        c->next[last] = c->head[v];
+        c->head[v] = c->head[u];
+    }
+    quadric_join(&c->q[v], &c->q[u]);
+    remove_vertex(c, u);
+    compact(c, v);
+    compact(c, a);
+    compact(c, b);
+    /* A neighbour's quadric is as it was and its neighbours are too, but for u gone and
+     * v come: only a collapse onto v is new, unless its cheapest went to u. */
+    order(c, v);
+    for (uint32_t k = c->head[v]; k != NONE; k = c->next[k]) {
+        uint32_t x = after(c, k);
+        if (c->flags[x] || c->slot[x] == NONE || c->to[x] == u) {
+            order(c, x);
+            continue;
+        }
+        double e = cost_of(c, x, v);
+        if (e < c->key[x]) {
+            c->to[x] = v;
+            heap_set(c, x, e);
+        }
+    }
+}
+
+/* A refused u gets its cheapest allowed collapse back in the heap, or leaves it. */
+static void reorder(collapser *c, uint32_t u)
+{
+    c->refused[u] = 1;
+    double best = INFINITY;
+    uint32_t to = NONE, a, b;
+    for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
+        uint32_t x = after(c, k);
+        double e = cost_of(c, u, x);
+        if (e < best && allowed(c, u, x, &a, &b))
+            best = e, to = x;
+    }
+    if (to == NONE) {
+        heap_remove(c, u);
+        return;
+    }
+    c->to[u] = to;
+    c->flags[u] |= CHECKED;
+    heap_set(c, u, best);
+}
+
+/* PASS 2 for vertex u: its edges each used once each way, its triangles one fan. */
+static int is_simple(const collapser *c, uint32_t u)
+{
+    size_t n = 0;
+    for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
+        uint32_t x = after(c, k);
+        size_t forward = 0, backward = 0;
+        for (uint32_t j = c->head[u]; j != NONE; j = c->next[j])
+            forward += after(c, j) == x, backward += before(c, j) == x;
+        if (forward != 1 || backward != 1)
+            return 0;
+        n++;
+    }
+    if (n < 3)
+        return 0;
+    /* One fan: walking from triangle to triangle across u's edges comes back after n. */
+    uint32_t start = c->head[u], k = start;
+    size_t steps = 0;
+    do {
+        uint32_t x = after(c, k), j;
+        for (j = c->head[u]; j != NONE && before(c, j) != x; j = c->next[j])
+            ;
+        k = j;
+        steps++;
+    } while (k != NONE && k != start && steps <= n);
+    return k == start && steps == n;
+}
+
+static int collapser_init(collapser *c, const iso_mesh *mesh)
+{
+    memset(c, 0, sizeof *c);
+    size_t nv = mesh->vertex_count ? mesh->vertex_count : 1, nt = mesh->triangle_count ? mesh->triangle_count : 1;
+    c->pos = mesh->positions;
+    c->tri = malloc(3 * nt * sizeof *c->tri);
+    c->dead = calloc(nt, 1);
+    c->next = malloc(3 * nt * sizeof *c->next);
+    c->head = malloc(nv * sizeof *c->head);
+    c->flags = calloc(nv, 1);
+    c->q = calloc(nv, sizeof *c->q);
+    c->heap = malloc(nv * sizeof *c->heap);
+    c->slot = malloc(nv * sizeof *c->slot);
+    c->key = malloc(nv * sizeof *c->key);
+    c->to = malloc(nv * sizeof *c->to);
+    c->mark = calloc(nv, sizeof *c->mark);
+    c->refused = calloc(nv, 1);
+    if (!c->tri || !c->dead || !c->next || !c->head || !c->flags || !c->q || !c->heap || !c->slot ||
+        !c->key || !c->to || !c->mark || !c->refused)
+        return ISO_E_NOMEM;
+    memcpy(c->tri, mesh->indices, 3 * mesh->triangle_count * sizeof *c->tri);
+    memset(c->slot, 0xff, nv * sizeof *c->slot);
+    /* PASS 1 */
+    memset(c->head, 0xff, nv * sizeof *c->head);
+    for (size_t k = 3 * mesh->triangle_count; k-- > 0;) {
+        c->next[k] = c->head[c->tri[k]];
+        c->head[c->tri[k]] = (uint32_t)k;
+    }
+    c->alive = mesh->triangle_count;
+    /* PASS 3 */
+    for (size_t t = 0; t < mesh->triangle_count; t++) {
+        const uint32_t *x = c->tri + 3 * t;
+        const float *p0 = c->pos + 3 * (size_t)x[0], *p1 = c->pos + 3 * (size_t)x[1], *p2 = c->pos + 3 * (size_t)x[2];
+        quadric q = {0};
+        quadric_add_triangle(&q, p0, p1, p2);
+        for (int k = 0; k < 3; k++)
+            quadric_join(&c->q[x[k]], &q);
+    }
+    return 0;
+}
+
+int iso_simplify_manifold(iso_mesh *mesh, const iso_simplify_params *params,
+                          iso_simplify_result *result, iso_error *err)
+{
+    iso_simplify_result local;
+    iso_simplify_result *r = result ? result : &local;
+    if (mesh->triangle_count <= params->target_triangles || !params->lock_border)
+        return iso_simplify(mesh, params, r, err);
+    if (params->target_triangles < 1 || !(params->target_error >= 0) || !(params->voxel_size >= 0) ||
+        !isfinite(params->voxel_size))
+        return iso_simplify(mesh, params, r, err); /* its argument errors */
+    double start = iso_clock_ms();
+    *r = (iso_simplify_result){.triangles_in = mesh->triangle_count, .vertices_in = mesh->vertex_count,
+                               .scale = 1};
+    collapser c;
+    int rc = collapser_init(&c, mesh);
+    if (rc) {
+        collapser_free(&c);
+        return iso_error_set(err, ISO_E_NOMEM, "simplify: no memory for %zu triangles", mesh->triangle_count);
+    }
+    /* PASS 2, then PASS 4 over the free vertices */
+    for (uint32_t v = 0; v < mesh->vertex_count; v++)
+        if (c.head[v] != NONE && !is_simple(&c, v))
+            c.flags[v] |= LOCKED;
+    for (uint32_t v = 0; v < mesh->vertex_count; v++)
+        if (c.head[v] != NONE)
+            order(&c, v);
+    /* PASS 5 */
+    double limit = params->target_error * params->target_error;
+    while (c.alive > params->target_triangles && c.heap_count) {
+        uint32_t u = c.heap[0], a, b;
+        if (c.key[u] > limit)
+            break;
+        int ok = allowed(&c, u, c.to[u], &a, &b);
+        if (!ok) {
+            reorder(&c, u);
+            continue;
+        }
+        c.worst = fmax(c.worst, c.key[u]);
+        if (ok == 2) {
+            drop_tetrahedron(&c, u, c.to[u], a, b);
+            continue;
+        }
+        collapse(&c, u, c.to[u], a, b);
+    }
+    /* PASS 6: into the collapser's own triangles first, so that a failure below leaves
+     * the mesh as it came in. */
+    size_t kept = 0;
+    for (size_t t = 0; t < mesh->triangle_count; t++)
+        if (!c.dead[t])
+            memmove(c.tri + 3 * kept++, c.tri + 3 * t, 3 * sizeof *c.tri);
+    for (size_t v = 0; v < mesh->vertex_count; v++)
+        r->locked_vertices += c.refused[v] && !(c.flags[v] & REMOVED);
+    r->error = sqrt(c.worst);
+    r->error_voxels = r->error / (params->voxel_size > 0 ? params->voxel_size : 1);
+    iso_mesh view = *mesh;
+    view.indices = c.tri, view.triangle_count = kept;
+    iso_mesh_pinches left;
+    uint32_t *remap = params->keep_vertices ? NULL : malloc((mesh->vertex_count ? mesh->vertex_count : 1) * sizeof *remap);
+    if (!params->keep_vertices && !remap)
+        rc = iso_error_set(err, ISO_E_NOMEM, "simplify: no memory to drop unused vertices");
+    if (!rc && (rc = iso_mesh_find_pinches(&view, NULL, &left)))
+        rc = iso_error_set(err, rc, "simplify: no memory to count pinches");
+    if (!rc && params->measure) {
+        double spacing = params->voxel_size > 0 ? params->voxel_size : 1;
+        rc = iso_mesh_distance_compute(mesh, &view, spacing, params->threads, &r->distance, err);
+        r->measured = !rc;
+    }
+    if (!rc) {
+        memcpy(mesh->indices, c.tri, 3 * kept * sizeof *c.tri);
+        mesh->triangle_count = kept;
+        r->triangles = kept;
+        r->nonmanifold_edges = left.pinch_edges;
+        r->pinch_vertices = left.pinch_vertices;
+        r->unpaired_edges = left.unpaired_edges;
+        if (remap)
+            iso_mesh_drop_unused_into(mesh, remap);
+    }
+    free(remap);
+    collapser_free(&c);
+    r->ms = iso_clock_ms() - start;
+    if (rc)
+        return rc;
+    r->vertices = mesh->vertex_count;
+    return 0;
+}
