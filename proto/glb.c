@@ -111,21 +111,13 @@ int proto_glb_encode_info(const iso_mesh *mesh, const proto_encode_options *opt,
     return rc;
 }
 
-int proto_glb_write(const proto_glb_json *json, const unsigned char *bin, size_t bin_size,
-                    unsigned char **out, size_t *out_size, iso_error *err)
+size_t proto_glb_head(const proto_glb_json *json, size_t bin_size, unsigned char *out)
 {
     /* Layout: header (12), JSON chunk (8 + text padded with spaces), BIN chunk (8 + bytes
      * padded with zeros) when there is one. Lengths are uint32 in the container. */
-    *out = NULL;
-    *out_size = 0;
     const size_t json_padded = proto_glb_pad4(json->len), bin_padded = proto_glb_pad4(bin_size);
     const size_t size = 12 + 8 + json_padded + (bin_size ? 8 + bin_padded : 0);
-    if (bin_size > UINT32_MAX - 64 || size > UINT32_MAX)
-        return iso_error_set(err, ISO_E_LIMIT, "glb of %zu bytes exceeds glTF's 4 GiB", size);
-    unsigned char *buf = malloc(size);
-    if (!buf)
-        return iso_error_set(err, ISO_E_NOMEM, "no memory for a glb of %zu bytes", size);
-    unsigned char *p = buf;
+    unsigned char *p = out;
     p = proto_put_u32(p, GLB_MAGIC);
     p = proto_put_u32(p, GLB_VERSION);
     p = proto_put_u32(p, (uint32_t)size);
@@ -137,11 +129,35 @@ int proto_glb_write(const proto_glb_json *json, const unsigned char *bin, size_t
     if (bin_size) {
         p = proto_put_u32(p, (uint32_t)bin_padded);
         p = proto_put_u32(p, GLB_CHUNK_BIN);
-        memcpy(p, bin, bin_size);
-        memset(p + bin_size, 0, bin_padded - bin_size);
-        p += bin_padded;
     }
-    assert((size_t)(p - buf) == size);
+    return (size_t)(p - out);
+}
+
+int proto_glb_size(const proto_glb_json *json, size_t bin_size, size_t *size, iso_error *err)
+{
+    *size = 12 + 8 + proto_glb_pad4(json->len) + (bin_size ? 8 + proto_glb_pad4(bin_size) : 0);
+    if (bin_size > UINT32_MAX - 64 || *size > UINT32_MAX)
+        return iso_error_set(err, ISO_E_LIMIT, "glb of %zu bytes exceeds glTF's 4 GiB", *size);
+    return 0;
+}
+
+int proto_glb_write(const proto_glb_json *json, const unsigned char *bin, size_t bin_size,
+                    unsigned char **out, size_t *out_size, iso_error *err)
+{
+    *out = NULL;
+    *out_size = 0;
+    size_t size;
+    int rc = proto_glb_size(json, bin_size, &size, err);
+    if (rc)
+        return rc;
+    unsigned char *buf = malloc(size);
+    if (!buf)
+        return iso_error_set(err, ISO_E_NOMEM, "no memory for a glb of %zu bytes", size);
+    size_t head = proto_glb_head(json, bin_size, buf);
+    if (bin_size) {
+        memcpy(buf + head, bin, bin_size);
+        memset(buf + head + bin_size, 0, size - head - bin_size);
+    }
     *out = buf;
     *out_size = size;
     return 0;

@@ -43,6 +43,16 @@ void proto_glb_json_empty(proto_glb_json *j);
 int proto_glb_write(const proto_glb_json *json, const unsigned char *bin, size_t bin_size,
                     unsigned char **out, size_t *out_size, iso_error *err);
 
+/* The container's bytes before the BIN chunk's data (header, JSON chunk, and the BIN
+ * chunk's header when bin_size > 0) written to out, which holds PROTO_GLB_HEAD_MAX bytes;
+ * returns how many. For encoders that write their BIN data in place after it. */
+#define PROTO_GLB_HEAD_MAX (12 + 8 + sizeof(((proto_glb_json *)0)->text) + 8)
+size_t proto_glb_head(const proto_glb_json *json, size_t bin_size, unsigned char *out);
+
+/* The whole container's size for a BIN chunk of bin_size bytes: 0, or ISO_E_LIMIT (over
+ * glTF's 4 GiB). */
+int proto_glb_size(const proto_glb_json *json, size_t bin_size, size_t *size, iso_error *err);
+
 /* n rounded up to a multiple of 4: glTF aligns chunks and buffer views to 4 bytes. */
 static inline size_t proto_glb_pad4(size_t n)
 {

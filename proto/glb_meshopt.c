@@ -3,22 +3,25 @@
  * attributes (KHR_mesh_quantization), as three.js's GLTFLoader + MeshoptDecoder read it.
  *
  * Passes, in order:
- *   1. quantize: positions to qp-bit integers on the mesh's bounding cube (uint16, four
- *      per vertex as the codec wants strides of 4), the node's translation and scale
- *      mapping them back to world units; above 16 bits, float positions unquantized.
- *      Normals to signed normalized integers: int8 up to 8 bits, else int16 with the
- *      bits below qn cleared (zeros the codec's byte deltas compress to nothing);
- *   2. encode each stream (positions, normals, indices) into the BIN chunk, each view
- *      4-byte aligned; the uncompressed layout lives in a second, fallback buffer that
- *      has no data (the extension is required). With two threads (opt->threads) the
- *      indices are encoded on one while the other quantizes and encodes the vertices;
- *      the bytes do not depend on it;
- *   3. the JSON and the container (glb_container.h).
+ *   1. quantize: (a) the positions' grid, the mesh's bounding cube, whose corner and step
+ *      the node's translation and scale carry back to world units; (b) on all threads,
+ *      a share of the vertices each: positions to qp-bit integers on the grid (uint16,
+ *      four per vertex as the codec wants strides of 4; above 16 bits, float positions
+ *      unquantized), normals to signed normalized integers (int8 up to 8 bits, else int16
+ *      with the bits below qn cleared: zeros the codec's byte deltas compress to nothing);
+ *   2. encode each stream (positions, normals, indices) straight into the glb's buffer,
+ *      each at its own place, the indices on one thread (glb_meshopt_index.c: the
+ *      library's bytes, found faster) while the other encodes the vertex streams; the
+ *      bytes do not depend on the threads. The uncompressed layout lives in a second,
+ *      fallback buffer that has no data (the extension is required);
+ *   3. the JSON and the container's head (glb_container.h) written in front, the streams
+ *      moved down behind it, each 4-byte aligned, and the unused end given back.
  * Every vertex and triangle is kept, in order (the index codec may start a triangle at
  * another corner, same winding): a loader gets the mesh's counts exactly. */
 #include "encode.h"
 #include "base/base.h"
 #include "glb_container.h"
+#include "glb_meshopt_index.h"
 
 #include <assert.h>
 #include <math.h>
@@ -39,11 +42,13 @@ enum { VIEW_POSITION, VIEW_NORMAL, VIEW_INDEX, VIEW_COUNT };
 /* One buffer view: its uncompressed data (stride bytes per element) and where its
  * compressed bytes go. */
 typedef struct view {
-    void *data;
+    const void *data;
     size_t count, stride;
     int triangles;                   /* 1: the index codec, 0: the vertex codec */
     size_t offset, length;           /* in the fallback buffer (uncompressed) */
     size_t packed_offset, packed_length; /* in the BIN chunk */
+    size_t bound;                    /* the codec's bound on packed_length */
+    unsigned char *packed;           /* where the codec wrote it (in the glb's buffer) */
 } view;
 
 /* The quantized mesh and its JSON facts. */
@@ -54,198 +59,167 @@ typedef struct quantized {
     int normal_type;                 /* PROTO_GLTF_BYTE or PROTO_GLTF_SHORT */
     int index_type;                  /* PROTO_GLTF_UNSIGNED_SHORT or _INT */
     float origin[3], step;           /* world = origin + step * q */
+    double extent, steps;            /* the grid: the cube's side, its steps (2^qp - 1) */
     double qmin[3], qmax[3];         /* the POSITION accessor's bounds, in its units */
 } quantized;
 
-static void quantized_free(quantized *q)
-{
-    for (int v = 0; v < VIEW_COUNT; v++)
-        if (v != VIEW_INDEX)
-            free(q->views[v].data);
-}
-
-/* lround(x) for |x| < 2^62 without a library call: rounding halves away from zero. */
+/* lround(x) for |x| < 2^62 without a library call or a branch: halves away from zero. */
 static inline long round_half_away(double x)
 {
     double a = fabs(x);
     long k = (long)(a + 0.5);
-    if ((double)k - a > 0.5) /* a + 0.5 rounded up (a just under a half) */
-        k--;
+    k -= (double)k - a > 0.5; /* a + 0.5 rounded up (a just under a half) */
     return x < 0 ? -k : k;
 }
 
-/* Pass 1, positions: the bounding cube's corner and step (Draco's grid, so that qp
- * means the same for both codecs). */
-static int quantize_positions(const iso_mesh *mesh, int bits, quantized *q)
+/* A position's step count on an axis: round((p - lo) / extent * steps), as Draco's grid
+ * rounds it. */
+static long position_step(float p, float lo, double extent, double steps)
+{
+    return round_half_away(((double)p - lo) / extent * steps);
+}
+
+/* Pass 1a, positions' grid: the bounding cube's corner and step (Draco's grid, so that
+ * qp means the same for both codecs). Rounding is monotonic, so the accessor's bounds are
+ * the box's corners' steps. */
+static void position_grid(const iso_mesh *mesh, int bits, quantized *q)
 {
     size_t n = mesh->vertex_count;
     const float *p = mesh->positions;
-    float lo[3] = {p[0], p[1], p[2]}, hi[3] = {p[0], p[1], p[2]};
-    for (size_t i = 1; i < n; i++)
-        for (int a = 0; a < 3; a++) {
-            float x = p[3 * i + a];
-            lo[a] = x < lo[a] ? x : lo[a];
-            hi[a] = x > hi[a] ? x : hi[a];
-        }
-    view *v = &q->views[VIEW_POSITION];
-    v->count = n;
-    if (bits > MESHOPT_POSITION_BITS_MAX) {
-        q->float_positions = 1;
-        v->stride = 12;
-        v->data = malloc(n * 12);
-        if (!v->data)
-            return ISO_E_NOMEM;
-        memcpy(v->data, p, n * 12);
-        for (int a = 0; a < 3; a++)
-            q->qmin[a] = lo[a], q->qmax[a] = hi[a];
-        return 0;
+    float x0 = p[0], y0 = p[1], z0 = p[2], x1 = x0, y1 = y0, z1 = z0; /* in registers */
+    for (size_t i = 1; i < n; i++) {
+        const float *v = p + 3 * i;
+        x0 = v[0] < x0 ? v[0] : x0, x1 = v[0] > x1 ? v[0] : x1;
+        y0 = v[1] < y0 ? v[1] : y0, y1 = v[1] > y1 ? v[1] : y1;
+        z0 = v[2] < z0 ? v[2] : z0, z1 = v[2] > z1 ? v[2] : z1;
     }
-    double extent = 0, steps = (double)((1u << bits) - 1);
+    const float lo[3] = {x0, y0, z0}, hi[3] = {x1, y1, z1};
+    q->float_positions = bits > MESHOPT_POSITION_BITS_MAX;
+    q->extent = 0;
+    q->steps = q->float_positions ? 0 : (double)((1u << bits) - 1);
     for (int a = 0; a < 3; a++) {
         q->origin[a] = lo[a];
-        extent = fmax(extent, (double)hi[a] - lo[a]);
+        q->extent = fmax(q->extent, (double)hi[a] - lo[a]);
     }
-    q->step = extent > 0 ? (float)(extent / steps) : 1.0f;
-    v->stride = 8;
-    uint16_t *out = malloc(n * 8);
-    if (!out)
-        return ISO_E_NOMEM;
-    v->data = out;
-    long kmin[3] = {(long)steps, (long)steps, (long)steps}, kmax[3] = {0, 0, 0};
-    for (size_t i = 0; i < n; i++) {
+    q->step = q->extent > 0 && !q->float_positions ? (float)(q->extent / q->steps) : 1.0f;
+    for (int a = 0; a < 3; a++) {
+        if (q->float_positions)
+            q->qmin[a] = lo[a], q->qmax[a] = hi[a];
+        else
+            q->qmin[a] = 0, q->qmax[a] = q->extent > 0 ? (double)position_step(hi[a], lo[a], q->extent, q->steps) : 0;
+    }
+}
+
+/* Pass 1b, positions of vertices from..to-1 on the grid. The division is done as a product
+ * by its inverse; a result within 1e-6 of a half step, where the two could round apart, is
+ * redone as the division. */
+static void quantize_positions(const iso_mesh *mesh, const quantized *q, void *out, size_t from, size_t to)
+{
+    const float *p = mesh->positions;
+    if (q->float_positions) {
+        memcpy((float *)out + 3 * from, p + 3 * from, (to - from) * 12);
+        return;
+    }
+    uint16_t *k = out;
+    const double extent = q->extent, steps = q->steps, inverse = extent > 0 ? steps / extent : 0;
+    for (size_t i = from; i < to; i++) {
         for (int a = 0; a < 3; a++) {
-            double t = extent > 0 ? ((double)p[3 * i + a] - lo[a]) / extent * steps : 0;
-            long k = round_half_away(t);
-            k = k < 0 ? 0 : k > (long)steps ? (long)steps : k;
-            out[4 * i + a] = (uint16_t)k;
-            kmin[a] = k < kmin[a] ? k : kmin[a];
-            kmax[a] = k > kmax[a] ? k : kmax[a];
+            float lo = q->origin[a];
+            double t = ((double)p[3 * i + a] - lo) * inverse; /* >= 0 */
+            double half = t - (double)(long)t - 0.5;
+            long r = fabs(half) < 1e-6 ? position_step(p[3 * i + a], lo, extent, steps) : (long)(t + 0.5);
+            k[4 * i + a] = (uint16_t)(r > (long)steps ? (long)steps : r);
         }
-        out[4 * i + 3] = 0;
+        k[4 * i + 3] = 0;
     }
-    for (int a = 0; a < 3; a++)
-        q->qmin[a] = (double)kmin[a], q->qmax[a] = (double)kmax[a];
-    return 0;
 }
 
-/* Pass 1, normals: int8 (stride 4) up to 8 bits, else int16 (stride 8) rounded to qn bits. */
-static int quantize_normals(const iso_mesh *mesh, int bits, quantized *q)
+/* Pass 1b, normals of vertices from..to-1: int8 (stride 4) up to 8 bits, else int16
+ * (stride 8) rounded to qn bits: round(x * max / grain) * grain, the grain a power of two
+ * (so dividing by it is multiplying by its exact inverse). */
+static void quantize_normals(const iso_mesh *mesh, int bits, void *out, size_t from, size_t to)
 {
-    size_t n = mesh->vertex_count;
-    view *v = &q->views[VIEW_NORMAL];
-    v->count = n;
-    int wide = bits > 8;
-    q->normal_type = wide ? PROTO_GLTF_SHORT : PROTO_GLTF_BYTE;
-    v->stride = wide ? 8 : 4;
-    v->data = malloc(n * v->stride);
-    if (!v->data)
-        return ISO_E_NOMEM;
-    double max = wide ? 32767 : 127;
-    long grain = wide ? 1L << (16 - bits) : 1, top = (long)max;
-    for (size_t i = 0; i < n; i++)
-        for (int a = 0; a < 4; a++) {
-            double x = a < 3 ? mesh->normals[3 * i + a] : 0;
-            long k = round_half_away(x * max / (double)grain) * grain;
-            k = k > top ? top : k < -top ? -top : k;
-            if (wide)
-                ((int16_t *)v->data)[4 * i + a] = (int16_t)k;
-            else
-                ((int8_t *)v->data)[4 * i + a] = (int8_t)k;
+    const float *x = mesh->normals;
+    const int wide = bits > 8;
+    const double max = wide ? 32767 : 127;
+    const long grain = wide ? 1L << (16 - bits) : 1, top = (long)max;
+    const double inverse = 1.0 / (double)grain;
+    if (wide) {
+        int16_t *k = out;
+        for (size_t i = from; i < to; i++) {
+            for (int a = 0; a < 3; a++) {
+                long r = round_half_away((double)x[3 * i + a] * max * inverse) * grain;
+                k[4 * i + a] = (int16_t)(r > top ? top : r < -top ? -top : r);
+            }
+            k[4 * i + 3] = 0;
         }
-    return 0;
+    } else {
+        int8_t *k = out;
+        for (size_t i = from; i < to; i++) {
+            for (int a = 0; a < 3; a++) {
+                long r = round_half_away((double)x[3 * i + a] * max);
+                k[4 * i + a] = (int8_t)(r > top ? top : r < -top ? -top : r);
+            }
+            k[4 * i + 3] = 0;
+        }
+    }
 }
 
-/* Pass 2 for one view: its compressed bytes into a buffer of their own (malloc'd). */
-static int encode_view(const quantized *q, view *v, unsigned char **out)
+/* Pass 2 for one view: its compressed bytes at v->packed (v->bound bytes there). */
+static void encode_view(view *v)
 {
-    size_t bound = v->triangles ? meshopt_encodeIndexBufferBound(v->count, q->views[VIEW_POSITION].count)
-                                : meshopt_encodeVertexBufferBound(v->count, v->stride);
-    *out = malloc(bound);
-    if (!*out)
-        return ISO_E_NOMEM;
-    v->packed_length = v->triangles ? meshopt_encodeIndexBuffer(*out, bound, v->data, v->count)
-                                    : meshopt_encodeVertexBuffer(*out, bound, v->data, v->count, v->stride);
-    assert(v->packed_length > 0); /* the bounds above are the codecs' own */
-    return 0;
+    v->packed_length = v->triangles ? proto_meshopt_encode_indices(v->packed, v->bound, v->data, v->count)
+                                    : meshopt_encodeVertexBuffer(v->packed, v->bound, v->data, v->count, v->stride);
+    assert(v->packed_length > 0); /* the bounds are the codecs' own */
 }
 
-/* Passes 1 and 2 on up to two threads: the indices on one, the vertices (quantized, then
- * encoded) on the other. */
+/* Passes 1b and 2 on up to two threads: each quantizes its share of the vertices; then
+ * one encodes the vertex streams and the other the indices (the longer of the two). */
 typedef struct pack_job {
     const iso_mesh *mesh;
     const proto_encode_options *opt;
     quantized *q;
-    unsigned char *packed[VIEW_COUNT];
-    int rc[2];
+    void *positions, *normals;       /* the quantized data the views read */
 } pack_job;
 
-static int pack_vertices(pack_job *job)
-{
-    quantized *q = job->q;
-    int rc = quantize_positions(job->mesh, job->opt->position_bits, q);
-    if (!rc)
-        rc = encode_view(q, &q->views[VIEW_POSITION], &job->packed[VIEW_POSITION]);
-    if (!rc && q->normals)
-        rc = quantize_normals(job->mesh, job->opt->normal_bits, q);
-    if (!rc && q->normals)
-        rc = encode_view(q, &q->views[VIEW_NORMAL], &job->packed[VIEW_NORMAL]);
-    return rc;
-}
-
-static void pack_share(void *context, int t, int threads)
+static void quantize_share(void *context, int t, int threads)
 {
     pack_job *job = context;
-    if (t == 0)
-        job->rc[0] = pack_vertices(job);
-    if (t == threads - 1)
-        job->rc[1] = encode_view(job->q, &job->q->views[VIEW_INDEX], &job->packed[VIEW_INDEX]);
+    size_t n = job->mesh->vertex_count, from = n * (size_t)t / (size_t)threads,
+           to = n * (size_t)(t + 1) / (size_t)threads;
+    quantize_positions(job->mesh, job->q, job->positions, from, to);
+    if (job->q->normals)
+        quantize_normals(job->mesh, job->opt->normal_bits, job->normals, from, to);
 }
 
-/* Joins the views' compressed bytes into one buffer, each 4-byte aligned, and lays out the
- * fallback buffer. */
-static int join(quantized *q, unsigned char *const packed[VIEW_COUNT], unsigned char **out, size_t *out_size)
+static void encode_share(void *context, int t, int threads)
 {
-    size_t total = 0, offset = 0;
-    for (int i = 0; i < VIEW_COUNT; i++)
-        if (packed[i])
-            total += proto_glb_pad4(q->views[i].packed_length);
-    unsigned char *buf = malloc(total ? total : 1);
-    if (!buf)
-        return ISO_E_NOMEM;
-    size_t used = 0;
+    pack_job *job = context;
+    if (t == 0) {
+        encode_view(&job->q->views[VIEW_POSITION]);
+        if (job->q->normals)
+            encode_view(&job->q->views[VIEW_NORMAL]);
+    }
+    if (t == threads - 1)
+        encode_view(&job->q->views[VIEW_INDEX]);
+}
+
+/* Lays out the views' compressed bytes in the BIN chunk, each 4-byte aligned, and the
+ * fallback buffer; returns the BIN chunk's size. */
+static size_t layout(quantized *q)
+{
+    size_t offset = 0, used = 0;
     for (int i = 0; i < VIEW_COUNT; i++) {
         view *v = &q->views[i];
-        if (!packed[i])
+        if (!v->packed)
             continue;
         v->offset = offset;
         v->length = v->count * v->stride;
         offset += proto_glb_pad4(v->length);
         v->packed_offset = used;
-        memcpy(buf + used, packed[i], v->packed_length);
-        used += v->packed_length;
-        while (used % 4)
-            buf[used++] = 0;
+        used += proto_glb_pad4(v->packed_length);
     }
-    *out = buf;
-    *out_size = used;
-    return 0;
-}
-
-/* Passes 1 and 2: the BIN chunk's bytes. */
-static int pack(const iso_mesh *mesh, const proto_encode_options *opt, quantized *q, unsigned char **out,
-                size_t *out_size)
-{
-    pack_job job = {.mesh = mesh, .opt = opt, .q = q};
-    int threads = iso_parallel_threads(opt->threads);
-    if (mesh->triangle_count < MESHOPT_TRIANGLES_PER_THREAD)
-        threads = 1;
-    iso_parallel_run(threads > 1 ? 2 : 1, pack_share, &job);
-    int rc = job.rc[0] ? job.rc[0] : job.rc[1];
-    if (!rc)
-        rc = join(q, job.packed, out, out_size);
-    for (int i = 0; i < VIEW_COUNT; i++)
-        free(job.packed[i]);
-    return rc;
+    return used;
 }
 
 static void json_view(proto_glb_json *j, const view *v, int target)
@@ -300,6 +274,23 @@ static void json_mesh(proto_glb_json *j, const quantized *q, size_t bin_size)
                        bin_size, last->offset + proto_glb_pad4(last->length));
 }
 
+/* Each view's codec bound, and where in the glb's buffer (after room for the container's
+ * head) its codec writes. Returns the buffer's size. */
+static size_t plan_buffer(quantized *q, const proto_encode_options *opt)
+{
+    view *pos = &q->views[VIEW_POSITION], *nrm = &q->views[VIEW_NORMAL], *idx = &q->views[VIEW_INDEX];
+    pos->stride = opt->position_bits > MESHOPT_POSITION_BITS_MAX ? 12 : 8;
+    nrm->stride = opt->normal_bits > 8 ? 8 : 4;
+    pos->bound = meshopt_encodeVertexBufferBound(pos->count, pos->stride);
+    nrm->bound = q->normals ? meshopt_encodeVertexBufferBound(nrm->count, nrm->stride) : 0;
+    idx->bound = meshopt_encodeIndexBufferBound(idx->count, pos->count);
+    size_t at = PROTO_GLB_HEAD_MAX;
+    for (int i = 0; i < VIEW_COUNT; i++)
+        if (q->views[i].bound)
+            at += q->views[i].bound + 4; /* a view padded to 4 never reaches the next */
+    return at;
+}
+
 int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *opt,
                              unsigned char **out, size_t *out_size, iso_error *err)
 {
@@ -324,24 +315,62 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
         proto_glb_json_empty(&json);
         return proto_glb_write(&json, NULL, 0, out, out_size, err);
     }
-    const int normals = mesh->normals != NULL;
-    quantized q = {.normals = normals};
+    quantized q = {.normals = mesh->normals != NULL};
     q.index_type = mesh->vertex_count <= UINT16_MAX ? PROTO_GLTF_UNSIGNED_SHORT : PROTO_GLTF_UNSIGNED_INT;
+    q.views[VIEW_POSITION].count = q.views[VIEW_NORMAL].count = mesh->vertex_count;
     q.views[VIEW_INDEX] = (view){.data = mesh->indices, .count = 3 * mesh->triangle_count,
                                  .stride = q.index_type == PROTO_GLTF_UNSIGNED_SHORT ? 2 : 4,
                                  .triangles = 1};
-    unsigned char *bin = NULL;
-    size_t bin_size = 0;
-    rc = pack(mesh, opt, &q, &bin, &bin_size);
-    if (rc) {
-        quantized_free(&q);
-        return iso_error_set(err, rc, "no memory to encode a glb of %zu vertices", mesh->vertex_count);
+    /* One buffer for the glb: the codecs write into it where plan_buffer says, then the
+     * streams move down behind the head and the rest is given back. */
+    size_t capacity = plan_buffer(&q, opt);
+    unsigned char *buf = malloc(capacity);
+    size_t position_bytes = mesh->vertex_count * q.views[VIEW_POSITION].stride;
+    unsigned char *vertex_data = malloc(position_bytes + mesh->vertex_count * q.views[VIEW_NORMAL].stride);
+    if (!buf || !vertex_data) {
+        free(buf);
+        free(vertex_data);
+        return iso_error_set(err, ISO_E_NOMEM, "no memory to encode a glb of %zu vertices", mesh->vertex_count);
     }
+    q.views[VIEW_POSITION].data = vertex_data;
+    q.views[VIEW_NORMAL].data = vertex_data + position_bytes;
+    q.normal_type = opt->normal_bits > 8 ? PROTO_GLTF_SHORT : PROTO_GLTF_BYTE;
+    size_t at = PROTO_GLB_HEAD_MAX;
+    for (int i = 0; i < VIEW_COUNT; i++)
+        if (q.views[i].bound) {
+            q.views[i].packed = buf + at;
+            at += q.views[i].bound + 4;
+        }
+    pack_job job = {.mesh = mesh, .opt = opt, .q = &q, .positions = vertex_data,
+                    .normals = vertex_data + position_bytes};
+    int threads = iso_parallel_threads(opt->threads);
+    if (mesh->triangle_count < MESHOPT_TRIANGLES_PER_THREAD)
+        threads = 1;
+    position_grid(mesh, opt->position_bits, &q);
+    iso_parallel_run(threads, quantize_share, &job);
+    iso_parallel_run(threads > 1 ? 2 : 1, encode_share, &job);
+    free(vertex_data);
+    size_t bin_size = layout(&q), size;
     json_mesh(&json, &q, bin_size);
-    rc = proto_glb_write(&json, bin, bin_size, out, out_size, err);
-    free(bin);
-    quantized_free(&q);
-    return rc;
+    rc = proto_glb_size(&json, bin_size, &size, err);
+    if (rc) {
+        free(buf);
+        return rc;
+    }
+    size_t head = proto_glb_head(&json, bin_size, buf);
+    for (int i = 0; i < VIEW_COUNT; i++) {
+        view *v = &q.views[i];
+        if (!v->packed)
+            continue;
+        unsigned char *to = buf + head + v->packed_offset;
+        memmove(to, v->packed, v->packed_length);
+        memset(to + v->packed_length, 0, proto_glb_pad4(v->packed_length) - v->packed_length);
+    }
+    assert(head + bin_size == size);
+    unsigned char *shrunk = realloc(buf, size);
+    *out = shrunk ? shrunk : buf;
+    *out_size = size;
+    return 0;
 }
 
 int proto_glb_meshopt_gzip_pieces(const unsigned char *glb, size_t size,

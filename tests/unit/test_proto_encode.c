@@ -13,6 +13,7 @@
 #include "check.h"
 #include "draco_shim.h"
 #include "encode.h"
+#include "glb_meshopt_index.h"
 
 /* ---- helpers ---- */
 
@@ -1319,6 +1320,24 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
         }
     CHECKF(qp > 16 ? worst == 0 : worst <= scale[0] * 0.5001 + 1e-5, "qp %d: position off by %g, step %g",
            qp, worst, scale[0]);
+    /* Exactly Draco's grid: lround((p - lo) / extent * (2^qp - 1)) on the bounding cube. */
+    if (qp <= 16) {
+        float blo[3], bhi[3];
+        for (int a = 0; a < 3; a++) {
+            blo[a] = bhi[a] = m->positions[a];
+            for (size_t v = 1; v < nv; v++)
+                blo[a] = fminf(blo[a], m->positions[3 * v + a]), bhi[a] = fmaxf(bhi[a], m->positions[3 * v + a]);
+        }
+        double extent = fmax(fmax((double)bhi[0] - blo[0], (double)bhi[1] - blo[1]), (double)bhi[2] - blo[2]);
+        double steps = ldexp(1, qp) - 1;
+        size_t off_grid = 0;
+        for (size_t v = 0; v < nv; v++)
+            for (int a = 0; a < 3; a++) {
+                long want = extent > 0 ? lround(((double)m->positions[3 * v + a] - blo[a]) / extent * steps) : 0;
+                off_grid += ((uint16_t *)pos)[4 * v + a] != want;
+            }
+        CHECKF(off_grid == 0, "qp %d: %zu components off the grid", qp, off_grid);
+    }
     double amin[3], amax[3];
     CHECK(json_vec3_of(json, "\"min\":[", amin) == 0 && json_vec3_of(json, "\"max\":[", amax) == 0);
     for (int a = 0; a < 3; a++)
@@ -1327,12 +1346,20 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
     if (normals) {
         CHECK_EQ(ns, qn > 8 ? 8 : 4);
         double step = qn > 8 ? ldexp(1, 16 - qn) / 32767 : 1.0 / 127, off = 0;
+        size_t off_grid = 0;
         for (size_t v = 0; v < nn; v++)
             for (int a = 0; a < 3; a++) {
                 double x = qn > 8 ? ((int16_t *)nrm)[4 * v + a] / 32767.0 : ((int8_t *)nrm)[4 * v + a] / 127.0;
                 off = fmax(off, fabs(x - m->normals[3 * v + a]));
+                long grain = qn > 8 ? 1L << (16 - qn) : 1;
+                long top = qn > 8 ? 32767 : 127;
+                long want = lround((double)m->normals[3 * v + a] * (double)top / (double)grain) * grain;
+                want = want > top ? top : want < -top ? -top : want;
+                long got = qn > 8 ? ((int16_t *)nrm)[4 * v + a] : ((int8_t *)nrm)[4 * v + a];
+                off_grid += got != want;
             }
         CHECKF(off <= step * 0.5001 + 1e-6, "qn %d: normal off by %g, step %g", qn, off, step);
+        CHECKF(off_grid == 0, "qn %d: %zu components not lround(x * max / grain) * grain within +-max", qn, off_grid);
     }
 decoded:
     free(pos);
@@ -1421,6 +1448,74 @@ static void test_gzip_pieces(void)
     }
     free(glb);
     iso_mesh_free(&m);
+}
+
+/* proto_meshopt_encode_indices against meshoptimizer's own encoder (version 0): the same
+ * bytes for the torus (edge FIFO hits), triangle soups of near and far indices (misses,
+ * free indices of one to five varint bytes, fans that reuse a vertex past the FIFO's 16),
+ * degenerate and repeated triangles, and no triangles; and 0 for a buffer too small. */
+static void check_index_codec(const uint32_t *idx, size_t count, size_t vertices, const char *what)
+{
+    size_t bound = meshopt_encodeIndexBufferBound(count, vertices);
+    unsigned char *want = malloc(bound), *got = malloc(bound);
+    CHECK(want && got);
+    if (want && got) {
+        size_t n = meshopt_encodeIndexBuffer(want, bound, idx, count);
+        size_t m = proto_meshopt_encode_indices(got, bound, idx, count);
+        CHECKF(n > 0 && m == n && !memcmp(want, got, n), "%s: %zu bytes, the library's %zu", what, m, n);
+        CHECK_EQ(proto_meshopt_encode_indices(got, count / 3 + 16, idx, count), 0);
+    }
+    free(want);
+    free(got);
+}
+
+static void test_meshopt_index_codec(void)
+{
+    meshopt_encodeIndexVersion(0);
+    iso_mesh m;
+    make_torus(&m, 350, 200, 0);
+    check_index_codec(m.indices, 3 * m.triangle_count, m.vertex_count, "torus");
+    /* The torus's triangles in reverse, and every third one rotated: other corners start. */
+    size_t count = 3 * m.triangle_count;
+    uint32_t *idx = malloc(count * sizeof *idx);
+    CHECK(idx != NULL);
+    if (idx) {
+        for (size_t t = 0; t < m.triangle_count; t++)
+            for (int c = 0; c < 3; c++)
+                idx[3 * t + c] = m.indices[3 * (m.triangle_count - 1 - t) + (c + t) % 3];
+        check_index_codec(idx, count, m.vertex_count, "torus reversed and rotated");
+    }
+    iso_mesh_free(&m);
+    free(idx);
+    const size_t soup = 60000;
+    idx = malloc(3 * soup * sizeof *idx);
+    CHECK(idx != NULL);
+    if (!idx)
+        return;
+    const uint32_t spans[] = {8, 20, 40, 300, 70000, 1u << 30};
+    for (int s = 0; s < 6; s++) {
+        uint32_t base = 0;
+        for (size_t t = 0; t < soup; t++) {
+            uint32_t span = spans[s];
+            if (t % 97 == 0)
+                base = rng() % (span < 1000 ? 1000 : span);
+            for (int c = 0; c < 3; c++)
+                idx[3 * t + c] = base + rng() % span;
+            if (t % 13 == 0) /* degenerate */
+                idx[3 * t + 1] = idx[3 * t];
+            if (t % 29 == 1) /* repeated */
+                memcpy(idx + 3 * t, idx + 3 * t - 3, 3 * sizeof *idx);
+            if (t % 7 == 2) /* a neighbour across an edge of the last triangle */
+                idx[3 * t] = idx[3 * t - 2], idx[3 * t + 1] = idx[3 * t - 3];
+            if (t % 5 == 3) /* a fan around a vertex 20 triangles back */
+                idx[3 * t] = idx[3 * t - 60];
+        }
+        char what[64];
+        snprintf(what, sizeof what, "soup of span %u", spans[s]);
+        check_index_codec(idx, 3 * soup, (size_t)(1u << 30) + 70000, what);
+    }
+    check_index_codec(idx, 0, 1, "no triangles");
+    free(idx);
 }
 
 static void test_glb_meshopt_refuses_and_empties(void)
@@ -1538,6 +1633,7 @@ int main(void)
     CHECK_RUN(test_draco_decoder_survives_corruption);
     CHECK_RUN(test_glb_container);
     CHECK_RUN(test_glb_meshopt_round_trip);
+    CHECK_RUN(test_meshopt_index_codec);
     CHECK_RUN(test_glb_meshopt_refuses_and_empties);
     CHECK_RUN(test_gzip_pieces);
     CHECK_RUN(test_empty_mesh_gives_valid_files);
