@@ -7,7 +7,9 @@
  *      and mapped back to the chain's (so that every level indexes the one position array);
  *   3. measure: each level's distance from level 0 (iso_mesh_distance_between, samples three
  *      voxels apart, against level 0's grid built once for all levels), so the answers
- *      below rest on measurements, not on estimates. */
+ *      below rest on measurements, not on estimates; a level's triangles left as they were
+ *      in the level before keep that level's bounds on their distance, so that the search
+ *      for the largest distance skips those that cannot raise it (distance.h). */
 #include "distance.h"
 
 #include <math.h>
@@ -121,9 +123,38 @@ static int keep_volume(iso_mesh_chain *chain, int k, iso_mesh *level, iso_error 
     return 0;
 }
 
-/* PASS 2 and 3 for level k. */
+/* PASS 3 for level k (level, moved or a view): its distance from level 0. *bound comes in
+ * per triangle of level k - 1 (NULL: nothing known; level 1's prior is level 0 itself)
+ * and leaves per triangle of level k (NULL when it was moved, so that its samples are not
+ * level k + 1's): what the measure of the next level reuses (distance.h). */
+static int measure_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int k,
+                         const iso_mesh *level, int threads, double **bound, iso_error *err)
+{
+    const iso_mesh_chain_level *prev = &chain->level[k - 1];
+    iso_mesh_chain_level *lv = &chain->level[k];
+    iso_mesh_distance_reuse reuse = {0};
+    double *next = lv->offset == 0 ? malloc((lv->triangle_count + 1) * sizeof *next) : NULL;
+    if (next && (k == 1 || *bound))
+        reuse = (iso_mesh_distance_reuse){.prior_indices = prev->indices,
+                                          .prior_triangles = prev->triangle_count,
+                                          .prior_bound = k == 1 ? NULL : *bound};
+    reuse.bound = next;
+    iso_mesh exact = view_of(chain, 0);
+    int rc = iso_mesh_distance_between(&exact, exact_grid, level, NULL,
+                                       ISO_CHAIN_SPACING_VOXELS * chain->voxel_size,
+                                       ISO_DISTANCE_SAMPLES, threads, &reuse, &lv->distance, err);
+    free(*bound);
+    if (rc) {
+        free(next);
+        next = NULL;
+    }
+    *bound = next;
+    return rc;
+}
+
+/* PASS 2 and 3 for level k (*bound: measure_level's). */
 static int add_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int k, int threads,
-                     unsigned char *seen, iso_error *err)
+                     unsigned char *seen, double **bound, iso_error *err)
 {
     const iso_mesh_chain_level *prev = &chain->level[k - 1];
     iso_mesh_chain_level *lv = &chain->level[k];
@@ -154,13 +185,11 @@ static int add_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int
     lv->nonmanifold_edges = pinches.pinch_edges;
     lv->pinch_vertices = pinches.pinch_vertices;
     lv->edges = pinches.edges;
-    iso_mesh exact = view_of(chain, 0), level = view_of(chain, k);
+    iso_mesh level = view_of(chain, k);
     double measure_start = iso_clock_ms();
     if ((rc = keep_volume(chain, k, &level, err)))
         return rc;
-    rc = iso_mesh_distance_between(&exact, exact_grid, &level, NULL,
-                                   ISO_CHAIN_SPACING_VOXELS * chain->voxel_size,
-                                   ISO_DISTANCE_SAMPLES, threads, &lv->distance, err);
+    rc = measure_level(chain, exact_grid, k, &level, threads, bound, err);
     if (lv->offset != 0)
         iso_mesh_free(&level);
     lv->simplify_ms = r.ms;
@@ -224,11 +253,13 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
                  ? iso_error_set(err, ISO_E_NOMEM, "chain: no memory for the grid of %zu triangles",
                                  exact->triangle_count)
                  : 0;
+    double *bound = NULL;
     for (int k = 1; k <= ISO_CHAIN_LEVELS && !rc; k++) {
         if ((exact->triangle_count >> k) < 1)
             break;
-        rc = add_level(c, grid, k, threads, seen, err);
+        rc = add_level(c, grid, k, threads, seen, &bound, err);
     }
+    free(bound);
     iso_mesh_grid_destroy(grid);
     free(seen);
     if (rc) {

@@ -22,7 +22,12 @@
  *   5. maximum: every sample of pass 2 not measured in pass 4, searched only until some
  *      triangle lies within M (the nearest triangle of the previous sample is tried first):
  *      such a sample cannot raise the maximum; any other gets its exact distance and
- *      raises M. So the maximum is exact over all samples of both kinds;
+ *      raises M. So the maximum is exact over all samples of both kinds. With an earlier
+ *      measure to reuse (iso_mesh_distance_reuse: a chain's previous level), a source
+ *      triangle identical to one of the earlier mesh's (same indices, same order, same
+ *      positions, so the same samples) whose samples were all found within some distance
+ *      u <= M is skipped whole: none of them can raise M. One whose samples lie on a
+ *      target triangle of the same corners tries that triangle first;
  *   6. percentile: the smallest distance d such that percentile samples of total weight at
  *      least 99% of all lie within d (a histogram finds d's bin, the bin is sorted), and
  *      their weighted mean.
@@ -43,7 +48,10 @@
 #define HISTOGRAM_BINS 65536
 #define COARSE 8      /* the far grid's cell side, in fine cells */
 #define FINE_RINGS 3  /* fine rings searched before the coarse grid takes over */
+#define PROBE_CELLS 3 /* the widest box of fine cells PASS 5 probes first, a side */
 #define NO_TRIANGLE UINT32_MAX
+#define KNOWN_NONE (-1.0)
+#define KNOWN_OWN (-2.0)
 
 typedef struct grid {
     double lo[3], h;
@@ -290,21 +298,27 @@ static void corners_of(const float *f, double c[3][3])
         c[k][0] = f[3 * k], c[k][1] = f[3 * k + 1], c[k][2] = f[3 * k + 2];
 }
 
+/* The squared distance from p to the box of triangle f (its corners, 9 floats). */
+static double box_gap_sq(const float *f, const double p[3])
+{
+    double gap = 0;
+    for (int a = 0; a < 3; a++) {
+        float x = f[a], y = f[3 + a], z = f[6 + a];
+        double below = (x < y ? (x < z ? x : z) : (y < z ? y : z)) - p[a];
+        double above = p[a] - (x > y ? (x > z ? x : z) : (y > z ? y : z));
+        double d = below > 0 ? below : above > 0 ? above : 0;
+        gap += d * d;
+    }
+    return gap;
+}
+
 /* The triangles of cell `at`, each skipped when its box is no nearer than the best. */
 static void search_cell(const grid *g, const iso_mesh_grid *ix, size_t at, const double p[3],
                         search *s)
 {
     for (uint32_t e = g->start[at]; e < g->start[at + 1]; e++) {
         const float *f = ix->corners + 9 * (size_t)g->items[e];
-        double gap = 0;
-        for (int a = 0; a < 3; a++) {
-            float x = f[a], y = f[3 + a], z = f[6 + a];
-            double below = (x < y ? (x < z ? x : z) : (y < z ? y : z)) - p[a];
-            double above = p[a] - (x > y ? (x > z ? x : z) : (y > z ? y : z));
-            double d = below > 0 ? below : above > 0 ? above : 0;
-            gap += d * d;
-        }
-        if (gap >= s->best)
+        if (box_gap_sq(f, p) >= s->best)
             continue;
         double tc[3][3];
         corners_of(f, tc);
@@ -397,6 +411,44 @@ static void nearest(const iso_mesh_grid *ix, const double p[3], double stop, sea
         search_rings(&ix->coarse, ix, p, INT32_MAX, s);
 }
 
+/* PASS 5's first try: any triangle within `stop` (squared) of p, among the fine cells the
+ * box p +- sqrt(stop) covers (when it covers at most PROBE_CELLS a side), p's own cell
+ * first, trying only triangles whose boxes lie within `stop`. Returns 1 with s holding
+ * the one found, else 0 with s untouched: the search must then find the nearest. */
+static int probe(const iso_mesh_grid *ix, const double p[3], double stop, search *s)
+{
+    const grid *g = &ix->fine;
+    double r = sqrt(stop);
+    int lo[3], hi[3], c[3];
+    for (int a = 0; a < 3; a++) {
+        lo[a] = cell_of(g, p[a] - r, a), hi[a] = cell_of(g, p[a] + r, a), c[a] = cell_of(g, p[a], a);
+        if (hi[a] - lo[a] >= PROBE_CELLS)
+            return 0;
+    }
+    for (int pass = 0; pass < 2; pass++)
+        for (int k = lo[2]; k <= hi[2]; k++)
+            for (int j = lo[1]; j <= hi[1]; j++)
+                for (int i = lo[0]; i <= hi[0]; i++) {
+                    int cell[3] = {i, j, k}, own = i == c[0] && j == c[1] && k == c[2];
+                    size_t at = cell_index(g, i, j, k);
+                    if (own != (pass == 0) || cell_gap_sq(g, p, cell) > stop)
+                        continue;
+                    for (uint32_t e = g->start[at]; e < g->start[at + 1]; e++) {
+                        const float *f = ix->corners + 9 * (size_t)g->items[e];
+                        if (box_gap_sq(f, p) > stop)
+                            continue;
+                        double tc[3][3];
+                        corners_of(f, tc);
+                        double d = point_triangle_sq(p, tc);
+                        if (d <= stop) {
+                            s->best = d, s->triangle = g->items[e];
+                            return 1;
+                        }
+                    }
+                }
+    return 0;
+}
+
 /* How many sub-triangles a side of triangle t is cut into (PASS 2). */
 static int subdivisions(const double c[3][3], double spacing)
 {
@@ -427,6 +479,10 @@ typedef struct direction {
     const double *area;       /* per source triangle: the area before it (cap + 1 entries) */
     const uint32_t *vertices; /* the source's used vertices not on the target (PASS 2) */
     size_t vertex_count;
+    const double *known;      /* per source triangle, or NULL: KNOWN_NONE, KNOWN_OWN (its
+                               * samples lie on the target's triangle of the same
+                               * corners), or a squared bound of its samples' distances */
+    double *bound;            /* out per source triangle, or NULL: the same, found here */
     size_t drawn;             /* PASS 3 points drawn (0: the centroids are the samples) */
     float *dist, *weight;     /* per percentile sample */
     double start_max;         /* the largest percentile sample's distance (PASS 5) */
@@ -515,19 +571,23 @@ static void measure_percentile(void *context, int part, int parts)
         triangle_corners(m, t, c);
         int n = (int)lround(sqrt((double)(d->first[t + 1] - d->first[t])));
         int count = centroids(c, n, pts);
-        double w = triangle_area(c) / ((double)n * n);
+        double w = triangle_area(c) / ((double)n * n), bound = 0;
         for (int k = 0; k < count; k++) {
             search s = {INFINITY, NO_TRIANGLE, 0};
             nearest(d->dst, pts[k], 0, &s);
             d->dist[d->first[t] + (size_t)k] = (float)sqrt(s.best);
             d->weight[d->first[t] + (size_t)k] = (float)w;
+            bound = fmax(bound, s.best);
         }
+        if (d->bound)
+            d->bound[t] = bound;
     }
     free(pts);
 }
 
-/* PASS 5 for one point: raises *max (squared) when p lies farther from the target. */
-static void raise_max(const iso_mesh_grid *dst, const double p[3], uint32_t *hint, double *max)
+/* PASS 5 for one point: raises *max (squared) when p lies farther from the target.
+ * Returns the square of a distance p does not exceed (its own when it raised *max). */
+static double raise_max(const iso_mesh_grid *dst, const double p[3], uint32_t *hint, double *max)
 {
     search s = {INFINITY, NO_TRIANGLE, 0};
     if (*hint != NO_TRIANGLE) {
@@ -535,12 +595,36 @@ static void raise_max(const iso_mesh_grid *dst, const double p[3], uint32_t *hin
         corners_of(dst->corners + 9 * (size_t)*hint, tc);
         s.best = point_triangle_sq(p, tc), s.triangle = *hint;
         if (s.best <= *max)
-            return;
+            return s.best;
+    }
+    if (probe(dst, p, *max, &s)) {
+        *hint = s.triangle;
+        return s.best;
     }
     nearest(dst, p, *max, &s);
     *hint = s.triangle;
     if (s.best > *max)
         *max = s.best;
+    return s.best;
+}
+
+/* PASS 5 for source triangle t's centroids (pts: room for them). A triangle whose known
+ * bound is within *max cannot raise it and is skipped; one whose samples lie on the
+ * target's triangle of the same corners tries that triangle first. Returns the square of
+ * a distance none of its samples exceeds. */
+static double raise_max_triangle(const direction *d, size_t t, double (*pts)[3], uint32_t *hint,
+                                 double *max)
+{
+    double known = d->known ? d->known[t] : KNOWN_NONE, bound = 0, c[3][3];
+    if (known >= 0 && known <= *max)
+        return known;
+    triangle_corners(d->src, t, c);
+    int count = centroids(c, (int)lround(sqrt((double)(d->first[t + 1] - d->first[t]))), pts);
+    for (int k = 0; k < count; k++) {
+        double own = known == KNOWN_OWN ? point_triangle_sq(pts[k], c) : INFINITY;
+        bound = fmax(bound, own <= *max ? own : raise_max(d->dst, pts[k], hint, max));
+    }
+    return bound;
 }
 
 /* PASS 5 on one thread's share: the centroids (when pass 3 drew its own points) and the
@@ -555,12 +639,9 @@ static void measure_max(void *context, int part, int parts)
     size_t t0 = m->triangle_count * (size_t)part / (size_t)parts;
     size_t t1 = m->triangle_count * (size_t)(part + 1) / (size_t)parts;
     for (size_t t = t0; pts && t < t1; t++) {
-        double c[3][3];
-        triangle_corners(m, t, c);
-        int n = (int)lround(sqrt((double)(d->first[t + 1] - d->first[t])));
-        int count = centroids(c, n, pts);
-        for (int k = 0; k < count; k++)
-            raise_max(d->dst, pts[k], &hint, &max);
+        double bound = raise_max_triangle(d, t, pts, &hint, &max);
+        if (d->bound)
+            d->bound[t] = bound;
     }
     size_t v0 = d->vertex_count * (size_t)part / (size_t)parts;
     size_t v1 = d->vertex_count * (size_t)(part + 1) / (size_t)parts;
@@ -680,9 +761,49 @@ static int enumerate(const iso_mesh *src, const iso_mesh *dst, double spacing, s
     return 0;
 }
 
-/* One direction: from src's surface to dst's (its grid given). */
+/* PASS 2 with reuse: per triangle of src, what the prior measure knows of it (the
+ * direction's `known`): a hash of the prior's triangles by their three indices in order.
+ * Returns 0 or ISO_E_NOMEM. */
+static int match_prior(const iso_mesh *src, const iso_mesh *dst, const iso_mesh_distance_reuse *reuse,
+                       double *known)
+{
+    size_t slots = 2;
+    while (slots < 2 * reuse->prior_triangles)
+        slots *= 2;
+    uint32_t *table = malloc(slots * sizeof *table);
+    if (!table)
+        return ISO_E_NOMEM;
+    memset(table, 0xff, slots * sizeof *table);
+    const uint32_t *pi = reuse->prior_indices;
+    for (size_t t = 0; t < reuse->prior_triangles; t++) {
+        size_t at = (size_t)mix(((uint64_t)pi[3 * t] << 32 | pi[3 * t + 1]) ^ mix(pi[3 * t + 2])) & (slots - 1);
+        while (table[at] != UINT32_MAX)
+            at = (at + 1) & (slots - 1);
+        table[at] = (uint32_t)t;
+    }
+    /* Samples lie on the target's triangles only when both share the positions. */
+    int own = !reuse->prior_bound && src->positions == dst->positions;
+    for (size_t t = 0; t < src->triangle_count; t++) {
+        const uint32_t *v = src->indices + 3 * t;
+        size_t at = (size_t)mix(((uint64_t)v[0] << 32 | v[1]) ^ mix(v[2])) & (slots - 1);
+        known[t] = KNOWN_NONE;
+        for (; table[at] != UINT32_MAX; at = (at + 1) & (slots - 1)) {
+            const uint32_t *q = pi + 3 * (size_t)table[at];
+            if (q[0] == v[0] && q[1] == v[1] && q[2] == v[2]) {
+                known[t] = reuse->prior_bound ? reuse->prior_bound[table[at]] : own ? KNOWN_OWN : KNOWN_NONE;
+                break;
+            }
+        }
+    }
+    free(table);
+    return 0;
+}
+
+/* One direction: from src's surface to dst's (its grid given), with what an earlier
+ * measure knows of src's triangles (reuse, or NULL). */
 static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh_grid *dst,
-                   double spacing, size_t cap, int threads, one_way_result *out)
+                   double spacing, size_t cap, int threads, const iso_mesh_distance_reuse *reuse,
+                   one_way_result *out)
 {
     *out = (one_way_result){0};
     if (!src->triangle_count)
@@ -695,18 +816,26 @@ static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh
     double *area = malloc((src->triangle_count + 1) * sizeof *area);
     uint32_t *vertices = NULL;
     float *dist = NULL, *weight = NULL;
+    double *known = NULL;
     size_t vertex_count = 0, used_count = 0;
     int rc = ISO_E_NOMEM;
     if (!first || !area ||
         enumerate(src, dst_mesh, spacing, first, area, &vertices, &vertex_count, &used_count))
+        goto done;
+    if (reuse && reuse->prior_indices &&
+        (!(known = malloc(src->triangle_count * sizeof *known)) || match_prior(src, dst_mesh, reuse, known)))
         goto done;
     size_t centroids_n = first[src->triangle_count];
     size_t drawn = centroids_n > cap && area[src->triangle_count] > 0 ? cap : 0;
     size_t n = drawn ? drawn : centroids_n;
     if (!(dist = malloc((n ? n : 1) * sizeof *dist)) || !(weight = malloc((n ? n : 1) * sizeof *weight)))
         goto done;
+    if (reuse && reuse->bound)
+        for (size_t t = 0; t < src->triangle_count; t++)
+            reuse->bound[t] = INFINITY; /* nothing known until a pass finds it */
     direction d = {.src = src, .dst = dst, .first = first, .area = area, .vertices = vertices,
-                   .vertex_count = vertex_count, .drawn = drawn, .dist = dist, .weight = weight};
+                   .vertex_count = vertex_count, .drawn = drawn, .dist = dist, .weight = weight,
+                   .known = known, .bound = reuse ? reuse->bound : NULL};
     int workers = iso_parallel_threads(threads);
     iso_parallel_run(workers, measure_percentile, &d); /* PASS 3, 4 */
     for (int w = 0; w < workers; w++)
@@ -729,6 +858,7 @@ static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh
 done:
     free(first);
     free(area);
+    free(known);
     free(vertices);
     free(dist);
     free(weight);
@@ -746,7 +876,8 @@ static void union_bounds(const iso_mesh *a, const iso_mesh *b, float lo[3], floa
 
 int iso_mesh_distance_between(const iso_mesh *a, const iso_mesh_grid *ga, const iso_mesh *b,
                               const iso_mesh_grid *gb, double spacing, size_t cap, int threads,
-                              iso_mesh_distance *out, iso_error *err)
+                              const iso_mesh_distance_reuse *reuse, iso_mesh_distance *out,
+                              iso_error *err)
 {
     double start = iso_clock_ms();
     *out = (iso_mesh_distance){0};
@@ -762,8 +893,8 @@ int iso_mesh_distance_between(const iso_mesh *a, const iso_mesh_grid *ga, const 
         (!gb && (rc = iso_mesh_grid_build(b, lo, hi, &own_b))))
         goto done;
     one_way_result ab, ba;
-    if ((rc = one_way(a, b, gb ? gb : own_b, spacing, cap, threads, &ab)) ||
-        (rc = one_way(b, a, ga ? ga : own_a, spacing, cap, threads, &ba)))
+    if ((rc = one_way(a, b, gb ? gb : own_b, spacing, cap, threads, NULL, &ab)) ||
+        (rc = one_way(b, a, ga ? ga : own_a, spacing, cap, threads, reuse, &ba)))
         goto done;
     out->p99_ab = ab.p99, out->max_ab = ab.max, out->samples_a = ab.samples, out->drawn_a = ab.drawn;
     out->p99_ba = ba.p99, out->max_ba = ba.max, out->samples_b = ba.samples, out->drawn_b = ba.drawn;
@@ -789,5 +920,5 @@ int iso_mesh_distance_compute(const iso_mesh *a, const iso_mesh *b, double spaci
                               iso_mesh_distance *out, iso_error *err)
 {
     return iso_mesh_distance_between(a, NULL, b, NULL, spacing, ISO_DISTANCE_SAMPLES, threads,
-                                     out, err);
+                                     NULL, out, err);
 }

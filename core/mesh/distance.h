@@ -15,10 +15,29 @@ int iso_mesh_grid_build(const iso_mesh *mesh, const float lo[3], const float hi[
                         iso_mesh_grid **out);
 void iso_mesh_grid_destroy(iso_mesh_grid *g);
 
+/* What a measure of b against a can take from an earlier measure against the same a, at
+ * the same spacing, of a mesh `prior` over the same positions as b (a chain's previous
+ * level), and leave for the next one. A triangle of b with the same three indices in the
+ * same order as one of prior's has the same samples, so their distances to a are within
+ * that triangle's bound: when the bound is within the largest distance found so far, the
+ * triangle cannot raise the maximum from b to a and is not searched (pass 5). The maximum
+ * stays exact over all samples. */
+typedef struct iso_mesh_distance_reuse {
+    const uint32_t *prior_indices; /* 3 per prior triangle, over b's positions; NULL: none */
+    size_t prior_triangles;
+    const double *prior_bound;     /* per prior triangle, the square of a distance no sample
+                                    * of it exceeds; NULL: prior's triangles are a's own (its
+                                    * samples lie on a: each is tried against its triangle) */
+    double *bound;                 /* out, per triangle of b (NULL: not wanted): the same for
+                                    * this measure, for the next one's prior_bound */
+} iso_mesh_distance_reuse;
+
 /* iso_mesh_distance_compute with a's grid ga and b's grid gb given (either may be NULL:
- * built over both meshes' bounds for the call) and the percentile's sample cap. */
+ * built over both meshes' bounds for the call), the percentile's sample cap, and reuse
+ * (NULL: none). */
 int iso_mesh_distance_between(const iso_mesh *a, const iso_mesh_grid *ga, const iso_mesh *b,
                               const iso_mesh_grid *gb, double spacing, size_t cap, int threads,
-                              iso_mesh_distance *out, iso_error *err);
+                              const iso_mesh_distance_reuse *reuse, iso_mesh_distance *out,
+                              iso_error *err);
 
 #endif

@@ -194,6 +194,40 @@ static int by_distance(const void *pa, const void *pb)
     return (a > b) - (a < b);
 }
 
+/* Triangle t of src cut into k x k similar sub-triangles, k the fewest that make their
+ * sides at most `spacing`: their centroids' distances to dst by brute force, appended to
+ * *s (n of *cap), each weighing its area. */
+static void brute_triangle(const iso_mesh *src, size_t t, const iso_mesh *dst, double spacing,
+                           sample **s, size_t *n, size_t *cap)
+{
+    double c[3][3], u[3], v[3], x[3], longest = 0;
+    corners(src, t, c);
+    for (int e = 0; e < 3; e++) {
+        double side[3];
+        sub(c[(e + 1) % 3], c[e], side);
+        longest = fmax(longest, sqrt(dot3(side, side)));
+    }
+    int k = (int)ceil(longest / spacing);
+    k = k < 1 ? 1 : k;
+    sub(c[1], c[0], u), sub(c[2], c[0], v), cross(u, v, x);
+    double w = 0.5 * sqrt(dot3(x, x)) / (k * k);
+    for (int i = 0; i < k; i++)
+        for (int j = 0; j < k; j++) {
+            /* Sub-triangle (i, j) of the parallelogram grid: two centroids when inside. */
+            for (int down = 0; down < 2; down++) {
+                if (i + j + down >= k)
+                    continue;
+                double a = (i + (down ? 2.0 : 1.0) / 3) / k, b = (j + (down ? 2.0 : 1.0) / 3) / k;
+                double p[3];
+                for (int q = 0; q < 3; q++)
+                    p[q] = c[0][q] + a * u[q] + b * v[q];
+                if (*n == *cap)
+                    *s = realloc(*s, (*cap *= 2) * sizeof **s);
+                (*s)[(*n)++] = (sample){brute_point_mesh(dst, p), w};
+            }
+        }
+}
+
 /* Every sample mesh.h promises (sub-triangle centroids weighing their area, used vertices
  * weighing 0), measured by brute force; the weighted 99th percentile by a full sort, and
  * the share of the weight within distance `within` (returned). */
@@ -204,32 +238,7 @@ static double brute_share(const iso_mesh *src, const iso_mesh *dst, double spaci
     sample *s = malloc(cap * sizeof *s);
     char *used = calloc(src->vertex_count, 1);
     for (size_t t = 0; t < src->triangle_count; t++) {
-        double c[3][3], u[3], v[3], x[3], longest = 0;
-        corners(src, t, c);
-        for (int e = 0; e < 3; e++) {
-            double side[3];
-            sub(c[(e + 1) % 3], c[e], side);
-            longest = fmax(longest, sqrt(dot3(side, side)));
-        }
-        int k = (int)ceil(longest / spacing);
-        k = k < 1 ? 1 : k;
-        sub(c[1], c[0], u), sub(c[2], c[0], v), cross(u, v, x);
-        double w = 0.5 * sqrt(dot3(x, x)) / (k * k);
-        for (int i = 0; i < k; i++)
-            for (int j = 0; j < k; j++) {
-                /* Sub-triangle (i, j) of the parallelogram grid: two centroids when inside. */
-                for (int down = 0; down < 2; down++) {
-                    if (i + j + down >= k)
-                        continue;
-                    double a = (i + (down ? 2.0 : 1.0) / 3) / k, b = (j + (down ? 2.0 : 1.0) / 3) / k;
-                    double p[3];
-                    for (int q = 0; q < 3; q++)
-                        p[q] = c[0][q] + a * u[q] + b * v[q];
-                    if (n == cap)
-                        s = realloc(s, (cap *= 2) * sizeof *s);
-                    s[n++] = (sample){brute_point_mesh(dst, p), w};
-                }
-            }
+        brute_triangle(src, t, dst, spacing, &s, &n, &cap);
         for (int q = 0; q < 3; q++)
             used[src->indices[3 * t + q]] = 1;
     }
@@ -366,8 +375,8 @@ static void test_drawn_percentile_is_within_its_stated_error(void)
     const size_t cap = 1024;
     const double spacing = 1.0 / 64, sd = sqrt(0.99 * 0.01 / (double)cap);
     iso_mesh_distance d, one;
-    CHECK_OK(iso_mesh_distance_between(&a, NULL, &b, NULL, spacing, cap, 0, &d, &err), &err);
-    CHECK_OK(iso_mesh_distance_between(&a, NULL, &b, NULL, spacing, cap, 1, &one, &err), &err);
+    CHECK_OK(iso_mesh_distance_between(&a, NULL, &b, NULL, spacing, cap, 0, NULL, &d, &err), &err);
+    CHECK_OK(iso_mesh_distance_between(&a, NULL, &b, NULL, spacing, cap, 1, NULL, &one, &err), &err);
     CHECK(one.p99_ab == d.p99_ab && one.max_ab == d.max_ab);
     CHECK_EQ(d.drawn_a, cap);
     double p99, max;
@@ -562,6 +571,89 @@ static void test_chain_in_slabs_stays_closed(void)
     iso_vol_destroy(vol);
 }
 
+/* A view of chain level k over the chain's positions (nothing owned). */
+static iso_mesh level_view(const iso_mesh_chain *chain, int k)
+{
+    iso_mesh m;
+    iso_mesh_init(&m);
+    m.positions = chain->positions;
+    m.vertex_count = chain->vertex_count;
+    m.indices = chain->level[k].indices;
+    m.triangle_count = chain->level[k].triangle_count;
+    return m;
+}
+
+/* The reuse between a chain's levels (distance.h), with a cap small enough that the
+ * maximum takes its own pass: level k measured with level k - 1's bounds gives bit for bit
+ * what it gives alone; every bound it leaves is at least its triangle's largest centroid
+ * distance by brute force; some triangles are matched; and a false bound (0 for every
+ * prior triangle) is taken as given for every matched triangle, so the skip is what ran. */
+static void test_reuse_between_levels_changes_nothing(void)
+{
+    iso_error err;
+    iso_mesh exact;
+    iso_volume *vol = field_surface("field:sphere:24", 3.0, &exact);
+    if (!vol)
+        return;
+    iso_mesh_chain *chain = NULL;
+    CHECK_OK(iso_mesh_chain_build(&exact, 1, 1, &chain, &err), &err);
+    if (!chain)
+        return;
+    const size_t cap = 64;
+    const double spacing = 1.5;
+    iso_mesh a = level_view(chain, 0);
+    double *prior = NULL, *zeros = calloc(exact.triangle_count, sizeof *zeros);
+    size_t matched_total = 0, scap = 64;
+    sample *s = malloc(scap * sizeof *s);
+    for (int k = 1; k < chain->levels && !check_failed(); k++) {
+        iso_mesh b = level_view(chain, k), p = level_view(chain, k - 1);
+        double *bound = malloc(b.triangle_count * sizeof *bound);
+        iso_mesh_distance_reuse reuse = {.prior_indices = p.indices, .prior_triangles = p.triangle_count,
+                                         .prior_bound = prior, .bound = bound};
+        iso_mesh_distance alone, with;
+        CHECK_OK(iso_mesh_distance_between(&a, NULL, &b, NULL, spacing, cap, 1, NULL, &alone, &err), &err);
+        CHECK_OK(iso_mesh_distance_between(&a, NULL, &b, NULL, spacing, cap, 1, &reuse, &with, &err), &err);
+        CHECK_EQ(alone.drawn_b, cap);
+        CHECK(alone.p99 == with.p99 && alone.max == with.max && alone.max_ba == with.max_ba &&
+              alone.p99_ba == with.p99_ba && alone.mean == with.mean);
+        for (size_t t = 0; t < b.triangle_count; t++) {
+            size_t n = 0;
+            brute_triangle(&b, t, &a, spacing, &s, &n, &scap);
+            double most = 0;
+            for (size_t i = 0; i < n; i++)
+                most = fmax(most, s[i].d);
+            CHECKF(most <= sqrt(bound[t]) + 1e-6, "level %d triangle %zu: %g past its bound %g", k, t,
+                   most, sqrt(bound[t]));
+            if (check_failed())
+                break;
+        }
+        /* The prior's triangles matched here: those the false bound must reach. */
+        double *told = malloc(b.triangle_count * sizeof *told);
+        reuse.prior_bound = zeros, reuse.bound = told;
+        CHECK_OK(iso_mesh_distance_between(&a, NULL, &b, NULL, spacing, cap, 1, &reuse, &with, &err), &err);
+        size_t matched = 0, zero = 0;
+        for (size_t t = 0; t < b.triangle_count; t++) {
+            int same = 0;
+            for (size_t q = 0; q < p.triangle_count && !same; q++)
+                same = !memcmp(b.indices + 3 * t, p.indices + 3 * q, 3 * sizeof *b.indices);
+            matched += same;
+            zero += same && told[t] == 0;
+        }
+        CHECKF(zero == matched, "level %d: %zu of %zu matched triangles took the given bound", k, zero, matched);
+        matched_total += matched;
+        free(told);
+        free(prior);
+        prior = bound;
+    }
+    CHECKF(matched_total > 0, "no triangle kept from one level to the next");
+    free(prior);
+    free(zeros);
+    free(s);
+    iso_mesh_chain_destroy(chain);
+    iso_mesh_free(&exact);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_parallel_squares_are_a_quarter_apart);
@@ -571,5 +663,6 @@ int main(void)
     CHECK_RUN(test_drawn_percentile_is_within_its_stated_error);
     CHECK_RUN(test_chain_levels_are_measured_and_closed);
     CHECK_RUN(test_chain_in_slabs_stays_closed);
+    CHECK_RUN(test_reuse_between_levels_changes_nothing);
     return check_finish();
 }
