@@ -78,6 +78,11 @@ static void plan(lod *c, double tolerance)
     }
 }
 
+/* Bit cls set where the class cls = w0 + 3 w1 + 9 w2 of brick_around has w_d = w. */
+static const uint32_t where_mask[3][3] = {{0x1249249, 0x2492492, 0x4924924},
+                                          {0x1c0e07, 0xe07038, 0x70381c0},
+                                          {0x1ff, 0x3fe00, 0x7fc0000}};
+
 /* The strides of the lattice sets in brick b's closed box, by where a set lies per axis
  * (on the box's low plane, strictly inside, on its high plane): the finest of the bricks
  * holding it, whose closed boxes are [8i, 8i + 8] per axis. With a cap, a set on the
@@ -94,22 +99,21 @@ static void brick_around(lod *c, const uint32_t b[3])
         near[k] = inside ? c->shift[((size_t)q[2] * c->count[1] + (size_t)q[1]) * c->count[0] + (size_t)q[0]]
                          : ISO_TREE_LEVELS;
     }
-    for (int cls = 0; cls < 27; cls++) {
-        int where[3] = {cls % 3, cls / 3 % 3, cls / 9};
-        int lo[3], hi[3];
-        unsigned best = ISO_TREE_LEVELS;
-        for (int d = 0; d < 3; d++) {
-            lo[d] = where[d] == 0 ? 0 : 1;
-            hi[d] = where[d] == 2 ? 2 : 1;
-            if (c->cap && ((where[d] == 0 && b[d] == 0) || (where[d] == 2 && b[d] + 1 == c->count[d])))
-                best = 0;
+    /* The minimum over where a set lies, one axis at a time: on the low plane the bricks at
+     * offsets -1 and 0 hold it, inside only 0, on the high plane 0 and +1. */
+    for (int d = 0, scale = 1; d < 3; d++, scale *= 3)
+        for (int k = 0; k < 27; k++) {
+            if (k / scale % 3 != 1)
+                continue;
+            uint8_t below = near[k - scale], middle = near[k], over = near[k + scale];
+            near[k - scale] = below < middle ? below : middle;
+            near[k + scale] = over < middle ? over : middle;
         }
-        for (int k = lo[2]; k <= hi[2]; k++)
-            for (int j = lo[1]; j <= hi[1]; j++)
-                for (int i = lo[0]; i <= hi[0]; i++)
-                    best = near[k * 9 + j * 3 + i] < best ? near[k * 9 + j * 3 + i] : best;
-        c->around[cls] = (uint8_t)best;
-    }
+    uint32_t border = 0; /* with a cap: the classes on the volume's border */
+    for (int d = 0; d < 3 && c->cap; d++)
+        border |= (b[d] == 0 ? where_mask[d][0] : 0) | (b[d] + 1 == c->count[d] ? where_mask[d][2] : 0);
+    for (int cls = 0; cls < 27; cls++)
+        c->around[cls] = border >> cls & 1 ? 0 : near[cls];
 }
 
 /* ---- PASS 3: the coarse bricks (PASS 2, march_fine, is below) ---- */
@@ -239,8 +243,6 @@ static int add_vertex(lod *c, const double x[3], uint32_t *id)
  * on first use, where iso_mc_edge_t puts it between the segment's two samples. */
 static int crossing(lod *c, const uint32_t p[3], int axis, uint32_t length, uint32_t *id)
 {
-    uint64_t key = (((((uint64_t)p[2] * c->dims[1] + p[1]) * c->dims[0] + p[0]) * 3 + (uint64_t)axis) << 4 |
-                    length) + 1;
     int inner = 1;
     for (int d = 0; d < 3; d++)
         if (d != axis && (p[d] == c->lo[d] || p[d] == c->hi[d]))
@@ -256,6 +258,8 @@ static int crossing(lod *c, const uint32_t p[3], int axis, uint32_t length, uint
         return 0;
     vertex_map *m = &c->map;
     size_t at = 0;
+    uint64_t key = (((((uint64_t)p[2] * c->dims[1] + p[1]) * c->dims[0] + p[0]) * 3 + (uint64_t)axis) << 4 |
+                    length) + 1;
     if (!inner) {
         if (2 * (m->count + 1) > m->mask && grow_map(m))
             return ISO_E_NOMEM;
@@ -274,13 +278,17 @@ static int crossing(lod *c, const uint32_t p[3], int axis, uint32_t length, uint
     int rc = add_vertex(c, x, id);
     if (rc)
         return rc;
+    /* f is linear along a data edge: the interpolant's own error is f's. On a longer
+     * segment, f at x is that of the data edge holding it. */
+    double e = iso_mc_edge_error(a, b, t, c->level);
     if (length > 1) {
-        measure(c, x);
-    } else {
-        /* f is linear along a data edge: the interpolant's own error is f's. */
-        double e = iso_mc_edge_error(a, b, t, c->level);
-        c->error = e > c->error ? e : c->error;
+        uint32_t i = (uint32_t)(x[axis] - p[axis]), e0[3] = {p[0], p[1], p[2]}, e1[3];
+        e0[axis] += i < length ? i : length - 1;
+        memcpy(e1, e0, sizeof e1);
+        e1[axis]++;
+        e = iso_mc_edge_error(sample(c, e0), sample(c, e1), x[axis] - e0[axis], c->level);
     }
+    c->error = e > c->error ? e : c->error; /* NaN (a NaN or infinite sample) proves nothing */
     if (inner) {
         /* Only this brick holds the segment, at its own stride: no other length occurs. */
         c->inner_stamp[local] = c->stamp;
@@ -309,11 +317,14 @@ static int add_triangle(lod *c, uint32_t a, uint32_t b, uint32_t d)
 /* Marching cubes on the cell at o, size[] cells per axis. */
 static int regular_cell(lod *c, const uint32_t o[3], const uint32_t size[3])
 {
-    unsigned index = 0;
-    for (int k = 0; k < 8; k++) {
-        uint32_t p[3] = {o[0] + (k & 1) * size[0], o[1] + ((k >> 1) & 1) * size[1], o[2] + ((k >> 2) & 1) * size[2]};
-        index |= (unsigned)above(c, p) << k;
+    unsigned x0 = o[0] - c->lo[0], x1 = x0 + size[0], index = 0;
+    for (int k = 0; k < 4; k++) {
+        unsigned row = c->rows[(o[2] - c->lo[2] + (k >> 1) * size[2]) * ISO_BRICK_SAMPLES + o[1] - c->lo[1] +
+                               (k & 1) * size[1]];
+        index |= ((row >> x0 & 1) | (row >> x1 & 1) << 1) << (2 * k);
     }
+    if (index == 0 || index == 255)
+        return 0;
     const iso_mc_case *cs = iso_mc_cases() + index;
     uint32_t edge_id[12];
     unsigned known = 0; /* bit e: edge_id[e] is the crossing's vertex */
@@ -361,19 +372,20 @@ static void cell_sets(const lod *c, const uint32_t o[3], const uint32_t size[3],
     }
 }
 
-/* 1 if every face and edge of the cell at o has the cell's own stride. */
-static int cell_is_regular(const lod *c, const uint32_t o[3], const uint32_t size[3], unsigned shift)
+/* 1 if every face and edge of a cell of the brick at hand has the cell's own stride, for
+ * a cell touching the brick's planes given by touch (bit 2d: the low plane of axis d, bit
+ * 2d + 1: the high one). Its faces and edges are the sets that lie inside the brick along
+ * at least one axis and, along every other, on a plane the cell touches. finer: bit cls
+ * set where around[cls] differs from the brick's stride. */
+static int cell_is_regular(unsigned touch, uint32_t finer)
 {
-    uint8_t face[6], edge[3][8];
-    cell_sets(c, o, size, face, edge);
-    for (int f = 0; f < 6; f++)
-        if (face[f] != shift)
-            return 0;
-    for (int a = 0; a < 3; a++)
-        for (int k = 0; k < 8; k++)
-            if (!(k >> a & 1) && edge[a][k] != shift)
-                return 0;
-    return 1;
+    uint32_t held = (1u << 27) - 1, inside = 0;
+    for (int d = 0; d < 3; d++) {
+        held &= where_mask[d][1] | ((touch >> (2 * d) & 1) ? where_mask[d][0] : 0) |
+                ((touch >> (2 * d + 1) & 1) ? where_mask[d][2] : 0);
+        inside |= where_mask[d][1];
+    }
+    return !(held & inside & finer);
 }
 
 static int add_segment(lod *c, loop_segment s)
@@ -662,13 +674,22 @@ static int transition_cell(lod *c, const uint32_t o[3], const uint32_t size[3], 
                             step[k] = 1u << edge_shift[axis][(unsigned)side << a |
                                                              (unsigned)(p[other] != o[other]) << other];
                     }
+                    /* No crossing on its sides: its corners alike and no side split, or
+                     * every sample of its box alike. */
+                    unsigned split = 0, alike = 0;
+                    for (int k = 0; k < 4; k++) {
+                        split |= step[k] < (k & 1 ? wc : wb);
+                        alike += above(c, corner[k]);
+                    }
+                    if (!split && (alike == 0 || alike == 4))
+                        continue;
                     uint32_t box_lo[3], box_hi[3];
                     for (int d = 0; d < 3; d++) {
                         box_lo[d] = corner[0][d] < corner[2][d] ? corner[0][d] : corner[2][d];
                         box_hi[d] = corner[0][d] < corner[2][d] ? corner[2][d] : corner[0][d];
                     }
-                    if (!box_mixed(c, box_lo, box_hi))
-                        continue; /* no crossing on its sides */
+                    if (split && !box_mixed(c, box_lo, box_hi))
+                        continue;
                     int rc = square_segments(c, (const uint32_t(*)[3])corner, step);
                     if (rc)
                         return iso_error_set(err, rc, "out of memory extracting the surface");
@@ -680,15 +701,6 @@ static int transition_cell(lod *c, const uint32_t o[3], const uint32_t size[3], 
     for (int d = 0; d < 3; d++)
         middle[d] = o[d] + 0.5 * size[d];
     return fan_loops(c, middle, err);
-}
-
-/* 1 if no set around the brick at hand is finer than it: all its cells are regular. */
-static int no_finer_neighbour(const lod *c, unsigned shift)
-{
-    for (int cls = 0; cls < 27; cls++)
-        if (c->around[cls] < shift)
-            return 0;
-    return 1;
 }
 
 static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *err)
@@ -703,7 +715,9 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
     c->stamp++;
     brick_around(c, b);
     uint32_t s = 1u << shift;
-    int regular = no_finer_neighbour(c, shift);
+    uint32_t finer = 0; /* the classes around it finer than it (none: every cell is regular) */
+    for (int cls = 0; cls < 27; cls++)
+        finer |= (uint32_t)(c->around[cls] != shift) << cls;
     /* Whether a cell is regular depends only on which of the brick's planes it touches. */
     int8_t by_touch[64];
     memset(by_touch, -1, sizeof by_touch);
@@ -720,7 +734,7 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
                 }
                 c->cells++;
                 if (by_touch[touch] < 0)
-                    by_touch[touch] = (int8_t)(regular || cell_is_regular(c, o, size, shift));
+                    by_touch[touch] = (int8_t)(!finer || cell_is_regular(touch, finer));
                 int rc;
                 if (by_touch[touch]) {
                     rc = regular_cell(c, o, size);
