@@ -19,7 +19,7 @@
 #include "base/base.h"
 
 #if defined(__SSE2__)
-#include <emmintrin.h>
+#include <immintrin.h>
 #endif
 
 static const char *const order_names[5] = {"none", NULL, "trilinear", "triquadratic", "tricubic"};
@@ -310,8 +310,7 @@ static inline __m128i smooth3(__m128i a, __m128i b, __m128i c)
 /* An x edge: the four edge samples are adjacent, one lane each; the nine loads are the
  * 3 x 3 cross-section's rows along x. */
 static inline __attribute__((always_inline)) void edge_sums_x(const char *v0, const iso_voxel_type type,
-                                                              size_t bytes, size_t sp, size_t sq,
-                                                              int32_t s[4], int32_t dp[4], int32_t dq[4])
+                                                              size_t bytes, size_t sp, size_t sq, __m128i out[3])
 {
     __m128i u[3], dv[3];
     for (int c = 0; c < 3; c++) {
@@ -320,19 +319,20 @@ static inline __attribute__((always_inline)) void edge_sums_x(const char *v0, co
         u[c] = smooth3(f0, f1, f2);
         dv[c] = _mm_sub_epi32(f2, f0);
     }
-    _mm_storeu_si128((__m128i *)s, smooth3(u[0], u[1], u[2]));
-    _mm_storeu_si128((__m128i *)dp, smooth3(dv[0], dv[1], dv[2]));
-    _mm_storeu_si128((__m128i *)dq, _mm_sub_epi32(u[2], u[0]));
+    out[0] = smooth3(u[0], u[1], u[2]);
+    out[1] = smooth3(dv[0], dv[1], dv[2]);
+    out[2] = _mm_sub_epi32(u[2], u[0]);
 }
 
 /* Rows r0..r3 as columns: out[b] holds element b of each row. */
-static inline void transpose4(const __m128i r[4], __m128i out[3])
+static inline void transpose4(const __m128i r[4], __m128i out[4])
 {
     __m128i t0 = _mm_unpacklo_epi32(r[0], r[1]), t1 = _mm_unpacklo_epi32(r[2], r[3]);
     __m128i t2 = _mm_unpackhi_epi32(r[0], r[1]), t3 = _mm_unpackhi_epi32(r[2], r[3]);
     out[0] = _mm_unpacklo_epi64(t0, t1);
     out[1] = _mm_unpackhi_epi64(t0, t1);
     out[2] = _mm_unpacklo_epi64(t2, t3);
+    out[3] = _mm_unpackhi_epi64(t2, t3);
 }
 
 /* A y or z edge: the plane axis along x is the lanes (the fourth is unused: the caller
@@ -340,10 +340,9 @@ static inline void transpose4(const __m128i r[4], __m128i out[3])
  * across the other plane axis, then the 4 x 4 block is turned so that lanes are the edge
  * samples again. */
 static inline __attribute__((always_inline)) void edge_sums_yz(const char *v0, const iso_voxel_type type,
-                                                               size_t bytes, size_t se, size_t sq,
-                                                               int32_t s[4], int32_t dp[4], int32_t dq[4])
+                                                               size_t bytes, size_t se, size_t sq, __m128i out[3])
 {
-    __m128i across[4], diff[4], c_across[3], c_diff[3];
+    __m128i across[4], diff[4], c_across[4], c_diff[4];
     for (int a = 0; a < 4; a++) {
         const char *r = v0 + a * se * bytes;
         __m128i f0 = load4(r, type), f1 = load4(r + sq * bytes, type), f2 = load4(r + 2 * sq * bytes, type);
@@ -352,9 +351,22 @@ static inline __attribute__((always_inline)) void edge_sums_yz(const char *v0, c
     }
     transpose4(across, c_across);
     transpose4(diff, c_diff);
-    _mm_storeu_si128((__m128i *)s, smooth3(c_across[0], c_across[1], c_across[2]));
-    _mm_storeu_si128((__m128i *)dp, _mm_sub_epi32(c_across[2], c_across[0]));
-    _mm_storeu_si128((__m128i *)dq, smooth3(c_diff[0], c_diff[1], c_diff[2]));
+    out[0] = smooth3(c_across[0], c_across[1], c_across[2]);
+    out[1] = _mm_sub_epi32(c_across[2], c_across[0]);
+    out[2] = smooth3(c_diff[0], c_diff[1], c_diff[2]);
+}
+
+/* s, dp and dq (EDGE_SUMS) as lanes: out[0], out[1], out[2]. */
+static inline __attribute__((always_inline)) void edge_sums_lanes(const iso_volume *vol, const iso_voxel_type type,
+                                                                  size_t base, int e, size_t se, size_t sp,
+                                                                  size_t sq, __m128i out[3])
+{
+    size_t bytes = type == ISO_U8 || type == ISO_I8 ? 1 : 2;
+    const char *v0 = (const char *)vol->data + base * bytes;
+    if (e == 0)
+        edge_sums_x(v0, type, bytes, sp, sq, out);
+    else
+        edge_sums_yz(v0, type, bytes, se, sq, out);
 }
 
 static inline __attribute__((always_inline)) void edge_sums_vector(const iso_volume *vol, const iso_voxel_type type,
@@ -362,13 +374,12 @@ static inline __attribute__((always_inline)) void edge_sums_vector(const iso_vol
                                                                    size_t sq, double s[4], double dp[4],
                                                                    double dq[4])
 {
-    size_t bytes = type == ISO_U8 || type == ISO_I8 ? 1 : 2;
-    const char *v0 = (const char *)vol->data + base * bytes;
+    __m128i out[3];
     int32_t si[4], dpi[4], dqi[4];
-    if (e == 0)
-        edge_sums_x(v0, type, bytes, sp, sq, si, dpi, dqi);
-    else
-        edge_sums_yz(v0, type, bytes, se, sq, si, dpi, dqi);
+    edge_sums_lanes(vol, type, base, e, se, sp, sq, out);
+    _mm_storeu_si128((__m128i *)si, out[0]);
+    _mm_storeu_si128((__m128i *)dpi, out[1]);
+    _mm_storeu_si128((__m128i *)dqi, out[2]);
     for (int a = 0; a < 4; a++)
         s[a] = si[a], dp[a] = dpi[a], dq[a] = dqi[a];
 }
@@ -484,6 +495,7 @@ typedef struct normals_job {
     int order;
     iso_space space;
     double inv[3][3], origin[3];
+    int avx2; /* the CPU has AVX2 (the four-vertex edge path) */
 } normals_job;
 
 /* Vertex v's position in index space. */
@@ -545,6 +557,166 @@ static inline __attribute__((always_inline)) void tricubic_range(const normals_j
     }
 }
 
+#if defined(__SSE2__) && defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
+#define NORMALS_AVX2 1
+/* ---- the tricubic edge path, four vertices at a time (AVX2) ----
+ *
+ * The same operations as edge_gradient_of, index_point and unit_normal, in the same order,
+ * on four vertices' doubles at once: each lane's results are those of the scalar path, bit
+ * for bit (IEEE operations are correctly rounded whatever the vector width; no fused
+ * multiply-add, as in the scalar build). Only the integer sums stay per vertex. A lane
+ * the edge path does not take goes through normal_at. */
+
+/* Lanes of m (all ones or zero per lane) as bits. */
+__attribute__((target("avx2"))) static inline int lanes_of(__m256d m) { return _mm256_movemask_pd(m); }
+
+__attribute__((target("avx2"))) static inline __m256d add3(__m256d a, __m256d b, __m256d c)
+{
+    return _mm256_add_pd(_mm256_add_pd(a, b), c);
+}
+
+/* The four vertices from v on, vertex l in lane l; 1 if every lane took the edge path. */
+__attribute__((target("avx2"))) static inline __attribute__((always_inline)) void
+tricubic_four(const normals_job *job, const iso_voxel_type type, size_t v)
+{
+    const iso_volume *vol = job->vol;
+    const float *q = job->mesh->positions + 3 * v;
+    __m256d x = _mm256_setr_pd(q[0], q[3], q[6], q[9]), y = _mm256_setr_pd(q[1], q[4], q[7], q[10]);
+    __m256d z = _mm256_setr_pd(q[2], q[5], q[8], q[11]), p[3];
+    if (job->space == ISO_SPACE_WORLD) {
+        __m256d dx = _mm256_sub_pd(x, _mm256_set1_pd(job->origin[0]));
+        __m256d dy = _mm256_sub_pd(y, _mm256_set1_pd(job->origin[1]));
+        __m256d dz = _mm256_sub_pd(z, _mm256_set1_pd(job->origin[2]));
+        for (int r = 0; r < 3; r++)
+            p[r] = add3(_mm256_mul_pd(_mm256_set1_pd(job->inv[r][0]), dx),
+                        _mm256_mul_pd(_mm256_set1_pd(job->inv[r][1]), dy),
+                        _mm256_mul_pd(_mm256_set1_pd(job->inv[r][2]), dz));
+    } else {
+        p[0] = x, p[1] = y, p[2] = z;
+    }
+    /* On which planes (edge_gradient_of), and the edge axis's coordinate. */
+    const __m256d half = _mm256_set1_pd(0.5), slack = _mm256_set1_pd(EDGE_SLACK);
+    const __m256d sign = _mm256_set1_pd(-0.0), big = _mm256_set1_pd(0x1p30);
+    __m256d near[3], r[3], in_range = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+    for (int a = 0; a < 3; a++) {
+        r[a] = _mm256_floor_pd(_mm256_add_pd(p[a], half));
+        near[a] = _mm256_cmp_pd(_mm256_andnot_pd(sign, _mm256_sub_pd(p[a], r[a])), slack, _CMP_LT_OQ);
+        in_range = _mm256_and_pd(in_range, _mm256_cmp_pd(_mm256_andnot_pd(sign, p[a]), big, _CMP_LT_OQ));
+    }
+    __m256d on_x = _mm256_andnot_pd(near[0], _mm256_and_pd(near[1], near[2])); /* planes == 6 */
+    __m256d on_y = _mm256_andnot_pd(near[1], _mm256_and_pd(near[0], near[2])); /* planes == 5 */
+    __m256d on_z = _mm256_andnot_pd(near[2], _mm256_and_pd(near[0], near[1])); /* planes == 3 */
+    __m256d xe = _mm256_blendv_pd(_mm256_blendv_pd(p[2], p[1], on_y), p[0], on_x);
+    int edge = lanes_of(_mm256_and_pd(in_range, _mm256_or_pd(on_x, _mm256_or_pd(on_y, on_z))));
+    /* basis(4) along the edge. */
+    __m256d i = _mm256_floor_pd(xe), t = _mm256_sub_pd(xe, i), s = _mm256_sub_pd(_mm256_set1_pd(1), t);
+    __m256d c2 = _mm256_set1_pd(2), c3 = _mm256_set1_pd(3), c4 = _mm256_set1_pd(4), c6 = _mm256_set1_pd(6);
+    __m256d m3 = _mm256_set1_pd(-3), one = _mm256_set1_pd(1);
+    __m256d tt = _mm256_mul_pd(t, t), ttt = _mm256_mul_pd(tt, t);
+    __m256d t3 = _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(c3, t), t), t);    /* 3 * t * t * t */
+    __m256d m3t2 = _mm256_mul_pd(_mm256_mul_pd(m3, t), t);                     /* -3 * t * t */
+    __m256d w[4], d[4];
+    w[0] = _mm256_div_pd(_mm256_mul_pd(_mm256_mul_pd(s, s), s), c6);
+    w[1] = _mm256_div_pd(_mm256_add_pd(_mm256_sub_pd(t3, _mm256_mul_pd(_mm256_mul_pd(c6, t), t)), c4), c6);
+    w[2] = _mm256_div_pd(add3(_mm256_add_pd(_mm256_mul_pd(m3t2, t), _mm256_mul_pd(_mm256_mul_pd(c3, t), t)),
+                              _mm256_mul_pd(c3, t), one), c6);
+    w[3] = _mm256_div_pd(ttt, c6);
+    d[0] = _mm256_div_pd(_mm256_mul_pd(_mm256_xor_pd(s, sign), s), c2);
+    d[1] = _mm256_div_pd(_mm256_sub_pd(_mm256_mul_pd(_mm256_mul_pd(c3, t), t), _mm256_mul_pd(c4, t)), c2);
+    d[2] = _mm256_div_pd(add3(m3t2, _mm256_mul_pd(c2, t), one), c2);
+    d[3] = _mm256_div_pd(tt, c2);
+    /* The integer sums, vertex by vertex, then turned so that lanes are vertices. */
+    int at[3][4], first[4];
+    for (int a = 0; a < 3; a++)
+        _mm_storeu_si128((__m128i *)at[a], _mm256_cvttpd_epi32(_mm256_and_pd(r[a], in_range)));
+    _mm_storeu_si128((__m128i *)first, _mm256_cvttpd_epi32(_mm256_and_pd(i, in_range)));
+    const size_t *dims = vol->dims;
+    const size_t stride[3] = {1, dims[0], dims[0] * dims[1]};
+    __m128i sums[3][4];
+    for (int l = 0; l < 4; l++) {
+        int e = (edge >> l & 1) ? (lanes_of(on_x) >> l & 1 ? 0 : lanes_of(on_y) >> l & 1 ? 1 : 2) : -1;
+        int pa = e == 0 ? 1 : 0, qa = e == 2 ? 1 : 2;
+        long f = (long)first[l] - 1, ap = at[pa][l], aq = at[qa][l];
+        if (e < 0 || f < 0 || (size_t)f + 3 >= dims[e] || ap < 1 || (size_t)ap + 1 >= dims[pa] || aq < 1 ||
+            (size_t)aq + 1 >= dims[qa] || (e != 0 && (size_t)at[0][l] + 2 >= dims[0])) {
+            edge &= ~(1 << l);
+            sums[0][l] = sums[1][l] = sums[2][l] = _mm_setzero_si128();
+            continue;
+        }
+        size_t base = (size_t)f * stride[e] + (size_t)(ap - 1) * stride[pa] + (size_t)(aq - 1) * stride[qa];
+        __m128i out[3];
+        edge_sums_lanes(vol, type, base, e, stride[e], stride[pa], stride[qa], out);
+        for (int k = 0; k < 3; k++)
+            sums[k][l] = out[k];
+    }
+    __m256d ge = _mm256_setzero_pd(), gp = ge, gq = ge;
+    __m128i by_sample[3][4];
+    for (int k = 0; k < 3; k++)
+        transpose4(sums[k], by_sample[k]);
+    for (int a = 0; a < 4; a++) {
+        ge = _mm256_add_pd(ge, _mm256_mul_pd(d[a], _mm256_cvtepi32_pd(by_sample[0][a])));
+        gp = _mm256_add_pd(gp, _mm256_mul_pd(w[a], _mm256_cvtepi32_pd(by_sample[1][a])));
+        gq = _mm256_add_pd(gq, _mm256_mul_pd(w[a], _mm256_cvtepi32_pd(by_sample[2][a])));
+    }
+    ge = _mm256_div_pd(ge, _mm256_set1_pd(36));
+    gp = _mm256_div_pd(gp, _mm256_set1_pd(12));
+    gq = _mm256_div_pd(gq, _mm256_set1_pd(12));
+    /* g[e] = ge, g[pa] = gp, g[qa] = gq. */
+    __m256d g[3];
+    g[0] = _mm256_blendv_pd(gp, ge, on_x);
+    g[1] = _mm256_blendv_pd(_mm256_blendv_pd(gq, ge, on_y), gp, on_x);
+    g[2] = _mm256_blendv_pd(gq, ge, on_z);
+    __m256d zero = _mm256_setzero_pd();
+    __m256d nonzero = _mm256_or_pd(_mm256_or_pd(_mm256_cmp_pd(g[0], zero, _CMP_NEQ_UQ),
+                                                _mm256_cmp_pd(g[1], zero, _CMP_NEQ_UQ)),
+                                   _mm256_cmp_pd(g[2], zero, _CMP_NEQ_UQ));
+    edge &= lanes_of(nonzero);
+    /* unit_normal. */
+    __m256d n[3];
+    for (int c = 0; c < 3; c++)
+        n[c] = job->space == ISO_SPACE_WORLD
+                   ? _mm256_xor_pd(add3(_mm256_mul_pd(_mm256_set1_pd(job->inv[0][c]), g[0]),
+                                        _mm256_mul_pd(_mm256_set1_pd(job->inv[1][c]), g[1]),
+                                        _mm256_mul_pd(_mm256_set1_pd(job->inv[2][c]), g[2])),
+                                   sign)
+                   : _mm256_xor_pd(g[c], sign);
+    __m256d len = _mm256_sqrt_pd(add3(_mm256_mul_pd(n[0], n[0]), _mm256_mul_pd(n[1], n[1]), _mm256_mul_pd(n[2], n[2])));
+    __m256d finite = _mm256_and_pd(_mm256_cmp_pd(len, zero, _CMP_GT_OQ),
+                                   _mm256_cmp_pd(len, _mm256_set1_pd(INFINITY), _CMP_LT_OQ));
+    edge &= lanes_of(finite);
+    float out[3][4];
+    for (int c = 0; c < 3; c++)
+        _mm_storeu_ps(out[c], _mm256_cvtpd_ps(_mm256_div_pd(n[c], len)));
+    float *normals = job->mesh->normals + 3 * v;
+    for (int l = 0; l < 4; l++)
+        if (edge >> l & 1)
+            for (int c = 0; c < 3; c++)
+                normals[3 * l + c] = out[c][l];
+        else
+            normal_at(job, v + (size_t)l);
+}
+
+__attribute__((target("avx2"))) static inline __attribute__((always_inline)) void
+tricubic_range_four(const normals_job *job, const iso_voxel_type type, size_t begin, size_t end)
+{
+    size_t v = begin;
+    for (; v + 4 <= end; v += 4)
+        tricubic_four(job, type, v);
+    tricubic_range(job, type, v, end);
+}
+
+__attribute__((target("avx2"))) static void tricubic_avx2(const normals_job *job, size_t begin, size_t end)
+{
+    switch (job->vol->type) {
+    case ISO_U8: tricubic_range_four(job, ISO_U8, begin, end); break;
+    case ISO_I8: tricubic_range_four(job, ISO_I8, begin, end); break;
+    case ISO_U16: tricubic_range_four(job, ISO_U16, begin, end); break;
+    case ISO_I16: tricubic_range_four(job, ISO_I16, begin, end); break;
+    default: tricubic_range(job, job->vol->type, begin, end); break;
+    }
+}
+#endif
+
 /* Thread t of threads: a contiguous share of the vertices (each normal depends only on
  * its own position, so the result does not depend on the split). */
 static void normals_share(void *context, int t, int threads)
@@ -552,6 +724,12 @@ static void normals_share(void *context, int t, int threads)
     const normals_job *job = context;
     size_t n = job->mesh->vertex_count;
     size_t begin = n * (size_t)t / (size_t)threads, end = n * (size_t)(t + 1) / (size_t)threads;
+#if defined(NORMALS_AVX2)
+    if (job->order == 4 && !job->vol->has_nan && job->avx2) {
+        tricubic_avx2(job, begin, end);
+        return;
+    }
+#endif
     if (job->order == 4 && !job->vol->has_nan)
         switch (job->vol->type) {
         case ISO_U8: tricubic_range(job, ISO_U8, begin, end); return;
@@ -579,6 +757,9 @@ int iso_normals_compute(const iso_volume *vol, iso_mesh *mesh, int order, iso_sp
     if (order < 2 || order > 4)
         return iso_error_set(err, ISO_E_ARGUMENT, "normals: order %d is not 2, 3 or 4", order);
     normals_job job = {.vol = vol, .mesh = mesh, .order = order, .space = space};
+#if defined(NORMALS_AVX2)
+    job.avx2 = __builtin_cpu_supports("avx2");
+#endif
     double a[3][3];
     if (world_frame(vol, a, job.inv, job.origin))
         return iso_error_set(err, ISO_E_ARGUMENT, "normals: the volume's index-to-world map is singular");

@@ -179,8 +179,11 @@ static void check_tricubic_on_grid_edges(const iso_volume *vol)
     iso_mesh_free(&mesh);
 }
 
-/* The normals at check_tricubic_on_grid_edges' points, into out (3 per point). */
-static void grid_edge_normals(const iso_volume *vol, float *out, size_t n)
+/* The normals at points on grid edges along every axis up to the volume's last samples,
+ * into out (3 per point): all in one call, or (one_by_one) each point alone in a mesh of
+ * its own, where it takes the one-vertex path (normals.c computes four at a time where
+ * the CPU can). */
+static void grid_edge_normals(const iso_volume *vol, float *out, size_t n, int one_by_one)
 {
     iso_error err;
     iso_mesh mesh;
@@ -194,16 +197,29 @@ static void grid_edge_normals(const iso_volume *vol, float *out, size_t n)
                     mesh.positions[3 * v + a] = (float)(a == axis ? fmin((a == 2 ? k : j) + 0.37, vol->dims[a] - 1.0)
                                                                   : a == 2 ? (double)k : (double)j);
     mesh.vertex_count = v;
-    CHECK_OK(iso_normals_compute(vol, &mesh, 4, ISO_SPACE_INDEX, 1, &err), &err);
-    if (mesh.normals)
-        memcpy(out, mesh.normals, v * 3 * sizeof *out);
+    if (!one_by_one) {
+        CHECK_OK(iso_normals_compute(vol, &mesh, 4, ISO_SPACE_INDEX, 1, &err), &err);
+        if (mesh.normals)
+            memcpy(out, mesh.normals, v * 3 * sizeof *out);
+    }
+    for (size_t u = 0; one_by_one && u < v; u++) {
+        iso_mesh alone;
+        iso_mesh_init(&alone);
+        alone.positions = mesh.positions + 3 * u;
+        alone.vertex_count = 1;
+        CHECK_OK(iso_normals_compute(vol, &alone, 4, ISO_SPACE_INDEX, 1, &err), &err);
+        if (alone.normals)
+            memcpy(out + 3 * u, alone.normals, 3 * sizeof *out);
+        free(alone.normals);
+    }
     iso_mesh_free(&mesh);
 }
 
 /* The Marschner-Lobb field as floats, and as 8- and 16-bit integers (unsigned and signed:
  * the vector integer sums of normals.c). The integer volumes' normals are also the same,
  * bit for bit, as those of the same values stored as floats (summed one by one in doubles,
- * exactly for such values), on edges along every axis up to the volume's last samples. */
+ * exactly for such values), and as those of each point computed alone (one vertex at a
+ * time, not four), on edges along every axis up to the volume's last samples. */
 static void test_tricubic_on_grid_edges(void)
 {
     iso_error err;
@@ -236,12 +252,16 @@ static void test_tricubic_on_grid_edges(void)
         iso_vol_update_stats(ints);
         iso_vol_update_stats(floats);
         check_tricubic_on_grid_edges(ints);
-        static float from_ints[EDGE_POINTS * 3], from_floats[EDGE_POINTS * 3];
+        static float from_ints[EDGE_POINTS * 3], from_floats[EDGE_POINTS * 3], alone[EDGE_POINTS * 3];
         memset(from_ints, 0, sizeof from_ints);
         memset(from_floats, 0xff, sizeof from_floats);
-        grid_edge_normals(ints, from_ints, EDGE_POINTS);
-        grid_edge_normals(floats, from_floats, EDGE_POINTS);
+        memset(alone, 0x7f, sizeof alone);
+        grid_edge_normals(ints, from_ints, EDGE_POINTS, 0);
+        grid_edge_normals(floats, from_floats, EDGE_POINTS, 0);
+        grid_edge_normals(ints, alone, EDGE_POINTS, 1);
         CHECKF(!memcmp(from_ints, from_floats, sizeof from_ints), "voxel type %d: normals differ from the float copy's",
+               (int)types[t]);
+        CHECKF(!memcmp(from_ints, alone, sizeof from_ints), "voxel type %d: normals differ one vertex at a time",
                (int)types[t]);
         iso_vol_destroy(ints);
         iso_vol_destroy(floats);
