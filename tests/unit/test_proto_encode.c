@@ -1259,7 +1259,9 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
     free(one);
     proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
     int count = proto_glb_meshopt_gzip_pieces(buf, size, pieces);
-    CHECK_EQ(count, m->triangle_count ? 2 : 1);
+    /* An index stream of 256 KB or more is cut in two, inside it. */
+    CHECK_EQ(count, !m->triangle_count ? 1 : size - pieces[0].end >= (256u << 10) ? 3 : 2);
+    CHECK(count < 3 || (pieces[0].end < pieces[1].end && pieces[1].end < size));
     unsigned char *gz;
     size_t gz_size;
     CHECK_OK(proto_gzip_pieces(buf, size, pieces, count, 2, &gz, &gz_size, &err), &err);
@@ -1388,6 +1390,26 @@ static void test_glb_meshopt_round_trip(void)
     make_torus(&m, 100, 60, 0);
     check_glb_meshopt(&m, 14, 10);
     iso_mesh_free(&m);
+    /* The torus's triangles shuffled: an index stream of free indices, over 256 KB. */
+    make_torus(&m, 350, 200, 1);
+    for (size_t t = m.triangle_count - 1; t > 0; t--) {
+        size_t u = rng() % (t + 1);
+        for (int c = 0; c < 3; c++) {
+            uint32_t x = m.indices[3 * t + c];
+            m.indices[3 * t + c] = m.indices[3 * u + c];
+            m.indices[3 * u + c] = x;
+        }
+    }
+    check_glb_meshopt(&m, 14, 10);
+    unsigned char *glb;
+    size_t size;
+    iso_error err;
+    CHECK_OK(proto_encode_glb_meshopt(&m, NULL, &glb, &size, &err), &err);
+    proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
+    if (glb)
+        CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 3);
+    free(glb);
+    iso_mesh_free(&m);
 }
 
 /* Pieces of any sizes (empty ones too), either strategy, one to four, on one or two
@@ -1421,6 +1443,32 @@ static void test_gzip_pieces(void)
                     check_gunzip(gz, gz_size, in, size);
                 free(gz);
             }
+    /* Huffman-only pieces whose codes need folding back to 15 bits (counts of
+     * Fibonacci numbers: 23 symbols, an unlimited code 22 bits deep), one byte value only,
+     * every byte value equally often, and blocks' edges (64 KB) inside the pieces. */
+    size_t fib_size = 0;
+    for (uint32_t a = 1, b = 1, sym = 0; sym < 23; sym++, b = a + b, a = b - a)
+        for (uint32_t k = 0; k < a; k++)
+            in[fib_size++] = (unsigned char)(sym * 11);
+    const size_t sizes[] = {fib_size, 70000, 200000};
+    for (int c = 0; c < 3; c++) {
+        if (c == 1)
+            memset(in, 'a', sizes[c]);
+        if (c == 2)
+            for (size_t i = 0; i < sizes[c]; i++)
+                in[i] = (unsigned char)rng();
+        for (int last = 0; last < 2; last++) {
+            proto_gzip_piece pieces[2] = {{.end = last ? 0 : sizes[c], .huffman = 1}, {.end = sizes[c], .huffman = 1}};
+            unsigned char *gz;
+            size_t gz_size;
+            CHECK_OK(proto_gzip_pieces(in, sizes[c], pieces, 2, 1, &gz, &gz_size, &err), &err);
+            if (gz)
+                check_gunzip(gz, gz_size, in, sizes[c]);
+            CHECKF(!gz || gz_size < sizes[c] / 8 * (c == 2 ? 9 : c == 1 ? 1 : 5) + 400, "case %d: %zu bytes of %zu", c,
+                   gz_size, sizes[c]);
+            free(gz);
+        }
+    }
     unsigned char *gz;
     size_t gz_size;
     CHECK_OK(proto_gzip(in, 0, &gz, &gz_size, &err), &err);
