@@ -635,17 +635,72 @@ static int fan_loops(lod *c, const double middle[3], iso_error *err)
     return 0;
 }
 
+/* The segments of one face of a transition cell, across axis a (side 1 the high one), of
+ * stride f: cut into squares of f, each side split at its own stride (a side inside the
+ * face has the face's, one on its border lies on one of the cell's edges and has that
+ * edge's). A square whose sides hold no crossing is skipped: its corners alike and no side
+ * split, or every sample of its box alike. */
+static int face_segments(lod *c, const uint32_t o[3], const uint32_t size[3], int a, int side, uint32_t f,
+                         const uint8_t edge_shift[3][8])
+{
+    static const int bc[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+    int b = (a + 1) % 3, d2 = (a + 2) % 3;
+    /* The border's strides: along b at d2 low and high, along d2 at b low and high. */
+    uint32_t along_b[2], along_c[2];
+    for (unsigned h = 0; h < 2; h++) {
+        along_b[h] = 1u << edge_shift[b][(unsigned)side << a | h << d2];
+        along_c[h] = 1u << edge_shift[d2][(unsigned)side << a | h << b];
+    }
+    uint32_t plane = o[a] + size[a] * (uint32_t)side;
+    for (uint32_t jc = 0; jc < size[d2]; jc += f)
+        for (uint32_t jb = 0; jb < size[b]; jb += f) {
+            uint32_t wb = size[b] - jb < f ? size[b] - jb : f, wc = size[d2] - jc < f ? size[d2] - jc : f;
+            uint32_t b_low = jb == 0 ? along_c[0] : f, b_high = jb + wb == size[b] ? along_c[1] : f;
+            uint32_t c_low = jc == 0 ? along_b[0] : f, c_high = jc + wc == size[d2] ? along_b[1] : f;
+            int split = c_low < wb || c_high < wb || b_low < wc || b_high < wc;
+            uint32_t corner[4][3], step[4];
+            for (int k = 0; k < 4; k++) {
+                int q = side ? k : 3 - k; /* (b, c, a) is right-handed: reversed below */
+                corner[k][a] = plane;
+                corner[k][b] = o[b] + jb + wb * (uint32_t)bc[q][0];
+                corner[k][d2] = o[d2] + jc + wc * (uint32_t)bc[q][1];
+            }
+            if (!split) {
+                unsigned alike = 0;
+                for (int k = 0; k < 4; k++)
+                    alike += above(c, corner[k]);
+                if (alike == 0 || alike == 4)
+                    continue;
+            } else {
+                uint32_t box_lo[3], box_hi[3];
+                for (int d = 0; d < 3; d++) {
+                    box_lo[d] = corner[0][d] < corner[2][d] ? corner[0][d] : corner[2][d];
+                    box_hi[d] = corner[0][d] < corner[2][d] ? corner[2][d] : corner[0][d];
+                }
+                if (!box_mixed(c, box_lo, box_hi))
+                    continue;
+            }
+            /* Side k runs along b for even k, along d2 for odd k (corner k to k + 1). */
+            step[0] = side ? c_low : c_high;
+            step[1] = b_high;
+            step[2] = side ? c_high : c_low;
+            step[3] = b_low;
+            int rc = square_segments(c, (const uint32_t(*)[3])corner, step);
+            if (rc)
+                return rc;
+        }
+    return 0;
+}
+
 /* A cell whose faces or edges are finer than itself: face squares, loops, fans. A face
  * whose samples all lie on one side of the level holds no segment and is skipped. */
 static int transition_cell(lod *c, const uint32_t o[3], const uint32_t size[3], iso_error *err)
 {
-    static const int bc[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
     uint8_t face_shift[6], edge_shift[3][8];
     cell_sets(c, o, size, face_shift, edge_shift);
     c->segment_count = 0;
     for (int a = 0; a < 3; a++)
         for (int side = 0; side < 2; side++) {
-            int b = (a + 1) % 3, d2 = (a + 2) % 3;
             uint32_t lo[3], hi[3];
             for (int d = 0; d < 3; d++) {
                 lo[d] = d == a ? o[d] + size[d] * (uint32_t)side : o[d];
@@ -653,47 +708,10 @@ static int transition_cell(lod *c, const uint32_t o[3], const uint32_t size[3], 
             }
             if (!box_mixed(c, lo, hi))
                 continue;
-            uint32_t f = 1u << face_shift[2 * a + side];
-            for (uint32_t jc = 0; jc < size[d2]; jc += f)
-                for (uint32_t jb = 0; jb < size[b]; jb += f) {
-                    uint32_t corner[4][3], step[4], wb = size[b] - jb < f ? size[b] - jb : f;
-                    uint32_t wc = size[d2] - jc < f ? size[d2] - jc : f;
-                    for (int k = 0; k < 4; k++) {
-                        int q = side ? k : 3 - k; /* (b, c, a) is right-handed: reversed below */
-                        corner[k][a] = o[a] + size[a] * (uint32_t)side;
-                        corner[k][b] = o[b] + jb + wb * (uint32_t)bc[q][0];
-                        corner[k][d2] = o[d2] + jc + wc * (uint32_t)bc[q][1];
-                    }
-                    /* A side inside the face has the face's stride; one on the face's
-                     * border lies on one of the cell's edges and has that edge's. */
-                    for (int k = 0; k < 4; k++) {
-                        const uint32_t *p = corner[k], *q = corner[(k + 1) % 4];
-                        int axis = p[b] != q[b] ? b : d2, other = axis == b ? d2 : b;
-                        step[k] = f;
-                        if (p[other] == o[other] || p[other] == o[other] + size[other])
-                            step[k] = 1u << edge_shift[axis][(unsigned)side << a |
-                                                             (unsigned)(p[other] != o[other]) << other];
-                    }
-                    /* No crossing on its sides: its corners alike and no side split, or
-                     * every sample of its box alike. */
-                    unsigned split = 0, alike = 0;
-                    for (int k = 0; k < 4; k++) {
-                        split |= step[k] < (k & 1 ? wc : wb);
-                        alike += above(c, corner[k]);
-                    }
-                    if (!split && (alike == 0 || alike == 4))
-                        continue;
-                    uint32_t box_lo[3], box_hi[3];
-                    for (int d = 0; d < 3; d++) {
-                        box_lo[d] = corner[0][d] < corner[2][d] ? corner[0][d] : corner[2][d];
-                        box_hi[d] = corner[0][d] < corner[2][d] ? corner[2][d] : corner[0][d];
-                    }
-                    if (split && !box_mixed(c, box_lo, box_hi))
-                        continue;
-                    int rc = square_segments(c, (const uint32_t(*)[3])corner, step);
-                    if (rc)
-                        return iso_error_set(err, rc, "out of memory extracting the surface");
-                }
+            int rc = face_segments(c, o, size, a, side, 1u << face_shift[2 * a + side],
+                                   (const uint8_t(*)[8])edge_shift);
+            if (rc)
+                return iso_error_set(err, rc, "out of memory extracting the surface");
         }
     if (!c->segment_count)
         return 0;
