@@ -13,6 +13,7 @@
 #include "distance.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -27,6 +28,8 @@ void iso_mesh_chain_destroy(iso_mesh_chain *chain)
     free(chain->positions);
     free(chain);
 }
+
+static int level_mesh(const iso_mesh_chain *chain, int k, iso_mesh *mesh, iso_error *err);
 
 /* A mesh over the chain's positions with level k's triangles (nothing owned). */
 static iso_mesh view_of(const iso_mesh_chain *chain, int k)
@@ -112,7 +115,7 @@ static int keep_volume(iso_mesh_chain *chain, int k, iso_mesh *level, iso_error 
         return iso_error_set(err, ISO_E_NOMEM, "chain: no memory to keep level %d's volume", k);
     iso_mesh moved;
     iso_mesh_init(&moved);
-    int rc = iso_mesh_chain_mesh(chain, k, &moved, err);
+    int rc = level_mesh(chain, k, &moved, err);
     if (rc) {
         iso_mesh_free(&moved);
         lv->offset = 0;
@@ -152,9 +155,9 @@ static int measure_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid,
     return rc;
 }
 
-/* PASS 2 and 3 for level k (*bound: measure_level's). */
-static int add_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int k, int threads,
-                     unsigned char *seen, double **bound, iso_error *err)
+/* PASS 2 for level k. The level is the chain's once this returns, even failing (the
+ * builder counts it for destroy). */
+static int add_level(iso_mesh_chain *chain, int k, unsigned char *seen, iso_error *err)
 {
     const iso_mesh_chain_level *prev = &chain->level[k - 1];
     iso_mesh_chain_level *lv = &chain->level[k];
@@ -176,7 +179,8 @@ static int add_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int
     lv->indices = m.indices = shrunk ? shrunk : m.indices;
     lv->triangle_count = m.triangle_count;
     lv->vertex_count = used_vertices(&m, seen);
-    chain->levels = k + 1; /* the level is the chain's from here: destroy frees it */
+    lv->simplify_ms = r.ms;
+    chain->bytes += 3 * lv->triangle_count * sizeof *lv->indices;
     lv->estimate = r.error;
     lv->folds_dropped = r.folds_dropped;
     iso_mesh_pinches pinches;
@@ -185,17 +189,96 @@ static int add_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int
     lv->nonmanifold_edges = pinches.pinch_edges;
     lv->pinch_vertices = pinches.pinch_vertices;
     lv->edges = pinches.edges;
+    return 0;
+}
+
+/* PASS 2c and 3 for level k (*bound: measure_level's). */
+static int measure_step(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int k, int threads,
+                        double **bound, iso_error *err)
+{
+    iso_mesh_chain_level *lv = &chain->level[k];
     iso_mesh level = view_of(chain, k);
-    double measure_start = iso_clock_ms();
-    if ((rc = keep_volume(chain, k, &level, err)))
-        return rc;
-    rc = measure_level(chain, exact_grid, k, &level, threads, bound, err);
+    double start = iso_clock_ms();
+    int rc = keep_volume(chain, k, &level, err);
+    if (!rc)
+        rc = measure_level(chain, exact_grid, k, &level, threads, bound, err);
     if (lv->offset != 0)
         iso_mesh_free(&level);
-    lv->simplify_ms = r.ms;
-    lv->measure_ms = iso_clock_ms() - measure_start;
-    chain->bytes += 3 * lv->triangle_count * sizeof *lv->indices;
+    lv->measure_ms = iso_clock_ms() - start;
     return rc;
+}
+
+/* PASS 2 and 3 side by side: the simplification is one thread's, so the levels already
+ * made are measured meanwhile on the chain's other threads, each after the one before
+ * (it reuses that one's bounds), and on all of them once the last level is made. Level
+ * k's measure writes only level k's measured fields, which nothing else touches; levels
+ * are handed over under the lock. */
+typedef struct pipeline {
+    iso_mesh_chain *chain;
+    const iso_mesh_grid *grid;
+    unsigned char *seen;
+    int levels, threads;       /* levels to make; the chain's threads */
+    pthread_mutex_t lock;
+    pthread_cond_t made_one;
+    int made;                  /* levels simplified (under the lock) */
+    int over;                  /* the simplification stopped: no more levels (under the lock) */
+    int stop;                  /* a measure failed: simplify no further (under the lock) */
+    int rc_simplify, rc_measure;
+    iso_error err_simplify, err_measure;
+} pipeline;
+
+static void simplify_all(pipeline *p)
+{
+    for (int k = 1; k <= p->levels; k++) {
+        pthread_mutex_lock(&p->lock);
+        int stop = p->stop;
+        pthread_mutex_unlock(&p->lock);
+        int rc = stop ? 0 : add_level(p->chain, k, p->seen, &p->err_simplify);
+        pthread_mutex_lock(&p->lock);
+        p->made = stop ? p->made : k; /* a failed level is still the chain's, to free */
+        p->over = stop || rc || k == p->levels;
+        p->rc_simplify = rc;
+        pthread_cond_broadcast(&p->made_one);
+        pthread_mutex_unlock(&p->lock);
+        if (stop || rc)
+            break;
+    }
+    if (p->levels == 0) {
+        pthread_mutex_lock(&p->lock);
+        p->over = 1;
+        pthread_mutex_unlock(&p->lock);
+    }
+}
+
+static void measure_all(pipeline *p)
+{
+    double *bound = NULL;
+    for (int k = 1; k <= p->levels; k++) {
+        pthread_mutex_lock(&p->lock);
+        while (p->made < k && !p->over)
+            pthread_cond_wait(&p->made_one, &p->lock);
+        int ready = p->made >= k && !(p->made == k && p->rc_simplify), all = p->over;
+        pthread_mutex_unlock(&p->lock);
+        if (!ready)
+            break;
+        int threads = all || p->threads < 2 ? p->threads : p->threads - 1;
+        if ((p->rc_measure = measure_step(p->chain, p->grid, k, threads, &bound, &p->err_measure))) {
+            pthread_mutex_lock(&p->lock);
+            p->stop = 1;
+            pthread_mutex_unlock(&p->lock);
+            break;
+        }
+    }
+    free(bound);
+}
+
+static void pipeline_stage(void *context, int t, int threads)
+{
+    (void)threads;
+    if (t == 0)
+        simplify_all(context);
+    else
+        measure_all(context);
 }
 
 int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
@@ -253,13 +336,24 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
                  ? iso_error_set(err, ISO_E_NOMEM, "chain: no memory for the grid of %zu triangles",
                                  exact->triangle_count)
                  : 0;
-    double *bound = NULL;
-    for (int k = 1; k <= ISO_CHAIN_LEVELS && !rc; k++) {
-        if ((exact->triangle_count >> k) < 1)
-            break;
-        rc = add_level(c, grid, k, threads, seen, &bound, err);
+    pipeline p = {.chain = c, .grid = grid, .seen = seen, .threads = iso_parallel_threads(threads),
+                  .lock = PTHREAD_MUTEX_INITIALIZER, .made_one = PTHREAD_COND_INITIALIZER};
+    while (p.levels < ISO_CHAIN_LEVELS && (exact->triangle_count >> (p.levels + 1)) >= 1)
+        p.levels++;
+    if (!rc && p.threads > 1) { /* share 0 makes the levels, share 1 measures them */
+        iso_parallel_run(2, pipeline_stage, &p);
+    } else if (!rc) {
+        simplify_all(&p);
+        measure_all(&p);
     }
-    free(bound);
+    c->levels = 1 + p.made;
+    if (!rc && (p.rc_simplify || p.rc_measure)) {
+        rc = p.rc_simplify ? p.rc_simplify : p.rc_measure;
+        if (err)
+            *err = p.rc_simplify ? p.err_simplify : p.err_measure;
+    }
+    pthread_mutex_destroy(&p.lock);
+    pthread_cond_destroy(&p.made_one);
     iso_mesh_grid_destroy(grid);
     free(seen);
     if (rc) {
@@ -293,6 +387,13 @@ int iso_mesh_chain_mesh(const iso_mesh_chain *chain, int k, iso_mesh *mesh, iso_
 {
     if (k < 0 || k >= chain->levels)
         return iso_error_set(err, ISO_E_ARGUMENT, "chain: no level %d (it has %d)", k, chain->levels);
+    return level_mesh(chain, k, mesh, err);
+}
+
+/* iso_mesh_chain_mesh without the range check: while the chain is built, its levels are
+ * counted only at the end. */
+static int level_mesh(const iso_mesh_chain *chain, int k, iso_mesh *mesh, iso_error *err)
+{
     const iso_mesh_chain_level *lv = &chain->level[k];
     iso_mesh_clear(mesh);
     uint32_t *remap = malloc((chain->vertex_count ? chain->vertex_count : 1) * sizeof *remap);

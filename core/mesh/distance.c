@@ -1,8 +1,9 @@
 /* distance.c: the measured distance between two surfaces, both ways (see mesh.h).
  *
  * Passes, for each direction (from a source surface to a target one):
- *   1. grid: the target's triangles binned into a uniform grid of cubic cells (about four
- *      cells per triangle), and into one 8 times coarser for far points (iso_mesh_grid;
+ *   1. grid: the target's triangles (their corners and bounding boxes, sorted by cell)
+ *      binned into a uniform grid of cubic cells (about four cells per triangle), and into
+ *      one 8 times coarser for far points (iso_mesh_grid;
  *      a caller measuring many meshes against one keeps that one's grid);
  *   2. samples: every triangle of the source is cut into n x n similar sub-triangles, n the
  *      smallest whole number that makes their longest side at most `spacing`; each
@@ -64,6 +65,7 @@ struct iso_mesh_grid {
     size_t triangle_count;
     grid fine, coarse; /* their items are slots in corners */
     float *corners;    /* 9 per triangle, sorted by fine cell so that a cell's are together */
+    float *boxes;      /* 6 per slot: its triangle's bounding box, lowest corner then highest */
 };
 
 static void grid_free(grid *g)
@@ -79,6 +81,7 @@ void iso_mesh_grid_destroy(iso_mesh_grid *g)
     grid_free(&g->fine);
     grid_free(&g->coarse);
     free(g->corners);
+    free(g->boxes);
     free(g);
 }
 
@@ -103,14 +106,11 @@ static size_t cell_index(const grid *g, int i, int j, int k)
     return ((size_t)k * (size_t)g->n[1] + (size_t)j) * (size_t)g->n[0] + (size_t)i;
 }
 
-/* The cell range a triangle's bounding box covers (its corners c, 9 floats). */
-static void box_cells(const grid *g, const float *c, int lo[3], int hi[3])
+/* The cell range a triangle's bounding box b (6 floats) covers. */
+static void box_cells(const grid *g, const float *b, int lo[3], int hi[3])
 {
-    for (int a = 0; a < 3; a++) {
-        float x = c[a], y = c[3 + a], z = c[6 + a];
-        lo[a] = cell_of(g, x < y ? (x < z ? x : z) : (y < z ? y : z), a);
-        hi[a] = cell_of(g, x > y ? (x > z ? x : z) : (y > z ? y : z), a);
-    }
+    for (int a = 0; a < 3; a++)
+        lo[a] = cell_of(g, b[a], a), hi[a] = cell_of(g, b[3 + a], a);
 }
 
 /* PASS 1: a grid's cells, `per_triangle` per triangle over lo..hi. */
@@ -139,13 +139,13 @@ static int grid_shape(grid *g, size_t triangles, const float lo[3], const float 
     return (g->start = calloc(*total + 1, sizeof *g->start)) ? 0 : ISO_E_NOMEM;
 }
 
-/* PASS 1: the triangles (corners, 9 floats each) binned into g's cells. */
-static int grid_fill(grid *g, const float *corners, size_t triangles, size_t total)
+/* PASS 1: the triangles (their boxes, 6 floats each) binned into g's cells. */
+static int grid_fill(grid *g, const float *boxes, size_t triangles, size_t total)
 {
     size_t items = 0;
     for (size_t t = 0; t < triangles; t++) {
         int a[3], b[3];
-        box_cells(g, corners + 9 * t, a, b);
+        box_cells(g, boxes + 6 * t, a, b);
         for (int k = a[2]; k <= b[2]; k++)
             for (int j = a[1]; j <= b[1]; j++)
                 for (int i = a[0]; i <= b[0]; i++)
@@ -162,7 +162,7 @@ static int grid_fill(grid *g, const float *corners, size_t triangles, size_t tot
     memcpy(fill, g->start, total * sizeof *fill);
     for (size_t t = 0; t < triangles; t++) {
         int a[3], b[3];
-        box_cells(g, corners + 9 * t, a, b);
+        box_cells(g, boxes + 6 * t, a, b);
         for (int k = a[2]; k <= b[2]; k++)
             for (int j = a[1]; j <= b[1]; j++)
                 for (int i = a[0]; i <= b[0]; i++)
@@ -200,21 +200,42 @@ static int sort_corners(const grid *g, const iso_mesh *m, size_t total, float *o
     return 0;
 }
 
+/* PASS 1: each slot's bounding box, from its corners. */
+static void boxes_of(const float *corners, size_t triangles, float *boxes)
+{
+    for (size_t t = 0; t < triangles; t++) {
+        const float *c = corners + 9 * t;
+        float *b = boxes + 6 * t;
+        for (int a = 0; a < 3; a++) {
+            float x = c[a], y = c[3 + a], z = c[6 + a];
+            b[a] = x < y ? (x < z ? x : z) : (y < z ? y : z);
+            b[3 + a] = x > y ? (x > z ? x : z) : (y > z ? y : z);
+        }
+    }
+}
+
 int iso_mesh_grid_build(const iso_mesh *mesh, const float lo[3], const float hi[3],
                         iso_mesh_grid **out)
 {
     iso_mesh_grid *g = calloc(1, sizeof *g);
     *out = NULL;
     size_t T = mesh->triangle_count, fine = 0, coarse = 0;
-    if (!g || !(g->corners = malloc((9 * T + 1) * sizeof *g->corners))) {
-        free(g);
+    if (!g)
+        return ISO_E_NOMEM;
+    if (!(g->corners = malloc((9 * T + 1) * sizeof *g->corners)) ||
+        !(g->boxes = malloc((6 * T + 1) * sizeof *g->boxes))) {
+        iso_mesh_grid_destroy(g);
         return ISO_E_NOMEM;
     }
     g->triangle_count = T;
     if (grid_shape(&g->fine, T, lo, hi, 4.0, &fine) ||
         grid_shape(&g->coarse, T, lo, hi, 4.0 / (COARSE * COARSE * COARSE), &coarse) ||
-        sort_corners(&g->fine, mesh, fine, g->corners) ||
-        grid_fill(&g->fine, g->corners, T, fine) || grid_fill(&g->coarse, g->corners, T, coarse)) {
+        sort_corners(&g->fine, mesh, fine, g->corners)) {
+        iso_mesh_grid_destroy(g);
+        return ISO_E_NOMEM;
+    }
+    boxes_of(g->corners, T, g->boxes);
+    if (grid_fill(&g->fine, g->boxes, T, fine) || grid_fill(&g->coarse, g->boxes, T, coarse)) {
         iso_mesh_grid_destroy(g);
         return ISO_E_NOMEM;
     }
@@ -298,14 +319,12 @@ static void corners_of(const float *f, double c[3][3])
         c[k][0] = f[3 * k], c[k][1] = f[3 * k + 1], c[k][2] = f[3 * k + 2];
 }
 
-/* The squared distance from p to the box of triangle f (its corners, 9 floats). */
-static double box_gap_sq(const float *f, const double p[3])
+/* The squared distance from p to box b (6 floats: lowest corner, highest). */
+static inline double box_gap_sq(const float *b, const double p[3])
 {
     double gap = 0;
     for (int a = 0; a < 3; a++) {
-        float x = f[a], y = f[3 + a], z = f[6 + a];
-        double below = (x < y ? (x < z ? x : z) : (y < z ? y : z)) - p[a];
-        double above = p[a] - (x > y ? (x > z ? x : z) : (y > z ? y : z));
+        double below = b[a] - p[a], above = p[a] - b[3 + a];
         double d = below > 0 ? below : above > 0 ? above : 0;
         gap += d * d;
     }
@@ -318,7 +337,7 @@ static void search_cell(const grid *g, const iso_mesh_grid *ix, size_t at, const
 {
     for (uint32_t e = g->start[at]; e < g->start[at + 1]; e++) {
         const float *f = ix->corners + 9 * (size_t)g->items[e];
-        if (box_gap_sq(f, p) >= s->best)
+        if (box_gap_sq(ix->boxes + 6 * (size_t)g->items[e], p) >= s->best)
             continue;
         double tc[3][3];
         corners_of(f, tc);
@@ -418,7 +437,7 @@ static void nearest(const iso_mesh_grid *ix, const double p[3], double stop, sea
 static int probe(const iso_mesh_grid *ix, const double p[3], double stop, search *s)
 {
     const grid *g = &ix->fine;
-    double r = sqrt(stop);
+    double r = fmin(sqrt(stop), g->h); /* most samples lie much nearer than the maximum */
     int lo[3], hi[3], c[3];
     for (int a = 0; a < 3; a++) {
         lo[a] = cell_of(g, p[a] - r, a), hi[a] = cell_of(g, p[a] + r, a), c[a] = cell_of(g, p[a], a);
@@ -435,7 +454,7 @@ static int probe(const iso_mesh_grid *ix, const double p[3], double stop, search
                         continue;
                     for (uint32_t e = g->start[at]; e < g->start[at + 1]; e++) {
                         const float *f = ix->corners + 9 * (size_t)g->items[e];
-                        if (box_gap_sq(f, p) > stop)
+                        if (box_gap_sq(ix->boxes + 6 * (size_t)g->items[e], p) > stop)
                             continue;
                         double tc[3][3];
                         corners_of(f, tc);
