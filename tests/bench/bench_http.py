@@ -18,7 +18,8 @@ ISO_BENCH_SECONDS sets each wrk run's length (default 6).
 
 First, the server's side of an uncached CThead skin request per codec (Draco; meshopt with
 and without gzip accepted), the binaries up at once and asked in turn: extraction,
-normals, encoding, gzip, their total and its ratio to the extraction. ISO_BENCH_ONLY=split
+normals (and their ratio to the extraction), encoding, gzip, their total and its ratio to the
+extraction (medians of the per-request ratios). ISO_BENCH_ONLY=split
 runs that alone (bench/results/http_split.json)."""
 
 import http.client
@@ -236,6 +237,7 @@ def split_one(port, vid, level, extra, encoding):
            (("extract_ms", "Extract"), ("normals_ms", "Normals"), ("encode_ms", "Encode"), ("gzip_ms", "Gzip"))}
     row["total_ms"] = sum(row.values())
     row["ratio"] = row["total_ms"] / row["extract_ms"]
+    row["normals_ratio"] = row["normals_ms"] / row["extract_ms"]
     row["bytes"] = len(body)
     return row
 
@@ -267,10 +269,11 @@ def split(binaries, catalog, vid, level):
 
 def print_split(rows):
     print(f"\nuncached CThead skin, tolerance 0, server steps (X-Iso-* headers), median of {SPLIT_REPEAT}, load {os.getloadavg()[0]:.1f}")
-    print("| binary | request | extract | normals | encode | gzip | total | total / extract | MB |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+    print("| binary | request | extract | normals | normals / extract | encode | gzip | total | total / extract | MB |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         print(f"| {os.path.relpath(r['binary'])} | {r['kind']} | {r['extract_ms']:.1f} | {r['normals_ms']:.1f} | "
+              f"{r['normals_ratio']:.2f} | "
               f"{r['encode_ms']:.1f} | {r['gzip_ms']:.1f} | {r['total_ms']:.1f} | {r['ratio']:.1f} | {r['bytes'] / 1e6:.2f} |")
 
 
