@@ -3,13 +3,16 @@
  * Passes of iso_mesh_chain_build:
  *   1. keep: the exact surface's positions and triangles become level 0;
  *   2. simplify: level k (k = 1..ISO_CHAIN_LEVELS) is level k - 1 simplified to half its
- *      triangles (iso_simplify_manifold, borders locked), gathered over compact vertices
- *      and mapped back to the chain's (so that every level indexes the one position array);
+ *      triangles by collapses that keep the link condition (collapse.c), borders locked,
+ *      in up to two slabs on their own threads (simplify_level: 2a gather, 2b collapse
+ *      in steps of error, 2c join), mapped back to the chain's vertices (so that every
+ *      level indexes the one position array);
  *   3. measure: each level's distance from level 0 (iso_mesh_distance_between, samples three
  *      voxels apart, against level 0's grid built once for all levels), so the answers
  *      below rest on measurements, not on estimates; a level's triangles left as they were
  *      in the level before keep that level's bounds on their distance, so that the search
  *      for the largest distance skips those that cannot raise it (distance.h). */
+#include "collapse.h"
 #include "distance.h"
 
 #include <math.h>
@@ -53,50 +56,156 @@ static size_t used_vertices(const iso_mesh *m, unsigned char *seen)
     return n;
 }
 
-/* PASS 2 for level k: m (level k - 1's triangles) simplified to `target` with its border
- * locked (iso_simplify_manifold), over compact vertices gathered from the chain's (so that
- * a small level costs its own size, not the exact surface's vertex count) and mapped back.
- * One thread: the collapses run cheapest first over the whole level, and cuts into parts
- * would either hold vertices still or need a joined pass of their own. */
-static int simplify_level(const iso_mesh_chain *chain, iso_mesh *m, int k, size_t target,
-                          iso_simplify_result *r, iso_error *err)
+#define CHAIN_SLAB_MIN 20000 /* triangles per slab, at least, else one part */
+#define CHAIN_STEP 1.25      /* each step's error limit over the one before (PASS 2b) */
+
+/* One slab of a level: its triangles over its own vertices, and their collapser. */
+typedef struct slab {
+    iso_mesh mesh;
+    uint32_t *global;        /* its vertex i is the chain's vertex global[i] */
+    iso_collapser *collapser;
+    size_t alive, goal;      /* triangles left; this step's goal */
+    int rc;
+} slab;
+
+typedef struct slab_job {
+    const iso_mesh *source;
+    const unsigned char *slab_of; /* per source triangle */
+    slab *slabs;
+    int count;
+    double limit;            /* this step's error limit */
+} slab_job;
+
+/* PASS 2a for the slabs of thread t: each gathered over compact vertices (so that its cost
+ * follows its own size, not the chain's vertex count), and its collapser made; the cut's
+ * edges are open in a slab, so the cut stays where it is. */
+static void gather_slab(void *context, int t, int threads)
 {
-    size_t n = m->triangle_count;
-    iso_mesh part;
-    iso_mesh_init(&part);
-    uint32_t *local = malloc((m->vertex_count ? m->vertex_count : 1) * sizeof *local);
-    uint32_t *global = malloc((3 * n + 1) * sizeof *global);
-    if (!local || !global || iso_mesh_reserve(&part, 3 * n, n)) {
-        free(local);
-        free(global);
-        iso_mesh_free(&part);
-        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for level %d (%zu triangles)", k, n);
-    }
-    memset(local, 0xff, m->vertex_count * sizeof *local);
-    size_t v = 0;
-    for (size_t i = 0; i < 3 * n; i++) {
-        uint32_t g = m->indices[i];
-        if (local[g] == UINT32_MAX) {
-            local[g] = (uint32_t)v;
-            global[v] = g;
-            memcpy(part.positions + 3 * v++, m->positions + 3 * (size_t)g, 3 * sizeof(float));
+    slab_job *job = context;
+    const iso_mesh *m = job->source;
+    for (int s = t; s < job->count; s += threads) {
+        slab *sl = &job->slabs[s];
+        size_t n = sl->alive, v = 0, i = 0;
+        uint32_t *local = malloc((m->vertex_count ? m->vertex_count : 1) * sizeof *local);
+        iso_mesh_init(&sl->mesh);
+        if (!local || iso_mesh_reserve(&sl->mesh, 3 * n, n) ||
+            !(sl->global = malloc((3 * n + 1) * sizeof *sl->global))) {
+            free(local);
+            sl->rc = ISO_E_NOMEM;
+            continue;
         }
-        part.indices[i] = local[g];
+        memset(local, 0xff, m->vertex_count * sizeof *local);
+        for (size_t tri = 0; tri < m->triangle_count; tri++) {
+            if (job->slab_of[tri] != s)
+                continue;
+            for (int k = 0; k < 3; k++) {
+                uint32_t g = m->indices[3 * tri + k];
+                if (local[g] == UINT32_MAX) {
+                    local[g] = (uint32_t)v;
+                    sl->global[v] = g;
+                    memcpy(sl->mesh.positions + 3 * v++, m->positions + 3 * (size_t)g, 3 * sizeof(float));
+                }
+                sl->mesh.indices[i++] = local[g];
+            }
+        }
+        free(local);
+        sl->mesh.vertex_count = v;
+        sl->mesh.triangle_count = n;
+        int pinch_free;
+        sl->rc = iso_collapser_create(&sl->mesh, &sl->collapser, &pinch_free);
     }
-    free(local);
-    part.vertex_count = v;
-    part.triangle_count = n;
-    iso_simplify_params sp = {.target_triangles = target, .target_error = INFINITY,
-                              .voxel_size = chain->voxel_size, .lock_border = 1, .keep_vertices = 1};
-    int rc = iso_simplify_manifold(&part, &sp, r, err);
-    if (!rc) {
-        for (size_t i = 0; i < 3 * part.triangle_count; i++)
-            m->indices[i] = global[part.indices[i]];
-        m->triangle_count = part.triangle_count;
+}
+
+/* PASS 2b, one step for the slabs of thread t. */
+static void step_slab(void *context, int t, int threads)
+{
+    slab_job *job = context;
+    for (int s = t; s < job->count; s += threads)
+        job->slabs[s].alive = iso_collapser_run(job->slabs[s].collapser, job->slabs[s].goal, job->limit);
+}
+
+/* PASS 2 for level k: m (level k - 1's triangles) simplified to `target` by collapses that
+ * keep the link condition (collapse.c), borders locked. On several threads and a level of
+ * 2 x CHAIN_SLAB_MIN triangles or more, in two slabs across an axis (the longest side on
+ * even levels, the next on odd ones, so that no cut stays), each on its own thread with
+ * its cut locked. (2a) each slab is gathered; (2b) the slabs collapse in steps, each up
+ * to an error limit CHAIN_STEP times the one before and to its share of the triangles
+ * still to go, so that the two spend their collapses where they cost least over the
+ * whole level, not where a fixed share of the target would force them; (2c) the slabs'
+ * triangles are mapped back to the chain's vertices. A smaller level, or one thread, is
+ * one slab and one run. */
+static int simplify_level(iso_mesh *m, int k, size_t target, int threads, iso_simplify_result *r,
+                          iso_error *err)
+{
+    size_t T = m->triangle_count;
+    int count = threads > 1 && T >= 2 * CHAIN_SLAB_MIN ? 2 : 1;
+    *r = (iso_simplify_result){.triangles_in = T, .vertices_in = m->vertex_count};
+    unsigned char *slab_of = malloc(T ? T : 1);
+    slab slabs[2] = {{.alive = 0}, {.alive = 0}};
+    if (!slab_of)
+        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for the slabs of level %d", k);
+    float lo[3], hi[3];
+    iso_mesh_bounds(m, lo, hi);
+    int order[3] = {0, 1, 2};
+    for (int a = 0; a < 3; a++)
+        for (int b = a + 1; b < 3; b++)
+            if (hi[order[b]] - lo[order[b]] > hi[order[a]] - lo[order[a]]) {
+                int swap = order[a];
+                order[a] = order[b], order[b] = swap;
+            }
+    int axis = order[k % 2];
+    double middle = 0.5 * ((double)lo[axis] + hi[axis]);
+    for (size_t t = 0; t < T; t++) {
+        double centre = 0;
+        for (int c = 0; c < 3; c++)
+            centre += m->positions[3 * (size_t)m->indices[3 * t + c] + (size_t)axis];
+        slab_of[t] = count > 1 && centre / 3 >= middle;
+        slabs[slab_of[t]].alive++;
     }
-    free(global);
-    iso_mesh_free(&part);
-    return rc;
+    if (count > 1 && (!slabs[0].alive || !slabs[1].alive)) { /* all on one side */
+        count = 1;
+        memset(slab_of, 0, T);
+        slabs[0].alive = T, slabs[1].alive = 0;
+    }
+    slab_job job = {.source = m, .slab_of = slab_of, .slabs = slabs, .count = count};
+    iso_parallel_run(count, gather_slab, &job); /* PASS 2a */
+    int rc = slabs[0].rc ? slabs[0].rc : slabs[1].rc;
+    if (count == 1 && !rc) {
+        slabs[0].goal = target, job.limit = INFINITY;
+        step_slab(&job, 0, 1);
+    }
+    for (double limit = 0; count > 1 && !rc;) { /* PASS 2b */
+        size_t total = slabs[0].alive + slabs[1].alive;
+        double next = fmin(iso_collapser_next(slabs[0].collapser), iso_collapser_next(slabs[1].collapser));
+        if (total <= target || next == INFINITY)
+            break;
+        job.limit = limit = fmax(limit * CHAIN_STEP, next);
+        for (int s = 0; s < 2; s++) {
+            size_t share = (size_t)ceil((double)(total - target) * (double)slabs[s].alive / (double)total);
+            slabs[s].goal = slabs[s].alive > share ? slabs[s].alive - share : 0;
+        }
+        iso_parallel_run(2, step_slab, &job);
+    }
+    size_t joined = 0; /* PASS 2c */
+    for (int s = 0; s < count; s++) {
+        slab *sl = &slabs[s];
+        if (!rc) {
+            iso_collapser_triangles(sl->collapser, m->indices + 3 * joined);
+            for (size_t i = 3 * joined; i < 3 * (joined + sl->alive); i++)
+                m->indices[i] = sl->global[m->indices[i]];
+            joined += sl->alive;
+            r->error = fmax(r->error, iso_collapser_error(sl->collapser));
+            r->locked_vertices += iso_collapser_refused(sl->collapser);
+        }
+        iso_collapser_destroy(sl->collapser);
+        iso_mesh_free(&sl->mesh);
+        free(sl->global);
+    }
+    free(slab_of);
+    if (rc)
+        return iso_error_set(err, rc, "chain: no memory for level %d (%zu triangles)", k, T);
+    m->triangle_count = r->triangles = joined;
+    return 0;
 }
 
 /* PASS 2c: a closed surface's level whose enclosed volume strays more than
@@ -169,7 +278,7 @@ static int add_level(iso_mesh_chain *chain, int k, unsigned char *seen, iso_erro
     target = target ? target : 1;
     iso_simplify_result r;
     double start = iso_clock_ms();
-    int rc = simplify_level(chain, &m, k, target, &r, err);
+    int rc = simplify_level(&m, k, target, iso_parallel_threads(threads), &r, err);
     if (rc) {
         free(m.indices);
         return rc;

@@ -19,7 +19,7 @@
  *      waits until its neighbourhood changes. Until the target count, or the next
  *      collapse would exceed the target error;
  *   6. write: the triangles left, in their input order. */
-#include "mesh.h"
+#include "collapse.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -31,12 +31,13 @@
 #define LOCKED 1u
 #define REMOVED 2u
 #define CHECKED 4u /* the vertex's key is its cheapest allowed collapse's, not a bound */
+#define ON_BORDER 8u /* on an open edge (and LOCKED) */
 
 typedef struct quadric {
     double a00, a01, a02, a11, a12, a22, b0, b1, b2, c, w;
 } quadric;
 
-typedef struct collapser {
+struct iso_collapser {
     const float *pos;
     uint32_t *tri;           /* the triangles' corners, relabelled as vertices collapse */
     unsigned char *dead;     /* per triangle */
@@ -50,11 +51,15 @@ typedef struct collapser {
     uint32_t *mark, stamp;   /* per vertex: scratch marks */
     unsigned char *refused;  /* per vertex: a collapse of it was refused for its topology */
     size_t alive;
+    size_t triangle_count, vertex_count;
     double worst;            /* the largest cost collapsed */
-} collapser;
+};
+typedef struct iso_collapser collapser;
 
-static void collapser_free(collapser *c)
+void iso_collapser_destroy(collapser *c)
 {
+    if (!c)
+        return;
     free(c->tri);
     free(c->dead);
     free(c->head);
@@ -67,6 +72,7 @@ static void collapser_free(collapser *c)
     free(c->to);
     free(c->mark);
     free(c->refused);
+    free(c);
 }
 
 /* ---- the heap ---- */
@@ -199,7 +205,7 @@ static uint32_t before(const collapser *c, uint32_t k)
 static void order(collapser *c, uint32_t u)
 {
     c->flags[u] &= (unsigned char)~CHECKED;
-    if (c->flags[u]) {
+    if (c->flags[u] & (LOCKED | REMOVED)) {
         heap_remove(c, u);
         return;
     }
@@ -219,29 +225,59 @@ static void order(collapser *c, uint32_t u)
     heap_set(c, u, best);
 }
 
+/* Whether triangle (u, x, y) moved to (v, x, y) turns over (or collapses to a line). */
+static int turns_over(const float *pu, const float *pv, const float *px, const float *py)
+{
+    double ex[3], ey[3], fx[3], fy[3];
+    for (int d = 0; d < 3; d++) {
+        ex[d] = (double)px[d] - pu[d], ey[d] = (double)py[d] - pu[d];
+        fx[d] = (double)px[d] - pv[d], fy[d] = (double)py[d] - pv[d];
+    }
+    double n0[3] = {ex[1] * ey[2] - ex[2] * ey[1], ex[2] * ey[0] - ex[0] * ey[2], ex[0] * ey[1] - ex[1] * ey[0]};
+    double n1[3] = {fx[1] * fy[2] - fx[2] * fy[1], fx[2] * fy[0] - fx[0] * fy[2], fx[0] * fy[1] - fx[1] * fy[0]};
+    return n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2] <= 0;
+}
+
 /* Whether the edge u->v's collapse keeps the surface a manifold without turning a
  * triangle over: 1 yes, 0 no, 2 the two ends are corners of a lone tetrahedron (the
- * collapse would fold it: it goes whole). a and b receive the edge's opposite corners. */
+ * collapse would fold it: it goes whole). a and b receive the edge's opposite corners.
+ * One walk over u's triangles marks its neighbours, finds the edge's two triangles and
+ * checks the others' turning; one over v's checks the link condition. */
 static int allowed(collapser *c, uint32_t u, uint32_t v, uint32_t *a, uint32_t *b)
 {
     if (c->flags[v] & REMOVED)
         return 0;
     uint32_t stamp = ++c->stamp, apex[2] = {NONE, NONE};
-    int shared = 0;
-    size_t valence_u = 0, valence_v = 0;
+    int shared = 0, facing_ab = 0;
+    size_t valence_u = 0, valence_v = 0, on_border = 0;
+    const float *pu = c->pos + 3 * (size_t)u, *pv = c->pos + 3 * (size_t)v;
+    uint32_t first_x = NONE, first_y = NONE; /* a triangle of u without v: (u, a, b)? */
     for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
         uint32_t x = after(c, k), y = before(c, k);
         c->mark[x] = c->mark[y] = stamp;
         valence_u++;
+        on_border += x != v && (c->flags[x] & ON_BORDER);
         if (x == v || y == v) {
             if (shared < 2)
                 apex[shared] = x == v ? y : x;
             shared++;
+        } else {
+            if (turns_over(pu, pv, c->pos + 3 * (size_t)x, c->pos + 3 * (size_t)y))
+                return 0;
+            first_x = x, first_y = y;
         }
     }
     if (shared != 2 || apex[0] == apex[1])
         return 0;
     *a = apex[0], *b = apex[1];
+    /* No new edge between two border vertices: where the border is a cut between parts
+     * simplified apart (the chain's slabs), the other part may make the same edge, and
+     * joined, it would have four triangles. */
+    if ((c->flags[v] & ON_BORDER) &&
+        on_border > (size_t)((c->flags[*a] & ON_BORDER) != 0) + (size_t)((c->flags[*b] & ON_BORDER) != 0))
+        return 0;
+    /* u of valence 3 has one triangle without v, on (u, a, b) */
+    facing_ab = valence_u == 3 && ((first_x == *a && first_y == *b) || (first_x == *b && first_y == *a));
     /* The link condition: the ends' only common neighbours are the opposite corners. */
     int tetrahedron = 0;
     for (uint32_t k = c->head[v]; k != NONE; k = c->next[k]) {
@@ -252,25 +288,8 @@ static int allowed(collapser *c, uint32_t u, uint32_t v, uint32_t *a, uint32_t *
             return 0;
         tetrahedron |= (x == *a && y == *b) || (x == *b && y == *a);
     }
-    const float *pu = c->pos + 3 * (size_t)u, *pv = c->pos + 3 * (size_t)v;
-    for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
-        uint32_t x = after(c, k), y = before(c, k);
-        if (x == v || y == v)
-            continue;
-        if (((x == *a && y == *b) || (x == *b && y == *a)) && tetrahedron)
-            return valence_u == 3 && valence_v == 3 ? 2 : 0;
-        /* The triangle (u, x, y) moved to (v, x, y) must face the same side. */
-        const float *px = c->pos + 3 * (size_t)x, *py = c->pos + 3 * (size_t)y;
-        double ex[3], ey[3], fx[3], fy[3];
-        for (int d = 0; d < 3; d++) {
-            ex[d] = (double)px[d] - pu[d], ey[d] = (double)py[d] - pu[d];
-            fx[d] = (double)px[d] - pv[d], fy[d] = (double)py[d] - pv[d];
-        }
-        double n0[3] = {ex[1] * ey[2] - ex[2] * ey[1], ex[2] * ey[0] - ex[0] * ey[2], ex[0] * ey[1] - ex[1] * ey[0]};
-        double n1[3] = {fx[1] * fy[2] - fx[2] * fy[1], fx[2] * fy[0] - fx[0] * fy[2], fx[0] * fy[1] - fx[1] * fy[0]};
-        if (n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2] <= 0)
-            return 0;
-    }
+    if (facing_ab && tetrahedron)
+        return valence_v == 3 ? 2 : 0;
     return 1;
 }
 
@@ -374,23 +393,31 @@ static void reorder(collapser *c, uint32_t u)
     heap_set(c, u, best);
 }
 
-/* PASS 2 for vertex u: its edges each used once each way, its triangles one fan. */
-static int is_simple(const collapser *c, uint32_t u)
+/* PASS 2 for vertex u: 0 when its edges are each used once each way and its triangles
+ * make one fan, BORDER when two of its edges are open and its triangles one fan from one
+ * to the other, PINCHED otherwise. */
+#define BORDER 1
+#define PINCHED 2
+static int kind_of(const collapser *c, uint32_t u)
 {
-    size_t n = 0;
+    size_t n = 0, open = 0;
+    uint32_t start = c->head[u];
     for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
-        uint32_t x = after(c, k);
-        size_t forward = 0, backward = 0;
+        uint32_t x = after(c, k), y = before(c, k);
+        size_t forward = 0, backward = 0, into = 0;
         for (uint32_t j = c->head[u]; j != NONE; j = c->next[j])
-            forward += after(c, j) == x, backward += before(c, j) == x;
-        if (forward != 1 || backward != 1)
-            return 0;
+            forward += after(c, j) == x, backward += before(c, j) == x, into += after(c, j) == y;
+        if (forward != 1 || backward > 1)
+            return PINCHED;
+        open += !backward;
+        if (!into) /* no triangle leads into this one: an open fan starts here */
+            start = k;
         n++;
     }
-    if (n < 3)
-        return 0;
-    /* One fan: walking from triangle to triangle across u's edges comes back after n. */
-    uint32_t start = c->head[u], k = start;
+    if (n < 3 || (open != 0 && open != 1))
+        return PINCHED;
+    /* One fan: walking from triangle to triangle across u's edges meets all n. */
+    uint32_t k = start;
     size_t steps = 0;
     do {
         uint32_t x = after(c, k), j;
@@ -399,12 +426,17 @@ static int is_simple(const collapser *c, uint32_t u)
         k = j;
         steps++;
     } while (k != NONE && k != start && steps <= n);
-    return k == start && steps == n;
+    if (steps != n || (open ? k != NONE : k != start))
+        return PINCHED;
+    return open ? BORDER : 0;
 }
 
-static int collapser_init(collapser *c, const iso_mesh *mesh)
+int iso_collapser_create(const iso_mesh *mesh, collapser **out, int *pinch_free)
 {
-    memset(c, 0, sizeof *c);
+    collapser *c = calloc(1, sizeof *c);
+    *out = c;
+    if (!c)
+        return ISO_E_NOMEM;
     size_t nv = mesh->vertex_count ? mesh->vertex_count : 1, nt = mesh->triangle_count ? mesh->triangle_count : 1;
     c->pos = mesh->positions;
     c->tri = malloc(3 * nt * sizeof *c->tri);
@@ -420,8 +452,12 @@ static int collapser_init(collapser *c, const iso_mesh *mesh)
     c->mark = calloc(nv, sizeof *c->mark);
     c->refused = calloc(nv, 1);
     if (!c->tri || !c->dead || !c->next || !c->head || !c->flags || !c->q || !c->heap || !c->slot ||
-        !c->key || !c->to || !c->mark || !c->refused)
+        !c->key || !c->to || !c->mark || !c->refused) {
+        iso_collapser_destroy(c);
+        *out = NULL;
         return ISO_E_NOMEM;
+    }
+    c->triangle_count = mesh->triangle_count, c->vertex_count = mesh->vertex_count;
     memcpy(c->tri, mesh->indices, 3 * mesh->triangle_count * sizeof *c->tri);
     memset(c->slot, 0xff, nv * sizeof *c->slot);
     /* PASS 1 */
@@ -440,7 +476,67 @@ static int collapser_init(collapser *c, const iso_mesh *mesh)
         for (int k = 0; k < 3; k++)
             quadric_join(&c->q[x[k]], &q);
     }
+    /* PASS 2, then PASS 4 over the free vertices */
+    *pinch_free = 1;
+    for (uint32_t v = 0; v < mesh->vertex_count; v++) {
+        int kind = c->head[v] == NONE ? 0 : kind_of(c, v);
+        c->flags[v] |= kind ? LOCKED : 0;
+        c->flags[v] |= kind == BORDER ? ON_BORDER : 0;
+        *pinch_free &= kind != PINCHED;
+    }
+    for (uint32_t v = 0; v < mesh->vertex_count; v++)
+        if (c->head[v] != NONE)
+            order(c, v);
     return 0;
+}
+
+size_t iso_collapser_run(collapser *c, size_t target_triangles, double target_error)
+{
+    /* PASS 5 */
+    double limit = target_error * target_error;
+    while (c->alive > target_triangles && c->heap_count) {
+        uint32_t u = c->heap[0], a, b;
+        if (c->key[u] > limit)
+            break;
+        int ok = allowed(c, u, c->to[u], &a, &b);
+        if (!ok) {
+            reorder(c, u);
+            continue;
+        }
+        c->worst = fmax(c->worst, c->key[u]);
+        if (ok == 2)
+            drop_tetrahedron(c, u, c->to[u], a, b);
+        else
+            collapse(c, u, c->to[u], a, b);
+    }
+    return c->alive;
+}
+
+void iso_collapser_triangles(const collapser *c, uint32_t *out)
+{
+    /* PASS 6 */
+    size_t kept = 0;
+    for (size_t t = 0; t < c->triangle_count; t++)
+        if (!c->dead[t])
+            memcpy(out + 3 * kept++, c->tri + 3 * t, 3 * sizeof *out);
+}
+
+double iso_collapser_next(const collapser *c)
+{
+    return c->heap_count ? sqrt(c->key[c->heap[0]]) : INFINITY;
+}
+
+double iso_collapser_error(const collapser *c)
+{
+    return sqrt(c->worst);
+}
+
+size_t iso_collapser_refused(const collapser *c)
+{
+    size_t n = 0;
+    for (size_t v = 0; v < c->vertex_count; v++)
+        n += c->refused[v] && !(c->flags[v] & REMOVED);
+    return n;
 }
 
 int iso_simplify_manifold(iso_mesh *mesh, const iso_simplify_params *params,
@@ -456,54 +552,30 @@ int iso_simplify_manifold(iso_mesh *mesh, const iso_simplify_params *params,
     double start = iso_clock_ms();
     *r = (iso_simplify_result){.triangles_in = mesh->triangle_count, .vertices_in = mesh->vertex_count,
                                .scale = 1};
-    collapser c;
-    int rc = collapser_init(&c, mesh);
-    if (rc) {
-        collapser_free(&c);
+    collapser *c;
+    int pinch_free;
+    if (iso_collapser_create(mesh, &c, &pinch_free))
         return iso_error_set(err, ISO_E_NOMEM, "simplify: no memory for %zu triangles", mesh->triangle_count);
-    }
-    /* PASS 2, then PASS 4 over the free vertices */
-    for (uint32_t v = 0; v < mesh->vertex_count; v++)
-        if (c.head[v] != NONE && !is_simple(&c, v))
-            c.flags[v] |= LOCKED;
-    for (uint32_t v = 0; v < mesh->vertex_count; v++)
-        if (c.head[v] != NONE)
-            order(&c, v);
-    /* PASS 5 */
-    double limit = params->target_error * params->target_error;
-    while (c.alive > params->target_triangles && c.heap_count) {
-        uint32_t u = c.heap[0], a, b;
-        if (c.key[u] > limit)
-            break;
-        int ok = allowed(&c, u, c.to[u], &a, &b);
-        if (!ok) {
-            reorder(&c, u);
-            continue;
-        }
-        c.worst = fmax(c.worst, c.key[u]);
-        if (ok == 2) {
-            drop_tetrahedron(&c, u, c.to[u], a, b);
-            continue;
-        }
-        collapse(&c, u, c.to[u], a, b);
-    }
-    /* PASS 6: into the collapser's own triangles first, so that a failure below leaves
-     * the mesh as it came in. */
-    size_t kept = 0;
-    for (size_t t = 0; t < mesh->triangle_count; t++)
-        if (!c.dead[t])
-            memmove(c.tri + 3 * kept++, c.tri + 3 * t, 3 * sizeof *c.tri);
-    for (size_t v = 0; v < mesh->vertex_count; v++)
-        r->locked_vertices += c.refused[v] && !(c.flags[v] & REMOVED);
-    r->error = sqrt(c.worst);
-    r->error_voxels = r->error / (params->voxel_size > 0 ? params->voxel_size : 1);
+    size_t kept = iso_collapser_run(c, params->target_triangles, params->target_error);
+    /* The result goes to a buffer of its own and replaces the mesh's indices only when
+     * nothing can fail any more. */
     iso_mesh view = *mesh;
-    view.indices = c.tri, view.triangle_count = kept;
-    iso_mesh_pinches left;
+    view.indices = malloc((3 * kept + 1) * sizeof *view.indices);
+    view.triangle_count = kept;
     uint32_t *remap = params->keep_vertices ? NULL : malloc((mesh->vertex_count ? mesh->vertex_count : 1) * sizeof *remap);
-    if (!params->keep_vertices && !remap)
-        rc = iso_error_set(err, ISO_E_NOMEM, "simplify: no memory to drop unused vertices");
-    if (!rc && (rc = iso_mesh_find_pinches(&view, NULL, &left)))
+    iso_mesh_pinches left = {0};
+    int rc = !view.indices || (!params->keep_vertices && !remap)
+                 ? iso_error_set(err, ISO_E_NOMEM, "simplify: no memory for the result")
+                 : 0;
+    if (!rc) {
+        iso_collapser_triangles(c, view.indices);
+        r->error = iso_collapser_error(c);
+        r->error_voxels = r->error / (params->voxel_size > 0 ? params->voxel_size : 1);
+        r->locked_vertices = iso_collapser_refused(c);
+    }
+    iso_collapser_destroy(c);
+    /* Collapses that keep the link condition make no pinch: only the input's can be left. */
+    if (!rc && !pinch_free && (rc = iso_mesh_find_pinches(&view, NULL, &left)))
         rc = iso_error_set(err, rc, "simplify: no memory to count pinches");
     if (!rc && params->measure) {
         double spacing = params->voxel_size > 0 ? params->voxel_size : 1;
@@ -511,7 +583,7 @@ int iso_simplify_manifold(iso_mesh *mesh, const iso_simplify_params *params,
         r->measured = !rc;
     }
     if (!rc) {
-        memcpy(mesh->indices, c.tri, 3 * kept * sizeof *c.tri);
+        memcpy(mesh->indices, view.indices, 3 * kept * sizeof *view.indices);
         mesh->triangle_count = kept;
         r->triangles = kept;
         r->nonmanifold_edges = left.pinch_edges;
@@ -519,12 +591,10 @@ int iso_simplify_manifold(iso_mesh *mesh, const iso_simplify_params *params,
         r->unpaired_edges = left.unpaired_edges;
         if (remap)
             iso_mesh_drop_unused_into(mesh, remap);
+        r->vertices = mesh->vertex_count;
     }
+    free(view.indices);
     free(remap);
-    collapser_free(&c);
     r->ms = iso_clock_ms() - start;
-    if (rc)
-        return rc;
-    r->vertices = mesh->vertex_count;
-    return 0;
+    return rc;
 }
