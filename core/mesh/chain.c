@@ -264,9 +264,9 @@ static int measure_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid,
     return rc;
 }
 
-/* PASS 2 for level k. The level is the chain's once this returns, even failing (the
- * builder counts it for destroy). */
-static int add_level(iso_mesh_chain *chain, int k, unsigned char *seen, iso_error *err)
+/* PASS 2 for level k on `threads`. The level is the chain's once this returns, even
+ * failing (the builder counts it for destroy). */
+static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *seen, iso_error *err)
 {
     const iso_mesh_chain_level *prev = &chain->level[k - 1];
     iso_mesh_chain_level *lv = &chain->level[k];
@@ -278,7 +278,7 @@ static int add_level(iso_mesh_chain *chain, int k, unsigned char *seen, iso_erro
     target = target ? target : 1;
     iso_simplify_result r;
     double start = iso_clock_ms();
-    int rc = simplify_level(&m, k, target, iso_parallel_threads(threads), &r, err);
+    int rc = simplify_level(&m, k, target, threads, &r, err);
     if (rc) {
         free(m.indices);
         return rc;
@@ -317,8 +317,9 @@ static int measure_step(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, 
     return rc;
 }
 
-/* PASS 2 and 3 side by side: the simplification is one thread's, so the levels already
- * made are measured meanwhile on the chain's other threads, each after the one before
+/* PASS 2 and 3 side by side: the simplification is one thread's (but for level 1, made
+ * before on all threads, since nothing waits to be measured beside it), so the levels
+ * already made are measured meanwhile on the chain's other threads, each after the one before
  * (it reuses that one's bounds), and on all of them once the last level is made. Level
  * k's measure writes only level k's measured fields, which nothing else touches; levels
  * are handed over under the lock. */
@@ -338,11 +339,11 @@ typedef struct pipeline {
 
 static void simplify_all(pipeline *p)
 {
-    for (int k = 1; k <= p->levels; k++) {
+    for (int k = p->made + 1; k <= p->levels && !p->rc_simplify; k++) {
         pthread_mutex_lock(&p->lock);
         int stop = p->stop;
         pthread_mutex_unlock(&p->lock);
-        int rc = stop ? 0 : add_level(p->chain, k, p->seen, &p->err_simplify);
+        int rc = stop ? 0 : add_level(p->chain, k, 1, p->seen, &p->err_simplify);
         pthread_mutex_lock(&p->lock);
         p->made = stop ? p->made : k; /* a failed level is still the chain's, to free */
         p->over = stop || rc || k == p->levels;
@@ -449,6 +450,11 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
                   .lock = PTHREAD_MUTEX_INITIALIZER, .made_one = PTHREAD_COND_INITIALIZER};
     while (p.levels < ISO_CHAIN_LEVELS && (exact->triangle_count >> (p.levels + 1)) >= 1)
         p.levels++;
+    if (!rc && p.levels > 0) { /* level 1 on all threads: nothing to measure beside it yet */
+        p.rc_simplify = add_level(c, 1, p.threads, seen, &p.err_simplify);
+        p.made = 1;
+        p.over = p.rc_simplify || p.levels == 1;
+    }
     if (!rc && p.threads > 1) { /* share 0 makes the levels, share 1 measures them */
         iso_parallel_run(2, pipeline_stage, &p);
     } else if (!rc) {
