@@ -4,16 +4,17 @@
  *
  * Passes, in order:
  *   1. quantize: (a) the positions' grid, the mesh's bounding cube, whose corner and step
- *      the node's translation and scale carry back to world units; (b) on all threads,
- *      a share of the vertices each: positions to qp-bit integers on the grid (uint16,
- *      four per vertex as the codec wants strides of 4; above 16 bits, float positions
- *      unquantized), normals to signed normalized integers (int8 up to 8 bits, else int16
- *      with the bits below qn cleared: zeros the codec's byte deltas compress to nothing);
+ *      the node's translation and scale carry back to world units; (b) positions to
+ *      qp-bit integers on the grid (uint16, four per vertex as the codec wants strides of
+ *      4; above 16 bits, float positions unquantized), normals to signed normalized
+ *      integers (int8 up to 8 bits, else int16 with the bits below qn cleared: zeros the
+ *      codec's byte deltas compress to nothing);
  *   2. encode each stream (positions, normals, indices) straight into the glb's buffer,
- *      each at its own place, the indices on one thread (glb_meshopt_index.c: the
- *      library's bytes, found faster) while the other encodes the vertex streams; the
- *      bytes do not depend on the threads. The uncompressed layout lives in a second,
- *      fallback buffer that has no data (the extension is required);
+ *      each at its own place, with the library's codecs' bytes found faster
+ *      (glb_meshopt_codec.h). With two threads the indices (which need no quantizing) go
+ *      on one while the other does pass 1 and the vertex streams; the bytes do not depend
+ *      on the threads. The uncompressed layout lives in a second, fallback buffer that
+ *      has no data (the extension is required);
  *   3. the JSON and the container's head (glb_container.h) written in front, the streams
  *      moved down behind it, each 4-byte aligned, and the unused end given back.
  * Every vertex and triangle is kept, in order (the index codec may start a triangle at
@@ -21,7 +22,7 @@
 #include "encode.h"
 #include "base/base.h"
 #include "glb_container.h"
-#include "glb_meshopt_index.h"
+#include "glb_meshopt_codec.h"
 
 #include <assert.h>
 #include <math.h>
@@ -114,19 +115,19 @@ static void position_grid(const iso_mesh *mesh, int bits, quantized *q)
     }
 }
 
-/* Pass 1b, positions of vertices from..to-1 on the grid. The division is done as a product
+/* Pass 1b, positions on the grid. The division is done as a product
  * by its inverse; a result within 1e-6 of a half step, where the two could round apart, is
  * redone as the division. */
-static void quantize_positions(const iso_mesh *mesh, const quantized *q, void *out, size_t from, size_t to)
+static void quantize_positions(const iso_mesh *mesh, const quantized *q, void *out)
 {
     const float *p = mesh->positions;
     if (q->float_positions) {
-        memcpy((float *)out + 3 * from, p + 3 * from, (to - from) * 12);
+        memcpy(out, p, mesh->vertex_count * 12);
         return;
     }
     uint16_t *k = out;
     const double extent = q->extent, steps = q->steps, inverse = extent > 0 ? steps / extent : 0;
-    for (size_t i = from; i < to; i++) {
+    for (size_t i = 0; i < mesh->vertex_count; i++) {
         for (int a = 0; a < 3; a++) {
             float lo = q->origin[a];
             double t = ((double)p[3 * i + a] - lo) * inverse; /* >= 0 */
@@ -138,10 +139,10 @@ static void quantize_positions(const iso_mesh *mesh, const quantized *q, void *o
     }
 }
 
-/* Pass 1b, normals of vertices from..to-1: int8 (stride 4) up to 8 bits, else int16
+/* Pass 1b, normals: int8 (stride 4) up to 8 bits, else int16
  * (stride 8) rounded to qn bits: round(x * max / grain) * grain, the grain a power of two
  * (so dividing by it is multiplying by its exact inverse). */
-static void quantize_normals(const iso_mesh *mesh, int bits, void *out, size_t from, size_t to)
+static void quantize_normals(const iso_mesh *mesh, int bits, void *out)
 {
     const float *x = mesh->normals;
     const int wide = bits > 8;
@@ -150,7 +151,7 @@ static void quantize_normals(const iso_mesh *mesh, int bits, void *out, size_t f
     const double inverse = 1.0 / (double)grain;
     if (wide) {
         int16_t *k = out;
-        for (size_t i = from; i < to; i++) {
+        for (size_t i = 0; i < mesh->vertex_count; i++) {
             for (int a = 0; a < 3; a++) {
                 long r = round_half_away((double)x[3 * i + a] * max * inverse) * grain;
                 k[4 * i + a] = (int16_t)(r > top ? top : r < -top ? -top : r);
@@ -159,7 +160,7 @@ static void quantize_normals(const iso_mesh *mesh, int bits, void *out, size_t f
         }
     } else {
         int8_t *k = out;
-        for (size_t i = from; i < to; i++) {
+        for (size_t i = 0; i < mesh->vertex_count; i++) {
             for (int a = 0; a < 3; a++) {
                 long r = round_half_away((double)x[3 * i + a] * max);
                 k[4 * i + a] = (int8_t)(r > top ? top : r < -top ? -top : r);
@@ -173,12 +174,13 @@ static void quantize_normals(const iso_mesh *mesh, int bits, void *out, size_t f
 static void encode_view(view *v)
 {
     v->packed_length = v->triangles ? proto_meshopt_encode_indices(v->packed, v->bound, v->data, v->count)
-                                    : meshopt_encodeVertexBuffer(v->packed, v->bound, v->data, v->count, v->stride);
+                                    : proto_meshopt_encode_vertices(v->packed, v->bound, v->data, v->count, v->stride);
     assert(v->packed_length > 0); /* the bounds are the codecs' own */
 }
 
-/* Passes 1b and 2 on up to two threads: each quantizes its share of the vertices; then
- * one encodes the vertex streams and the other the indices (the longer of the two). */
+/* Passes 1 and 2 on up to two threads: the indices (which need no quantizing, and take
+ * the longest) on one; the positions' grid, both quantizings and the vertex streams on
+ * the other. */
 typedef struct pack_job {
     const iso_mesh *mesh;
     const proto_encode_options *opt;
@@ -186,26 +188,21 @@ typedef struct pack_job {
     void *positions, *normals;       /* the quantized data the views read */
 } pack_job;
 
-static void quantize_share(void *context, int t, int threads)
+static void pack_share(void *context, int t, int threads)
 {
     pack_job *job = context;
-    size_t n = job->mesh->vertex_count, from = n * (size_t)t / (size_t)threads,
-           to = n * (size_t)(t + 1) / (size_t)threads;
-    quantize_positions(job->mesh, job->q, job->positions, from, to);
-    if (job->q->normals)
-        quantize_normals(job->mesh, job->opt->normal_bits, job->normals, from, to);
-}
-
-static void encode_share(void *context, int t, int threads)
-{
-    pack_job *job = context;
+    quantized *q = job->q;
     if (t == 0) {
-        encode_view(&job->q->views[VIEW_POSITION]);
-        if (job->q->normals)
-            encode_view(&job->q->views[VIEW_NORMAL]);
+        position_grid(job->mesh, job->opt->position_bits, q);
+        quantize_positions(job->mesh, q, job->positions);
+        encode_view(&q->views[VIEW_POSITION]);
+        if (q->normals) {
+            quantize_normals(job->mesh, job->opt->normal_bits, job->normals);
+            encode_view(&q->views[VIEW_NORMAL]);
+        }
     }
     if (t == threads - 1)
-        encode_view(&job->q->views[VIEW_INDEX]);
+        encode_view(&q->views[VIEW_INDEX]);
 }
 
 /* Lays out the views' compressed bytes in the BIN chunk, each 4-byte aligned, and the
@@ -350,9 +347,7 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
     int threads = iso_parallel_threads(opt->threads);
     if (mesh->triangle_count < MESHOPT_TRIANGLES_PER_THREAD)
         threads = 1;
-    position_grid(mesh, opt->position_bits, &q);
-    iso_parallel_run(threads, quantize_share, &job);
-    iso_parallel_run(threads > 1 ? 2 : 1, encode_share, &job);
+    iso_parallel_run(threads > 1 ? 2 : 1, pack_share, &job);
     free(vertex_data);
     size_t bin_size = layout(&q), size;
     json_mesh(&json, &q, bin_size);

@@ -15,7 +15,7 @@
  *      (the pair of the second and third through the fixed 16-entry table when it can)
  *      and pushes all three edges;
  * then the fixed table closes the stream (the decoder reads it, and it pads the data). */
-#include "glb_meshopt_index.h"
+#include "glb_meshopt_codec.h"
 
 #include <string.h>
 

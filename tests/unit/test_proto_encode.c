@@ -13,7 +13,7 @@
 #include "check.h"
 #include "draco_shim.h"
 #include "encode.h"
-#include "glb_meshopt_index.h"
+#include "glb_meshopt_codec.h"
 
 /* ---- helpers ---- */
 
@@ -1566,6 +1566,43 @@ static void test_meshopt_index_codec(void)
     free(idx);
 }
 
+/* proto_meshopt_encode_vertices against meshoptimizer's own encoder (version 0): the same
+ * bytes for strides 4 to 64, counts around the 16-vertex groups and the blocks (256
+ * vertices for strides up to 32, fewer above), over smooth bytes (small deltas: the 2-
+ * and 4-bit groups and their whole bytes), constant ones (zero groups) and random ones
+ * (8-bit groups); and 0 for a buffer too small or a stride the codec does not take. */
+static void test_meshopt_vertex_codec(void)
+{
+    const size_t most = 5000, strides[] = {4, 8, 12, 16, 32, 64};
+    const size_t counts[] = {0, 1, 15, 16, 17, 255, 256, 257, 1000, 4099, 5000};
+    unsigned char *v = malloc(most * 64);
+    CHECK(v != NULL);
+    if (!v)
+        return;
+    for (int kind = 0; kind < 3 && !check_failed(); kind++) {
+        for (size_t i = 0; i < most * 64; i++)
+            v[i] = kind == 0 ? (unsigned char)(rng() % 7 + i / 64 % 3) : kind == 1 ? 42 : (unsigned char)rng();
+        for (int a = 0; a < 6; a++)
+            for (int c = 0; c < 11; c++) {
+                size_t bound = meshopt_encodeVertexBufferBound(counts[c], strides[a]);
+                unsigned char *want = malloc(bound), *got = malloc(bound);
+                CHECK(want && got);
+                if (want && got) {
+                    size_t n = meshopt_encodeVertexBuffer(want, bound, v, counts[c], strides[a]);
+                    size_t m = proto_meshopt_encode_vertices(got, bound, v, counts[c], strides[a]);
+                    CHECKF(n > 0 && m == n && !memcmp(want, got, n), "kind %d, %zu vertices of %zu bytes: %zu bytes, the library's %zu",
+                           kind, counts[c], strides[a], m, n);
+                    CHECK_EQ(proto_meshopt_encode_vertices(got, strides[a], v, counts[c], strides[a]), 0);
+                }
+                free(want);
+                free(got);
+            }
+    }
+    unsigned char out[64];
+    CHECK_EQ(proto_meshopt_encode_vertices(out, sizeof out, v, 1, 6), 0);
+    free(v);
+}
+
 static void test_glb_meshopt_refuses_and_empties(void)
 {
     iso_error err;
@@ -1682,6 +1719,7 @@ int main(void)
     CHECK_RUN(test_glb_container);
     CHECK_RUN(test_glb_meshopt_round_trip);
     CHECK_RUN(test_meshopt_index_codec);
+    CHECK_RUN(test_meshopt_vertex_codec);
     CHECK_RUN(test_glb_meshopt_refuses_and_empties);
     CHECK_RUN(test_gzip_pieces);
     CHECK_RUN(test_empty_mesh_gives_valid_files);
