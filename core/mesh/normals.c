@@ -621,10 +621,11 @@ tricubic_four(const normals_job *job, const iso_voxel_type type, size_t v)
     w[2] = _mm256_div_pd(add3(_mm256_add_pd(_mm256_mul_pd(m3t2, t), _mm256_mul_pd(_mm256_mul_pd(c3, t), t)),
                               _mm256_mul_pd(c3, t), one), c6);
     w[3] = _mm256_div_pd(ttt, c6);
-    d[0] = _mm256_div_pd(_mm256_mul_pd(_mm256_xor_pd(s, sign), s), c2);
-    d[1] = _mm256_div_pd(_mm256_sub_pd(_mm256_mul_pd(_mm256_mul_pd(c3, t), t), _mm256_mul_pd(c4, t)), c2);
-    d[2] = _mm256_div_pd(add3(m3t2, _mm256_mul_pd(c2, t), one), c2);
-    d[3] = _mm256_div_pd(tt, c2);
+    /* Halving is exact: x * 0.5 is x / 2 (as the scalar build compiles it). */
+    d[0] = _mm256_mul_pd(_mm256_mul_pd(_mm256_xor_pd(s, sign), s), half);
+    d[1] = _mm256_mul_pd(_mm256_sub_pd(_mm256_mul_pd(_mm256_mul_pd(c3, t), t), _mm256_mul_pd(c4, t)), half);
+    d[2] = _mm256_mul_pd(add3(m3t2, _mm256_mul_pd(c2, t), one), half);
+    d[3] = _mm256_mul_pd(tt, half);
     /* The integer sums, vertex by vertex, then turned so that lanes are vertices. */
     int at[3][4], first[4];
     for (int a = 0; a < 3; a++)
@@ -633,8 +634,9 @@ tricubic_four(const normals_job *job, const iso_voxel_type type, size_t v)
     const size_t *dims = vol->dims;
     const size_t stride[3] = {1, dims[0], dims[0] * dims[1]};
     __m128i sums[3][4];
+    const int x_edges = lanes_of(on_x), y_edges = lanes_of(on_y);
     for (int l = 0; l < 4; l++) {
-        int e = (edge >> l & 1) ? (lanes_of(on_x) >> l & 1 ? 0 : lanes_of(on_y) >> l & 1 ? 1 : 2) : -1;
+        int e = (edge >> l & 1) ? (x_edges >> l & 1 ? 0 : y_edges >> l & 1 ? 1 : 2) : -1;
         int pa = e == 0 ? 1 : 0, qa = e == 2 ? 1 : 2;
         long f = (long)first[l] - 1, ap = at[pa][l], aq = at[qa][l];
         if (e < 0 || f < 0 || (size_t)f + 3 >= dims[e] || ap < 1 || (size_t)ap + 1 >= dims[pa] || aq < 1 ||
