@@ -71,6 +71,11 @@ int proto_draco_auto_speed(size_t triangles);
  * ISO_E_LIMIT. Safe on any mesh whose arrays hold their counts. */
 int proto_mesh_check(const iso_mesh *mesh, int finite, iso_error *err);
 
+/* proto_mesh_check in its two parts: the counts (O(1)), then the indices and values
+ * (O(V + T)), for an encoder that scans the data on a thread that would otherwise wait. */
+int proto_mesh_check_counts(const iso_mesh *mesh, iso_error *err);
+int proto_mesh_check_data(const iso_mesh *mesh, int finite, iso_error *err);
+
 /* Binary little-endian PLY: `element vertex N` with float x, y, z (and nx, ny, nz when the
  * mesh has normals), `element face T` with `property list uchar uint vertex_indices`.
  * Lossless, keeps order. Size: header + N * (12 or 24) + T * 13 bytes. */

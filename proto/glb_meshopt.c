@@ -179,20 +179,23 @@ static void encode_view(view *v)
 }
 
 /* Passes 1 and 2 on up to two threads: the indices (which need no quantizing, and take
- * the longest) on one; the positions' grid, both quantizings and the vertex streams on
- * the other. */
+ * the longest; the codec only compares them, so unchecked ones are safe) on one; the
+ * mesh's check (its indices and values), the positions' grid, both quantizings and the
+ * vertex streams on the other. */
 typedef struct pack_job {
     const iso_mesh *mesh;
     const proto_encode_options *opt;
     quantized *q;
     void *positions, *normals;       /* the quantized data the views read */
+    int rc;                          /* the check's */
+    iso_error *err;
 } pack_job;
 
 static void pack_share(void *context, int t, int threads)
 {
     pack_job *job = context;
     quantized *q = job->q;
-    if (t == 0) {
+    if (t == 0 && !(job->rc = proto_mesh_check_data(job->mesh, 1, job->err))) {
         position_grid(job->mesh, job->opt->position_bits, q);
         quantize_positions(job->mesh, q, job->positions);
         encode_view(&q->views[VIEW_POSITION]);
@@ -308,11 +311,13 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
         return iso_error_set(err, ISO_E_ARGUMENT, "position bits %d or normal bits %d outside %d..%d, %d..%d",
                              opt->position_bits, opt->normal_bits, PROTO_POSITION_BITS_MIN,
                              PROTO_POSITION_BITS_MAX, PROTO_NORMAL_BITS_MIN, PROTO_NORMAL_BITS_MAX);
-    int rc = proto_mesh_check(mesh, 1, err);
+    int rc = proto_mesh_check_counts(mesh, err);
     if (rc)
         return rc;
     proto_glb_json json = {.len = 0};
     if (mesh->triangle_count == 0) {
+        if ((rc = proto_mesh_check_data(mesh, 1, err)))
+            return rc;
         proto_glb_json_empty(&json);
         return proto_glb_write(&json, NULL, 0, out, out_size, err);
     }
@@ -343,12 +348,16 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
             at += q.views[i].bound + 4;
         }
     pack_job job = {.mesh = mesh, .opt = opt, .q = &q, .positions = vertex_data,
-                    .normals = vertex_data + position_bytes};
+                    .normals = vertex_data + position_bytes, .err = err};
     int threads = iso_parallel_threads(opt->threads);
     if (mesh->triangle_count < MESHOPT_TRIANGLES_PER_THREAD)
         threads = 1;
     iso_parallel_run(threads > 1 ? 2 : 1, pack_share, &job);
     free(vertex_data);
+    if (job.rc) {
+        free(buf);
+        return job.rc;
+    }
     size_t bin_size = layout(&q), size;
     json_mesh(&json, &q, bin_size);
     rc = proto_glb_size(&json, bin_size, &size, err);

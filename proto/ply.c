@@ -27,7 +27,7 @@ static int all_finite(const float *v, size_t n)
     return 1;
 }
 
-int proto_mesh_check(const iso_mesh *mesh, int finite, iso_error *err)
+int proto_mesh_check_counts(const iso_mesh *mesh, iso_error *err)
 {
     assert(mesh);
     assert(mesh->vertex_count == 0 || mesh->positions);
@@ -36,6 +36,11 @@ int proto_mesh_check(const iso_mesh *mesh, int finite, iso_error *err)
     if (mesh->vertex_count > UINT32_MAX || mesh->triangle_count > UINT32_MAX / 3)
         return iso_error_set(err, ISO_E_LIMIT, "mesh of %zu vertices, %zu triangles: too large"
                              " to encode", mesh->vertex_count, mesh->triangle_count);
+    return 0;
+}
+
+int proto_mesh_check_data(const iso_mesh *mesh, int finite, iso_error *err)
+{
     for (size_t i = 0; i < 3 * mesh->triangle_count; i++)
         if (mesh->indices[i] >= mesh->vertex_count)
             return iso_error_set(err, ISO_E_ARGUMENT, "triangle %zu: index %u >= %zu vertices",
@@ -45,6 +50,12 @@ int proto_mesh_check(const iso_mesh *mesh, int finite, iso_error *err)
     if (finite && mesh->normals && !all_finite(mesh->normals, 3 * mesh->vertex_count))
         return iso_error_set(err, ISO_E_ARGUMENT, "mesh has a non-finite normal");
     return 0;
+}
+
+int proto_mesh_check(const iso_mesh *mesh, int finite, iso_error *err)
+{
+    int rc = proto_mesh_check_counts(mesh, err);
+    return rc ? rc : proto_mesh_check_data(mesh, finite, err);
 }
 
 int proto_encode_ply(const iso_mesh *mesh, unsigned char **out, size_t *out_size,
