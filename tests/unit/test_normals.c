@@ -26,53 +26,60 @@ static void test_names(void)
             CHECK_EQ(iso_normals_order_from_name(iso_normals_name(o)), o);
 }
 
-/* f = 2i - 3j + 5k on 12^3; spacing (0.5, 2, 1); the frame rotated 90 degrees about z. */
+/* f = 2i - 3j + 5k on 12^3; spacing (0.5, 2, 1); the frame rotated 90 degrees about z;
+ * stored as floats and as 16-bit integers. Points off and on grid edges (enough of them
+ * for the four-vertex path of normals.c, in both spaces). */
 static void test_ramp_exact_every_order(void)
 {
     iso_error err;
     size_t dims[3] = {12, 12, 12};
-    iso_volume *vol = iso_vol_create(dims, ISO_F32, 0, &err);
-    CHECK(vol != NULL);
-    if (!vol)
-        return;
-    for (size_t k = 0; k < 12; k++)
-        for (size_t j = 0; j < 12; j++)
-            for (size_t i = 0; i < 12; i++)
-                iso_vol_set(vol, i, j, k, 2.0 * i - 3.0 * j + 5.0 * k);
-    vol->spacing[0] = 0.5, vol->spacing[1] = 2, vol->spacing[2] = 1;
-    double rot[3][3] = {{0, -1, 0}, {1, 0, 0}, {0, 0, 1}};
-    memcpy(vol->direction, rot, sizeof rot);
-    iso_vol_update_stats(vol);
-    /* Index gradient (2,-3,5); world gradient = A^-T g with A = R diag(s):
-     * A^-T = R diag(1/s), so world g = R (4, -1.5, 5) = (1.5, 4, 5). */
-    const double index_n[3] = {-2, 3, -5}, world_n[3] = {-1.5, -4, -5};
-    for (int space = 0; space < 2; space++)
-        for (int order = 2; order <= 4; order++) {
-            iso_mesh mesh;
-            iso_mesh_init(&mesh);
-            CHECK_OK(iso_mesh_reserve(&mesh, 3, 1), &err);
-            double pts[3][3] = {{4.3, 5.6, 6.1}, {3, 4, 5}, {7.5, 2.25, 8.9}};
-            for (int v = 0; v < 3; v++) {
-                double w[3];
-                if (space == ISO_SPACE_WORLD)
-                    iso_vol_index_to_world(vol, pts[v], w);
-                else
-                    memcpy(w, pts[v], sizeof w);
-                for (int c = 0; c < 3; c++)
-                    mesh.positions[3 * v + c] = (float)w[c];
+    for (int type = 0; type < 2; type++) {
+        iso_volume *vol = iso_vol_create(dims, type ? ISO_I16 : ISO_F32, 0, &err);
+        CHECK(vol != NULL);
+        if (!vol)
+            return;
+        for (size_t k = 0; k < 12; k++)
+            for (size_t j = 0; j < 12; j++)
+                for (size_t i = 0; i < 12; i++)
+                    iso_vol_set(vol, i, j, k, 2.0 * i - 3.0 * j + 5.0 * k);
+        vol->spacing[0] = 0.5, vol->spacing[1] = 2, vol->spacing[2] = 1;
+        double rot[3][3] = {{0, -1, 0}, {1, 0, 0}, {0, 0, 1}};
+        memcpy(vol->direction, rot, sizeof rot);
+        iso_vol_update_stats(vol);
+        /* Index gradient (2,-3,5); world gradient = A^-T g with A = R diag(s):
+         * A^-T = R diag(1/s), so world g = R (4, -1.5, 5) = (1.5, 4, 5). */
+        const double index_n[3] = {-2, 3, -5}, world_n[3] = {-1.5, -4, -5};
+        enum { POINTS = 9 };
+        const double pts[POINTS][3] = {{4.3, 5.6, 6.1}, {3, 4, 5},    {7.5, 2.25, 8.9}, {4.3, 5, 6}, {3, 4.6, 5},
+                                       {7, 2, 8.9},     {5, 6, 7.25}, {2.5, 3, 4},      {6, 7.75, 8}};
+        for (int space = 0; space < 2; space++)
+            for (int order = 2; order <= 4; order++) {
+                iso_mesh mesh;
+                iso_mesh_init(&mesh);
+                CHECK_OK(iso_mesh_reserve(&mesh, POINTS, 1), &err);
+                for (int v = 0; v < POINTS; v++) {
+                    double w[3];
+                    if (space == ISO_SPACE_WORLD)
+                        iso_vol_index_to_world(vol, pts[v], w);
+                    else
+                        memcpy(w, pts[v], sizeof w);
+                    for (int c = 0; c < 3; c++)
+                        mesh.positions[3 * v + c] = (float)w[c];
+                }
+                mesh.vertex_count = POINTS;
+                CHECK_OK(iso_normals_compute(vol, &mesh, order, (iso_space)(space ? ISO_SPACE_INDEX : ISO_SPACE_WORLD), 0, &err), &err);
+                const double *want = space ? index_n : world_n;
+                double len = sqrt(want[0] * want[0] + want[1] * want[1] + want[2] * want[2]);
+                for (int v = 0; v < POINTS && mesh.normals; v++)
+                    for (int c = 0; c < 3; c++)
+                        CHECKF(fabs(mesh.normals[3 * v + c] - want[c] / len) <= 2e-6, "type %d space %d order %d point %d: %g, want %g",
+                               type, space, order, v, mesh.normals[3 * v + c], want[c] / len);
+                CHECK_OK(iso_normals_compute(vol, &mesh, 0, ISO_SPACE_WORLD, 0, &err), &err);
+                CHECK(mesh.normals == NULL);
+                iso_mesh_free(&mesh);
             }
-            mesh.vertex_count = 3;
-            CHECK_OK(iso_normals_compute(vol, &mesh, order, (iso_space)(space ? ISO_SPACE_INDEX : ISO_SPACE_WORLD), 0, &err), &err);
-            const double *want = space ? index_n : world_n;
-            double len = sqrt(want[0] * want[0] + want[1] * want[1] + want[2] * want[2]);
-            for (int v = 0; v < 3 && mesh.normals; v++)
-                for (int c = 0; c < 3; c++)
-                    CHECK_NEAR(mesh.normals[3 * v + c], want[c] / len, 2e-6);
-            CHECK_OK(iso_normals_compute(vol, &mesh, 0, ISO_SPACE_WORLD, 0, &err), &err);
-            CHECK(mesh.normals == NULL);
-            iso_mesh_free(&mesh);
-        }
-    iso_vol_destroy(vol);
+        iso_vol_destroy(vol);
+    }
 }
 
 /* The cubic B-spline's weight, or its derivative's, of the sample at offset m in -1..2
