@@ -34,22 +34,57 @@ static double voxel_size(const iso_volume *vol, const proto_pipeline_request *re
     return req->extract.space == ISO_SPACE_INDEX ? 1 : iso_vol_min_spacing(vol);
 }
 
-/* Does a budget need the chain: the mesh at the faithful tolerance (core/extract) is over
- * it? Else the ladder answers it without simplification. */
+/* The triangles of the mesh at the faithful tolerance (core/extract) into
+ * res->faithful_triangles, extracted unless the request or its chain knows them. */
+static int faithful_triangles(const iso_tree *tree, const proto_pipeline_request *req,
+                              proto_pipeline_result *res, iso_error *err)
+{
+    if (!res->faithful_triangles)
+        res->faithful_triangles = req->faithful_triangles ? req->faithful_triangles
+                                  : req->chain              ? req->chain->faithful_triangles
+                                                            : 0;
+    if (res->faithful_triangles)
+        return 0;
+    iso_extract_params p = req->extract;
+    p.tolerance = iso_budget_faithful_tolerance(tree->vol, p.tolerance);
+    iso_mesh m;
+    iso_extract_stats stats;
+    iso_mesh_init(&m);
+    int rc = iso_extract(tree, &p, &m, &stats, err);
+    iso_mesh_free(&m);
+    res->faithful_triangles = rc ? 0 : stats.triangles;
+    /* The work is the request's; the mesh and its error bound are not the answer's. */
+    res->stats.nodes_visited += rc ? 0 : stats.nodes_visited;
+    res->stats.cells_visited += rc ? 0 : stats.cells_visited;
+    return rc;
+}
+
+/* Does a budget need the chain: the mesh at the faithful tolerance is over it? Else the
+ * ladder answers it without simplification. */
 static int budget_needs_chain(const iso_tree *tree, const proto_pipeline_request *req,
                               proto_pipeline_result *res, int *needs, iso_error *err)
 {
-    res->faithful_triangles = req->faithful_triangles;
-    if (!req->faithful_triangles) {
-        iso_extract_params p = req->extract;
-        p.tolerance = iso_budget_faithful_tolerance(tree->vol, p.tolerance);
-        int rc = iso_extract(tree, &p, &res->mesh, &res->stats, err);
-        if (rc)
-            return rc;
-        res->faithful_triangles = res->stats.triangles;
-    }
-    *needs = res->faithful_triangles > req->budget;
-    return 0;
+    int rc = faithful_triangles(tree, req, res, err);
+    *needs = !rc && res->faithful_triangles > req->budget;
+    return rc;
+}
+
+/* A chain just built keeps what later requests would otherwise find again: the faithful
+ * mesh's triangle count (for budgets) and each moved level's vertices' value error. */
+static int complete_chain(const iso_tree *tree, const iso_volume *vol,
+                          const proto_pipeline_request *req, proto_pipeline_result *res,
+                          iso_mesh_chain *chain, iso_error *err)
+{
+    int rc = faithful_triangles(tree, req, res, err);
+    chain->faithful_triangles = res->faithful_triangles;
+    iso_mesh m;
+    iso_mesh_init(&m);
+    for (int k = 1; !rc && k < chain->levels; k++)
+        if (chain->level[k].value_error < 0 && !(rc = iso_mesh_chain_mesh(chain, k, &m, err)))
+            chain->level[k].value_error = iso_mesh_value_error(vol, &m, req->extract.space,
+                                                               req->extract.level);
+    iso_mesh_free(&m);
+    return rc;
 }
 
 /* Step 2 from the chain: the level that answers, copied out; built first when the caller
@@ -62,7 +97,8 @@ static int from_chain(const iso_tree *tree, const iso_volume *vol,
     if (!chain) {
         if ((rc = iso_extract(tree, &req->extract, &res->mesh, &res->stats, err)) ||
             (rc = iso_mesh_chain_build(&res->mesh, voxel_size(vol, req), req->extract.threads,
-                                       &res->chain_built, err)))
+                                       &res->chain_built, err)) ||
+            (rc = complete_chain(tree, vol, req, res, res->chain_built, err)))
             return rc;
         chain = res->chain_built;
     }
@@ -78,13 +114,15 @@ static int from_chain(const iso_tree *tree, const iso_volume *vol,
     res->pinches = (iso_mesh_pinches){.edges = chain->level[k].edges,
                                       .pinch_edges = chain->level[k].nonmanifold_edges,
                                       .pinch_vertices = chain->level[k].pinch_vertices};
-    /* A level moved to keep the enclosed volume: its vertices' value error, measured, is
-     * what the error bound then promises. */
+    /* A level moved to keep the enclosed volume: its vertices' value error, measured when
+     * the chain was built, is what the error bound then promises. */
     res->vertex_offset = chain->level[k].offset;
+    double value_error = chain->level[k].value_error;
     if (res->vertex_offset != 0)
         res->stats.error_bound = fmax(res->stats.error_bound,
-                                      iso_mesh_value_error(vol, &res->mesh, req->extract.space,
-                                                           req->extract.level));
+                                      value_error >= 0 ? value_error
+                                                       : iso_mesh_value_error(vol, &res->mesh, req->extract.space,
+                                                                              req->extract.level));
     /* A level past 0 was simplified by meshoptimizer: its estimate, the largest of the
      * steps', stands beside the measured distance. */
     double estimate = 0;
@@ -96,17 +134,13 @@ static int from_chain(const iso_tree *tree, const iso_volume *vol,
                      .vertices_in = chain->level[0].vertex_count, .error = estimate,
                      .error_voxels = estimate / chain->voxel_size, .scale = 1}};
     if (req->budget && res->mesh.triangle_count > req->budget) {
-        iso_mesh exact = {.positions = chain->positions, .vertex_count = chain->vertex_count,
-                          .indices = chain->level[0].indices,
-                          .triangle_count = chain->level[0].triangle_count};
         iso_simplify_params sp = {.target_triangles = req->budget, .target_error = INFINITY,
                                   .lock_border = 1, .voxel_size = voxel_size(vol, req),
                                   .threads = req->extract.threads};
         if ((rc = iso_simplify_manifold(&res->mesh, &sp, &res->chosen.simplify, err)) ||
             ((rc = iso_mesh_find_pinches(&res->mesh, NULL, &res->pinches)) &&
              (rc = iso_error_set(err, rc, "no memory to count pinches"))) ||
-            (rc = iso_mesh_distance_compute(&exact, &res->mesh, ISO_CHAIN_SPACING_VOXELS * sp.voxel_size,
-                                            req->extract.threads, &res->distance, err)))
+            (rc = iso_mesh_chain_distance(chain, &res->mesh, req->extract.threads, &res->distance, err)))
             return rc;
         res->chosen.simplified = 1;
         res->chosen.fits = res->mesh.triangle_count <= req->budget;
@@ -130,16 +164,13 @@ static int budget_by_measure(const iso_tree *tree, const iso_volume *vol,
     if (rc || needs_chain)
         return rc;
     const iso_mesh_chain *chain = req->chain ? req->chain : res->chain_built;
-    iso_mesh ladder, exact = {.positions = chain->positions, .vertex_count = chain->vertex_count,
-                              .indices = chain->level[0].indices,
-                              .triangle_count = chain->level[0].triangle_count};
+    iso_mesh ladder;
     iso_mesh_init(&ladder);
     iso_extract_stats stats;
     iso_budget_result chosen = {.tolerance = req->extract.tolerance, .fits = -1};
     iso_mesh_distance d;
     if ((rc = iso_extract_budget_faithful(tree, &req->extract, req->budget, &ladder, &stats, &chosen, err)) ||
-        (rc = iso_mesh_distance_compute(&exact, &ladder, ISO_CHAIN_SPACING_VOXELS * chain->voxel_size,
-                                        req->extract.threads, &d, err))) {
+        (rc = iso_mesh_chain_distance(chain, &ladder, req->extract.threads, &d, err))) {
         iso_mesh_free(&ladder);
         return rc;
     }

@@ -28,6 +28,7 @@ void iso_mesh_chain_destroy(iso_mesh_chain *chain)
         return;
     for (int k = 0; k < chain->levels; k++)
         free(chain->level[k].indices);
+    iso_mesh_grid_destroy(chain->grid);
     free(chain->positions);
     free(chain);
 }
@@ -231,6 +232,7 @@ static int keep_volume(iso_mesh_chain *chain, int k, iso_mesh *level, iso_error 
         return rc;
     }
     lv->volume_change = (iso_mesh_enclosed_volume(&moved) - chain->volume) / chain->volume;
+    lv->value_error = -1; /* the caller, who has the volume, measures it (mesh.h) */
     *level = moved;
     return 0;
 }
@@ -438,15 +440,13 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
     c->volume = c->closed ? iso_mesh_enclosed_volume(&level0) : 0;
     c->bytes = sizeof *c + 3 * exact->vertex_count * sizeof *c->positions +
                3 * exact->triangle_count * sizeof *exact->indices;
-    /* PASS 3's grid of level 0, once for all levels: every level lies within its bounds. */
-    float lo[3], hi[3];
-    iso_mesh_bounds(&level0, lo, hi);
-    iso_mesh_grid *grid = NULL;
-    int rc = exact->triangle_count > 1 && iso_mesh_grid_build(&level0, lo, hi, &grid)
+    /* PASS 3's grid of level 0, once for all levels (every level lies within its bounds),
+     * and kept for later measures against level 0. */
+    int rc = iso_mesh_chain_grid_build(c)
                  ? iso_error_set(err, ISO_E_NOMEM, "chain: no memory for the grid of %zu triangles",
                                  exact->triangle_count)
                  : 0;
-    pipeline p = {.chain = c, .grid = grid, .seen = seen, .threads = iso_parallel_threads(threads),
+    pipeline p = {.chain = c, .grid = c->grid, .seen = seen, .threads = iso_parallel_threads(threads),
                   .lock = PTHREAD_MUTEX_INITIALIZER, .made_one = PTHREAD_COND_INITIALIZER};
     while (p.levels < ISO_CHAIN_LEVELS && (exact->triangle_count >> (p.levels + 1)) >= 1)
         p.levels++;
@@ -469,7 +469,6 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
     }
     pthread_mutex_destroy(&p.lock);
     pthread_cond_destroy(&p.made_one);
-    iso_mesh_grid_destroy(grid);
     free(seen);
     if (rc) {
         iso_mesh_chain_destroy(c);
@@ -478,6 +477,27 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
     c->build_ms = iso_clock_ms() - start;
     *out = c;
     return 0;
+}
+
+int iso_mesh_chain_grid_build(iso_mesh_chain *chain)
+{
+    iso_mesh level0 = view_of(chain, 0);
+    if (chain->grid || level0.triangle_count < 2)
+        return 0;
+    float lo[3], hi[3];
+    iso_mesh_bounds(&level0, lo, hi);
+    int rc = iso_mesh_grid_build(&level0, lo, hi, &chain->grid);
+    chain->bytes += iso_mesh_grid_bytes(chain->grid);
+    return rc;
+}
+
+int iso_mesh_chain_distance(const iso_mesh_chain *chain, const iso_mesh *mesh, int threads,
+                            iso_mesh_distance *out, iso_error *err)
+{
+    iso_mesh exact = view_of(chain, 0);
+    return iso_mesh_distance_between(&exact, chain->grid, mesh, NULL,
+                                     ISO_CHAIN_SPACING_VOXELS * chain->voxel_size,
+                                     ISO_DISTANCE_SAMPLES, threads, NULL, out, err);
 }
 
 int iso_mesh_chain_pick_distance(const iso_mesh_chain *chain, double distance)

@@ -1,15 +1,16 @@
 /* chain_file.c: a simplification chain written to a file and read back (see mesh.h).
  *
- * The file: a 64-byte header (magic, version, the size of a level record, the caller's
- * identity, counts, the payload's CRC-32 and the header's), then the payload: one level
+ * The file: a 72-byte header (magic, version, the size of a level record, the caller's
+ * identity, counts, the caller's faithful triangle count, the payload's CRC-32 and the
+ * header's), then the payload: one level
  * record per level (iso_mesh_chain_level as this build lays it out, its index pointer
  * zero), the positions (3 floats per vertex), and each level's indices (3 uint32 per
  * triangle) in order. Reading checks all of it, and every index against the vertex count,
  * before anything is used; a file of another version, another record layout or another
  * identity is stale (ISO_E_STALE), one whose sizes or checksums disagree is corrupt
  * (ISO_E_CORRUPT). Writing goes to a temporary file renamed into place, so a reader never
- * sees half a file. */
-#include "mesh.h"
+ * sees half a file. Level 0's search grid is not in the file: reading builds it again. */
+#include "distance.h"
 
 #include <errno.h>
 #include <stdio.h>
@@ -20,7 +21,7 @@
 #include "base/base.h"
 
 #define CHAIN_MAGIC "ISOCHAIN"
-#define CHAIN_VERSION 1u
+#define CHAIN_VERSION 2u /* 2: the faithful triangle count, each level's value error */
 
 typedef struct chain_header {
     char magic[8];
@@ -32,6 +33,7 @@ typedef struct chain_header {
     int32_t closed;
     double voxel_size;
     double volume;
+    uint64_t faithful_triangles;
     uint32_t payload_crc;
     uint32_t header_crc;     /* with this field zero */
 } chain_header;
@@ -79,7 +81,8 @@ int iso_mesh_chain_save(const iso_mesh_chain *chain, const char *path, uint64_t 
     chain_header h = {.version = CHAIN_VERSION, .record_bytes = sizeof(iso_mesh_chain_level),
                       .identity = identity, .vertex_count = chain->vertex_count,
                       .levels = (uint32_t)chain->levels, .closed = chain->closed,
-                      .voxel_size = chain->voxel_size, .volume = chain->volume};
+                      .voxel_size = chain->voxel_size, .volume = chain->volume,
+                      .faithful_triangles = chain->faithful_triangles};
     memcpy(h.magic, CHAIN_MAGIC, sizeof h.magic);
     for (size_t i = 1; i <= n; i++)
         h.payload_crc = crc_of(h.payload_crc, parts[i].data, parts[i].bytes);
@@ -159,6 +162,7 @@ int iso_mesh_chain_load(const char *path, uint64_t identity, iso_mesh_chain **ou
         c->voxel_size = h.voxel_size;
         c->volume = h.volume;
         c->closed = h.closed;
+        c->faithful_triangles = (size_t)h.faithful_triangles;
         c->positions = malloc(positions + sizeof(float));
         if (!c->positions)
             rc = ISO_E_NOMEM;
@@ -195,6 +199,10 @@ int iso_mesh_chain_load(const char *path, uint64_t identity, iso_mesh_chain **ou
                                  : iso_error_set(err, rc, "%s: sizes, indices or checksum do not match", path);
     }
     c->levels = (int)h.levels;
+    if (iso_mesh_chain_grid_build(c)) {
+        iso_mesh_chain_destroy(c);
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory for the grid of %s", path);
+    }
     *out = c;
     return 0;
 }

@@ -85,6 +85,20 @@ void iso_mesh_grid_destroy(iso_mesh_grid *g)
     free(g);
 }
 
+static size_t grid_cells(const grid *g)
+{
+    return (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
+}
+
+size_t iso_mesh_grid_bytes(const iso_mesh_grid *g)
+{
+    if (!g)
+        return 0;
+    size_t f = grid_cells(&g->fine), c = grid_cells(&g->coarse);
+    size_t items = (size_t)g->fine.start[f] + g->coarse.start[c];
+    return sizeof *g + 15 * g->triangle_count * sizeof(float) + (f + c + 2 + items) * sizeof(uint32_t);
+}
+
 static void triangle_corners(const iso_mesh *m, size_t t, double c[3][3])
 {
     for (int k = 0; k < 3; k++) {

@@ -14,6 +14,7 @@ typedef struct iso_mesh_grid iso_mesh_grid;
 int iso_mesh_grid_build(const iso_mesh *mesh, const float lo[3], const float hi[3],
                         iso_mesh_grid **out);
 void iso_mesh_grid_destroy(iso_mesh_grid *g);
+size_t iso_mesh_grid_bytes(const iso_mesh_grid *g); /* what it holds in memory */
 
 /* What a measure of b against a can take from an earlier measure against the same a, at
  * the same spacing, of a mesh `prior` over the same positions as b (a chain's previous
@@ -39,5 +40,9 @@ int iso_mesh_distance_between(const iso_mesh *a, const iso_mesh_grid *ga, const 
                               const iso_mesh_grid *gb, double spacing, size_t cap, int threads,
                               const iso_mesh_distance_reuse *reuse, iso_mesh_distance *out,
                               iso_error *err);
+
+/* Level 0's grid into chain->grid (none below 2 triangles), counted in chain->bytes:
+ * built with the chain, or after reading it from a file (chain.c). 0 or ISO_E_NOMEM. */
+int iso_mesh_chain_grid_build(iso_mesh_chain *chain);
 
 #endif

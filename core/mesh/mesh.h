@@ -345,6 +345,10 @@ typedef struct iso_mesh_chain_level {
                                    * vertices are level 0's, unmoved */
     double volume_change;         /* (level's enclosed volume - level 0's) / level 0's, after
                                    * the offset; 0 when level 0 is not closed */
+    double value_error;           /* a moved level's vertices' largest value error, which
+                                   * the caller with the volume measures once
+                                   * (iso_mesh_value_error) and the file keeps; 0 for an
+                                   * unmoved level, -1 while not measured */
     double simplify_ms, measure_ms;
 } iso_mesh_chain_level;
 
@@ -356,14 +360,20 @@ typedef struct iso_mesh_chain {
     double voxel_size;            /* position units per voxel */
     int closed;                   /* level 0 has no open edge */
     double volume;                /* level 0's signed enclosed volume, when closed */
-    size_t bytes;                 /* what it holds in memory */
+    size_t faithful_triangles;    /* the caller's, kept in the file: the triangles of the
+                                   * value-tolerance mesh budgets compare with (proto's
+                                   * pipeline); 0 unknown */
+    struct iso_mesh_grid *grid;   /* level 0's search grid, kept for later measures against
+                                   * level 0 (iso_mesh_chain_distance); NULL below 2 triangles */
+    size_t bytes;                 /* what it holds in memory, the grid included */
     double build_ms;
 } iso_mesh_chain;
 
 /* Builds the chain of `exact` (copied; the caller keeps its mesh). voxel_size: position
  * units per voxel (> 0). threads: for the measures, 0 = all cores. On success *out is a
  * chain for iso_mesh_chain_destroy. Cost: the simplifications and one measure per level;
- * memory about twice the exact mesh's. Returns 0, ISO_E_ARGUMENT or ISO_E_NOMEM. */
+ * memory about twice the exact mesh's, and level 0's search grid (about 110 bytes per
+ * exact triangle). Returns 0, ISO_E_ARGUMENT or ISO_E_NOMEM. */
 int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
                          iso_mesh_chain **out, iso_error *err);
 void iso_mesh_chain_destroy(iso_mesh_chain *chain);
@@ -376,6 +386,11 @@ int iso_mesh_chain_pick_budget(const iso_mesh_chain *chain, size_t triangles);
  * in the exact surface's order (level 0 comes out as the surface went in). O(level's triangles) plus a table of the chain's vertex count.
  * Returns 0, ISO_E_ARGUMENT (no such level) or ISO_E_NOMEM (mesh left empty). */
 int iso_mesh_chain_mesh(const iso_mesh_chain *chain, int k, iso_mesh *mesh, iso_error *err);
+/* mesh's distance from the chain's level 0, measured as the levels are (samples
+ * ISO_CHAIN_SPACING_VOXELS apart, the chain's grid of level 0 reused): what a mesh made
+ * from the chain, or beside it, reports. Returns as iso_mesh_distance_compute. */
+int iso_mesh_chain_distance(const iso_mesh_chain *chain, const iso_mesh *mesh, int threads,
+                            iso_mesh_distance *out, iso_error *err);
 
 /* A chain on disk (chain_file.c): iso_mesh_chain_save writes it with the caller's
  * identity (a hash of what the chain was built from: volume version, level, tolerance;

@@ -5,7 +5,9 @@ between the steps. Checks:
 - the first distance= request at a level builds the chain and writes it as
   CACHE/<id>.<16 hex digits>.isochain (one file per level, nothing outside the cache dir);
 - after a restart the same request is answered from that file: no cell visited (nothing
-  extracted), the same bytes and measured distance, no rebuild in the log;
+  extracted), the same bytes and measured distance, no rebuild in the log; so is a budget=
+  request the chain answers (the file keeps the faithful mesh's triangle count the budget
+  is compared with: nothing is extracted to find it again);
 - a corrupt file (one payload byte flipped) is refused (the log says why), the chain
   rebuilt, the same bytes served, and the file rewritten: the next restart reads it;
 - a stale file (another level's chain under this level's name) is refused the same way;
@@ -33,6 +35,7 @@ ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", os.path.join(ROOT, "build/isoserve")))
 RESULTS = Results("chain_file" + os.environ.get("ISO_SAN_SUFFIX", ""))
 LEVELS = (0.0, 0.5)
+BUDGET = "budget=300"  # under the faithful mesh's triangles: a chain level answers
 
 
 class Daemon:
@@ -54,8 +57,8 @@ class Daemon:
             time.sleep(0.1)
         raise AssertionError("the daemon did not start")
 
-    def mesh(self, level):
-        return request(self.port, f"/v1/volumes/torus/mesh?level={level}&distance=0.3&format=ply&normals=none")
+    def mesh(self, level, ask="distance=0.3"):
+        return request(self.port, f"/v1/volumes/torus/mesh?level={level}&{ask}&format=ply&normals=none")
 
     def stop(self):
         self.proc.send_signal(signal.SIGTERM)
@@ -85,6 +88,9 @@ def main():
                 r = d.mesh(level)
                 first[level] = facts(r)
                 assert int(r.getheader("X-Iso-Cells-Visited")) > 0  # extracted: no chain yet
+                r = d.mesh(level, BUDGET)
+                first[(level, BUDGET)] = facts(r)
+                assert r.getheader("X-Iso-Budget-Source") == "chain", r.getheader("X-Iso-Budget-Source")
         finally:
             d.stop()
         files = sorted(glob.glob(os.path.join(cache, "torus.*.isochain")))
@@ -101,6 +107,9 @@ def main():
                 r = d.mesh(level)
                 assert facts(r) == first[level], level
                 assert int(r.getheader("X-Iso-Cells-Visited")) == 0, r.getheader("X-Iso-Cells-Visited")
+                r = d.mesh(level, BUDGET)
+                assert facts(r) == first[(level, BUDGET)], level
+                assert int(r.getheader("X-Iso-Cells-Visited")) == 0, ("budget", r.getheader("X-Iso-Cells-Visited"))
         finally:
             log = d.stop()
         assert "rebuilding the chain" not in log, log[-500:]

@@ -280,6 +280,11 @@ static void test_chain_file_round_trip(void)
     if (!chain || fd < 0)
         return;
     close(fd);
+    /* What the caller keeps in the chain (proto's pipeline) goes to the file too. */
+    chain->faithful_triangles = 1234;
+    for (int k = 1; k < chain->levels; k++)
+        chain->level[k].value_error = 0.125 * k; /* data here: any value makes the trip */
+    CHECK(chain->grid != NULL);
     CHECK_OK(iso_mesh_chain_save(chain, path, 42, &err), &err);
     CHECK_OK(iso_mesh_chain_load(path, 42, &back, &err), &err);
     if (back) {
@@ -287,11 +292,26 @@ static void test_chain_file_round_trip(void)
         CHECK_EQ(back->vertex_count, chain->vertex_count);
         CHECK_EQ(back->closed, chain->closed);
         CHECK(back->volume == chain->volume && back->voxel_size == chain->voxel_size);
+        CHECK_EQ(back->faithful_triangles, 1234);
+        /* Level 0's grid is built again on reading, and measures as the build's did. */
+        CHECK(back->grid != NULL);
+        CHECK_EQ(back->bytes, chain->bytes);
         CHECK(!memcmp(back->positions, chain->positions, 3 * chain->vertex_count * sizeof(float)));
         for (int k = 0; k < chain->levels; k++) {
             const iso_mesh_chain_level *a = &chain->level[k], *b = &back->level[k];
             CHECK_EQ(b->triangle_count, a->triangle_count);
             CHECK(b->distance.p99 == a->distance.p99 && b->offset == a->offset);
+            CHECK(b->value_error == a->value_error);
+            if (k > 0) {
+                iso_mesh lm;
+                iso_mesh_distance d;
+                iso_mesh_init(&lm);
+                CHECK_OK(iso_mesh_chain_mesh(back, k, &lm, &err), &err);
+                CHECK_OK(iso_mesh_chain_distance(back, &lm, 1, &d, &err), &err);
+                CHECKF(d.p99 == a->distance.p99 && d.max == a->distance.max, "level %d: %g %g, built %g %g",
+                       k, d.p99, d.max, a->distance.p99, a->distance.max);
+                iso_mesh_free(&lm);
+            }
             CHECK_EQ(b->pinch_vertices, a->pinch_vertices);
             CHECK(!memcmp(b->indices, a->indices, 3 * a->triangle_count * sizeof(uint32_t)));
         }
