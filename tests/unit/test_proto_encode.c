@@ -1555,7 +1555,7 @@ static void test_meshopt_index_codec(void)
                 memcpy(idx + 3 * t, idx + 3 * t - 3, 3 * sizeof *idx);
             if (t % 7 == 2) /* a neighbour across an edge of the last triangle */
                 idx[3 * t] = idx[3 * t - 2], idx[3 * t + 1] = idx[3 * t - 3];
-            if (t % 5 == 3) /* a fan around a vertex 20 triangles back */
+            if (t % 5 == 3 && t >= 20) /* a fan around a vertex 20 triangles back */
                 idx[3 * t] = idx[3 * t - 60];
         }
         char what[64];
