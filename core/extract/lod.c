@@ -406,13 +406,12 @@ static int add_segment(lod *c, loop_segment s)
  * each side split at its own stride. At most 4 * 8 points. */
 #define MAX_POLYGON (4 * ISO_BRICK_CELLS)
 
-/* The segments of one square of a transition cell's face, by mc.h's face rule on its
- * polygon. corner[4]: the square's corners in order; step[k] the stride of the side from
- * corner k to the next, at whose multiples it is split (the volume's last sample may end
- * it off them). */
-static int square_segments(lod *c, const uint32_t corner[4][3], const uint32_t step[4])
+/* The polygon of one square of a transition cell's face into points[] (at most
+ * MAX_POLYGON), returning its point count: corner[4] the square's corners in order, step[k]
+ * the stride of the side from corner k to the next, at whose multiples it is split (the
+ * volume's last sample may end it off them). */
+static int split_square(const uint32_t corner[4][3], const uint32_t step[4], uint32_t points[][3])
 {
-    uint32_t points[MAX_POLYGON][3];
     int m = 0;
     for (int k = 0; k < 4; k++) {
         const uint32_t *p = corner[k], *q = corner[(k + 1) % 4];
@@ -430,6 +429,13 @@ static int square_segments(lod *c, const uint32_t corner[4][3], const uint32_t s
             }
         }
     }
+    return m;
+}
+
+/* The segments of one polygon of a transition cell's face (m points, in order), by mc.h's
+ * face rule. */
+static int polygon_segments(lod *c, const uint32_t points[][3], int m)
+{
     /* Crossings in order around the polygon: which were entries, and their vertices. */
     uint32_t id[MAX_POLYGON];
     int entry[MAX_POLYGON], inside[MAX_POLYGON], n = 0, at[MAX_POLYGON];
@@ -685,7 +691,13 @@ static int face_segments(lod *c, const uint32_t o[3], const uint32_t size[3], in
             step[1] = b_high;
             step[2] = side ? c_high : c_low;
             step[3] = b_low;
-            int rc = square_segments(c, (const uint32_t(*)[3])corner, step);
+            uint32_t points[MAX_POLYGON][3];
+            int m = 4;
+            if (split)
+                m = split_square((const uint32_t(*)[3])corner, step, points);
+            else
+                memcpy(points, corner, sizeof corner);
+            int rc = polygon_segments(c, (const uint32_t(*)[3])points, m);
             if (rc)
                 return rc;
         }
