@@ -132,10 +132,29 @@ static inline int vertex_age(const lanes *vertices, uint32_t v)
     return m ? __builtin_ctz(m) : -1;
 }
 
+/* Entry 0 (the newest) alone. */
+static inline uint32_t lanes_first(const lanes *l)
+{
+#if MESHOPT_SSE2
+    return (uint32_t)_mm_cvtsi128_si32(l->v[0]);
+#else
+    return l->v[0];
+#endif
+}
+
 /* Step 1: the newest edge among ages 0..14 as age * 4 + which (0: (a,b), 1: (b,c),
- * 2: (c,a); at one age the library tries them in that order), or -1. */
+ * 2: (c,a); at one age the library tries them in that order), or -1. The newest edge
+ * first, on its own: a surface strip's next triangle shares it (a third of the
+ * triangles of an extracted mesh), and then the 16-wide compare is not needed. */
 static inline int edge_find(const edges *e, uint32_t a, uint32_t b, uint32_t c)
 {
+    uint32_t from = lanes_first(&e->from), to = lanes_first(&e->to);
+    if (from == a && to == b)
+        return 0;
+    if (from == b && to == c)
+        return 1;
+    if (from == c && to == a)
+        return 2;
     unsigned ab, bc, ca;
 #if MESHOPT_SSE2
     __m128i va = _mm_set1_epi32((int)a), vb = _mm_set1_epi32((int)b), vc = _mm_set1_epi32((int)c);
