@@ -8,10 +8,12 @@
  *      in steps of error, 2c join), mapped back to the chain's vertices (so that every
  *      level indexes the one position array);
  *   3. measure: each level's distance from level 0 (iso_mesh_distance_between, samples three
- *      voxels apart, against level 0's grid built once for all levels), so the answers
- *      below rest on measurements, not on estimates; a level's triangles left as they were
- *      in the level before keep that level's bounds on their distance, so that the search
- *      for the largest distance skips those that cannot raise it (distance.h). */
+ *      voxels apart, against level 0's grid built once and kept with the chain), so the
+ *      answers below rest on measurements, not on estimates; a level's triangles left as
+ *      they were in the level before keep that level's bounds on their distance, so that
+ *      the search for the largest distance skips those that cannot raise it (distance.h).
+ *      Levels are measured in order beside the simplification of the next ones (the
+ *      pipeline below), each on the threads the simplification leaves. */
 #include "collapse.h"
 #include "distance.h"
 
