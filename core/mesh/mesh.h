@@ -372,7 +372,7 @@ typedef struct iso_mesh_chain {
 /* Builds the chain of `exact` (copied; the caller keeps its mesh). voxel_size: position
  * units per voxel (> 0). threads: for the measures, 0 = all cores. On success *out is a
  * chain for iso_mesh_chain_destroy. Cost: the simplifications and one measure per level;
- * memory about twice the exact mesh's, and level 0's search grid (about 110 bytes per
+ * memory about twice the exact mesh's, and level 0's search grid (about 95 bytes per
  * exact triangle). Returns 0, ISO_E_ARGUMENT or ISO_E_NOMEM. */
 int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
                          iso_mesh_chain **out, iso_error *err);
