@@ -48,7 +48,6 @@ struct iso_collapser {
     double *key;             /* per vertex: its cheapest collapse's cost */
     uint32_t *to;            /* per vertex: that collapse's target */
     size_t heap_count;
-    uint32_t *mark, stamp;   /* per vertex: scratch marks */
     unsigned char *refused;  /* per vertex: a collapse of it was refused for its topology */
     size_t alive;
     size_t triangle_count, vertex_count;
@@ -70,7 +69,6 @@ void iso_collapser_destroy(collapser *c)
     free(c->slot);
     free(c->key);
     free(c->to);
-    free(c->mark);
     free(c->refused);
     free(c);
 }
@@ -238,25 +236,28 @@ static int turns_over(const float *pu, const float *pv, const float *px, const f
     return n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2] <= 0;
 }
 
+#define MAX_VALENCE 64 /* a free vertex with more triangles stays (its checks' scratch) */
+
 /* Whether the edge u->v's collapse keeps the surface a manifold without turning a
  * triangle over: 1 yes, 0 no, 2 the two ends are corners of a lone tetrahedron (the
  * collapse would fold it: it goes whole). a and b receive the edge's opposite corners.
- * One walk over u's triangles marks its neighbours, finds the edge's two triangles and
- * checks the others' turning; one over v's checks the link condition. */
-static int allowed(collapser *c, uint32_t u, uint32_t v, uint32_t *a, uint32_t *b)
+ * One walk over u's triangles gathers its neighbours (on the stack: no per-vertex marks
+ * to write), finds the edge's two triangles and checks the others' turning; one over
+ * v's checks the link condition. */
+static int allowed(const collapser *c, uint32_t u, uint32_t v, uint32_t *a, uint32_t *b)
 {
     if (c->flags[v] & REMOVED)
         return 0;
-    uint32_t stamp = ++c->stamp, apex[2] = {NONE, NONE};
-    int shared = 0, facing_ab = 0;
-    size_t valence_u = 0, valence_v = 0, on_border = 0;
+    uint32_t near[MAX_VALENCE], apex[2] = {NONE, NONE};
+    int shared = 0;
+    size_t valence_u = 0, valence_v = 0;
     const float *pu = c->pos + 3 * (size_t)u, *pv = c->pos + 3 * (size_t)v;
     uint32_t first_x = NONE, first_y = NONE; /* a triangle of u without v: (u, a, b)? */
     for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
         uint32_t x = after(c, k), y = before(c, k);
-        c->mark[x] = c->mark[y] = stamp;
-        valence_u++;
-        on_border += x != v && (c->flags[x] & ON_BORDER);
+        if (valence_u == MAX_VALENCE)
+            return 0;
+        near[valence_u++] = x; /* u's fan is closed: each neighbour comes once as x */
         if (x == v || y == v) {
             if (shared < 2)
                 apex[shared] = x == v ? y : x;
@@ -273,19 +274,20 @@ static int allowed(collapser *c, uint32_t u, uint32_t v, uint32_t *a, uint32_t *
     /* No new edge between two border vertices: where the border is a cut between parts
      * simplified apart (the chain's slabs), the other part may make the same edge, and
      * joined, it would have four triangles. */
-    if ((c->flags[v] & ON_BORDER) &&
-        on_border > (size_t)((c->flags[*a] & ON_BORDER) != 0) + (size_t)((c->flags[*b] & ON_BORDER) != 0))
-        return 0;
+    if (c->flags[v] & ON_BORDER)
+        for (size_t i = 0; i < valence_u; i++)
+            if (near[i] != v && near[i] != *a && near[i] != *b && (c->flags[near[i]] & ON_BORDER))
+                return 0;
     /* u of valence 3 has one triangle without v, on (u, a, b) */
-    facing_ab = valence_u == 3 && ((first_x == *a && first_y == *b) || (first_x == *b && first_y == *a));
+    int facing_ab = valence_u == 3 && ((first_x == *a && first_y == *b) || (first_x == *b && first_y == *a));
     /* The link condition: the ends' only common neighbours are the opposite corners. */
     int tetrahedron = 0;
     for (uint32_t k = c->head[v]; k != NONE; k = c->next[k]) {
         uint32_t x = after(c, k), y = before(c, k);
         valence_v++;
-        if ((c->mark[x] == stamp && x != u && x != *a && x != *b) ||
-            (c->mark[y] == stamp && y != u && y != *a && y != *b))
-            return 0;
+        for (size_t i = 0; i < valence_u; i++)
+            if ((near[i] == x || near[i] == y) && near[i] != u && near[i] != *a && near[i] != *b)
+                return 0;
         tetrahedron |= (x == *a && y == *b) || (x == *b && y == *a);
     }
     if (facing_ab && tetrahedron)
@@ -449,10 +451,9 @@ int iso_collapser_create(const iso_mesh *mesh, collapser **out, int *pinch_free)
     c->slot = malloc(nv * sizeof *c->slot);
     c->key = malloc(nv * sizeof *c->key);
     c->to = malloc(nv * sizeof *c->to);
-    c->mark = calloc(nv, sizeof *c->mark);
     c->refused = calloc(nv, 1);
     if (!c->tri || !c->dead || !c->next || !c->head || !c->flags || !c->q || !c->heap || !c->slot ||
-        !c->key || !c->to || !c->mark || !c->refused) {
+        !c->key || !c->to || !c->refused) {
         iso_collapser_destroy(c);
         *out = NULL;
         return ISO_E_NOMEM;
