@@ -283,8 +283,9 @@ int iso_mesh_find_pinches(const iso_mesh *mesh, unsigned char *mark, iso_mesh_pi
  * collapses, cheapest first by the same quadric measure as meshoptimizer's (so
  * result->error compares with iso_simplify's), each refused where it would break the link
  * condition (the edge's two ends may share no neighbour but the edge's two opposite
- * corners) or turn a triangle over. Vertices on open edges, on edges not used once each
- * way, or whose triangles make more than one fan, do not move (collapses onto them stay
+ * corners), turn a triangle over, or join two border vertices by a new edge. Vertices on
+ * open edges, on edges not used once each way, or whose triangles make more than one fan,
+ * and free vertices of more than 64 triangles, do not move (collapses onto them stay
  * allowed), so the input's pinches stay as they were and are counted in
  * result->nonmanifold_edges and pinch_vertices. A lone tetrahedron (a speck) may go
  * whole. Every vertex is still an input vertex, the result watertight wherever the input
@@ -314,10 +315,11 @@ double iso_mesh_value_error(const iso_volume *vol, const iso_mesh *mesh, iso_spa
 /* A simplification chain: one surface at a few levels of detail, each measured.
  *
  * Level 0 is the surface given (the exact one); level k halves level k - 1's triangles
- * (iso_simplify_manifold with borders locked: 50%, 25%, 12.5%, ... of level 0), each from
- * the one before, so the chain costs little more than its first step; each level is
- * simplified on one thread over its own compact vertices (chain.c). Every level indexes the one
- * position array, a copy of level 0's: every vertex of every level is a vertex of the
+ * (iso_simplify_manifold's collapses with borders locked: 50%, 25%, 12.5%, ... of level
+ * 0), each from the one before, so the chain costs little more than its first step; each
+ * level is simplified over its own compact vertices, level 1 in two slabs on two threads
+ * (each with its cut locked, collapsing in steps of error), the others on one thread while
+ * another measures (chain.c). Every level indexes the one position array, a copy of level 0's: every vertex of every level is a vertex of the
  * exact surface, so its value error is the exact surface's, with one exception: on a
  * closed surface, collapses cut chords and a coarse level encloses less (2-3% on a blob
  * of a few hundred triangles), so a level whose enclosed volume strays more than
