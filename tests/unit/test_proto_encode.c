@@ -1236,9 +1236,29 @@ static void check_gunzip(const unsigned char *gz, size_t gz_size, const unsigned
     free(out);
 }
 
+/* The numbering by first use the meshopt glb sends, computed the plain way: number[old]
+ * is the new number of m's vertex old, order[new] the old vertex (the unused ones last,
+ * in their order). */
+static void first_use_numbering(const iso_mesh *m, uint32_t *number, uint32_t *order)
+{
+    uint32_t next = 0;
+    for (size_t v = 0; v < m->vertex_count; v++)
+        number[v] = UINT32_MAX;
+    for (size_t i = 0; i < 3 * m->triangle_count; i++)
+        if (number[m->indices[i]] == UINT32_MAX)
+            number[m->indices[i]] = next++;
+    for (size_t v = 0; v < m->vertex_count; v++)
+        if (number[v] == UINT32_MAX)
+            number[v] = next++;
+    for (size_t v = 0; v < m->vertex_count; v++)
+        order[number[v]] = (uint32_t)v;
+}
+
 /* Encodes m, reads every view back with meshoptimizer's decoders, and checks the counts
- * exactly, indices exactly, positions within half a quantization step (exactly above 16
- * bits) and normals within their quantization. One thread gives the same bytes as two.
+ * exactly; the vertices numbered by first use: each triangle, in order, a rotation of m's
+ * through that numbering; each decoded vertex's position within half a quantization step
+ * of its m vertex's (exactly above 16 bits) and its normal within their quantization, so
+ * that every corner gets its own vertex's attributes. One thread gives the same bytes as two.
  * Its gzip in pieces (the container and vertex streams Huffman-coded, the indices from the
  * index view's first byte on) inflates back to it. */
 static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
@@ -1292,18 +1312,23 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
     CHECK_EQ(ni, 3 * m->triangle_count);
     CHECK_EQ(is, m->vertex_count <= 65535 ? 2 : 4);
     CHECK_EQ(ps, qp > 16 ? 12 : 8);
+    uint32_t *number = malloc(2 * nv * sizeof *number + 1), *order = number + nv;
+    CHECK(number != NULL);
     if (check_failed() || !pos || !idx || (normals && !nrm))
         goto decoded;
+    first_use_numbering(m, number, order);
     /* The index codec may start a triangle at another corner; the winding stays. */
     for (size_t t = 0; t < ni / 3; t++) {
-        uint32_t k[3], *want = m->indices + 3 * t;
-        for (int c = 0; c < 3; c++)
+        uint32_t k[3], want[3];
+        for (int c = 0; c < 3; c++) {
             k[c] = is == 2 ? ((uint16_t *)idx)[3 * t + c] : ((uint32_t *)idx)[3 * t + c];
+            want[c] = number[m->indices[3 * t + c]];
+        }
         int r = 0;
         while (r < 3 && (k[r] != want[0] || k[(r + 1) % 3] != want[1] || k[(r + 2) % 3] != want[2]))
             r++;
         if (r == 3) {
-            CHECKF(0, "triangle %zu: %u %u %u, not a rotation of %u %u %u", t, k[0], k[1], k[2],
+            CHECKF(0, "triangle %zu: %u %u %u, not a rotation of %u %u %u (first use)", t, k[0], k[1], k[2],
                    want[0], want[1], want[2]);
             break;
         }
@@ -1318,7 +1343,7 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
         for (int a = 0; a < 3; a++) {
             double q = qp > 16 ? ((float *)pos)[3 * v + a] : ((uint16_t *)pos)[4 * v + a];
             lo[a] = fmin(lo[a], q), hi[a] = fmax(hi[a], q);
-            worst = fmax(worst, fabs(origin[a] + scale[a] * q - m->positions[3 * v + a]));
+            worst = fmax(worst, fabs(origin[a] + scale[a] * q - m->positions[3 * order[v] + a]));
         }
     CHECKF(qp > 16 ? worst == 0 : worst <= scale[0] * 0.5001 + 1e-5, "qp %d: position off by %g, step %g",
            qp, worst, scale[0]);
@@ -1335,7 +1360,7 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
         size_t off_grid = 0;
         for (size_t v = 0; v < nv; v++)
             for (int a = 0; a < 3; a++) {
-                long want = extent > 0 ? lround(((double)m->positions[3 * v + a] - blo[a]) / extent * steps) : 0;
+                long want = extent > 0 ? lround(((double)m->positions[3 * order[v] + a] - blo[a]) / extent * steps) : 0;
                 off_grid += ((uint16_t *)pos)[4 * v + a] != want;
             }
         CHECKF(off_grid == 0, "qp %d: %zu components off the grid", qp, off_grid);
@@ -1352,10 +1377,11 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
         for (size_t v = 0; v < nn; v++)
             for (int a = 0; a < 3; a++) {
                 double x = qn > 8 ? ((int16_t *)nrm)[4 * v + a] / 32767.0 : ((int8_t *)nrm)[4 * v + a] / 127.0;
-                off = fmax(off, fabs(x - m->normals[3 * v + a]));
+                const double n = m->normals[3 * order[v] + a];
+                off = fmax(off, fabs(x - n));
                 long grain = qn > 8 ? 1L << (16 - qn) : 1;
                 long top = qn > 8 ? 32767 : 127;
-                long want = lround((double)m->normals[3 * v + a] * (double)top / (double)grain) * grain;
+                long want = lround(n * (double)top / (double)grain) * grain;
                 want = want > top ? top : want < -top ? -top : want;
                 long got = qn > 8 ? ((int16_t *)nrm)[4 * v + a] : ((int8_t *)nrm)[4 * v + a];
                 off_grid += got != want;
@@ -1364,6 +1390,7 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
         CHECKF(off_grid == 0, "qn %d: %zu components not lround(x * max / grain) * grain within +-max", qn, off_grid);
     }
 decoded:
+    free(number);
     free(pos);
     free(nrm);
     free(idx);
@@ -1401,6 +1428,32 @@ static void test_glb_meshopt_round_trip(void)
         }
     }
     check_glb_meshopt(&m, 14, 10);
+    /* Its vertices shuffled too: positions and normals must follow their vertex. */
+    float *pos = malloc(m.vertex_count * 12), *nrm = malloc(m.vertex_count * 12);
+    uint32_t *to = malloc(m.vertex_count * 4);
+    CHECK(pos && nrm && to);
+    if (pos && nrm && to) {
+        for (size_t v = 0; v < m.vertex_count; v++)
+            to[v] = (uint32_t)v;
+        for (size_t v = m.vertex_count - 1; v > 0; v--) {
+            size_t u = rng() % (v + 1);
+            uint32_t x = to[v];
+            to[v] = to[u], to[u] = x;
+        }
+        for (size_t v = 0; v < m.vertex_count; v++) {
+            memcpy(pos + 3 * to[v], m.positions + 3 * v, 12);
+            memcpy(nrm + 3 * to[v], m.normals + 3 * v, 12);
+        }
+        memcpy(m.positions, pos, m.vertex_count * 12);
+        memcpy(m.normals, nrm, m.vertex_count * 12);
+        for (size_t i = 0; i < 3 * m.triangle_count; i++)
+            m.indices[i] = to[m.indices[i]];
+        check_glb_meshopt(&m, 14, 10);
+        check_glb_meshopt(&m, 20, 8);
+    }
+    free(pos);
+    free(nrm);
+    free(to);
     unsigned char *glb;
     size_t size;
     iso_error err;
@@ -1603,6 +1656,26 @@ static void test_meshopt_vertex_codec(void)
     free(v);
 }
 
+/* The meshopt glb numbers vertices by first use, the unused ones last in their order:
+ * seven vertices, two unused, three triangles, each vertex's normal its own. */
+static void test_glb_meshopt_first_use(void)
+{
+    static const float p[] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1};
+    static const float n[] = {1, 0, 0, 0, 1, 0, 0, 0, 1, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0.6f, 0.8f, 0};
+    static const uint32_t idx[] = {4, 2, 5, 2, 4, 0, 6, 0, 4};
+    static const uint32_t want[] = {4, 2, 5, 0, 6, 1, 3};
+    iso_mesh m;
+    make_mesh(&m, p, n, 7, idx, 3);
+    uint32_t number[7], order[7];
+    first_use_numbering(&m, number, order);
+    for (int v = 0; v < 7; v++)
+        CHECKF(order[v] == want[v], "new vertex %d: old %u, want %u", v, order[v], want[v]);
+    check_glb_meshopt(&m, 14, 10);
+    check_glb_meshopt(&m, 14, 8);
+    check_glb_meshopt(&m, 20, 10);
+    iso_mesh_free(&m);
+}
+
 static void test_glb_meshopt_refuses_and_empties(void)
 {
     iso_error err;
@@ -1616,6 +1689,14 @@ static void test_glb_meshopt_refuses_and_empties(void)
     opt.position_bits = 25;
     CHECK_EQ(proto_encode_glb_meshopt(&m, &opt, &buf, &size, &err), ISO_E_ARGUMENT);
     CHECK(buf == NULL && size == 0);
+    /* The numbering checks every index; the other thread the values. */
+    m.positions[4] = NAN;
+    CHECK_EQ(proto_encode_glb_meshopt(&m, NULL, &buf, &size, &err), ISO_E_ARGUMENT);
+    CHECK(buf == NULL && strstr(err.message, "non-finite position"));
+    m.indices[22] = 6;
+    CHECK_EQ(proto_encode_glb_meshopt(&m, NULL, &buf, &size, &err), ISO_E_ARGUMENT);
+    CHECKF(buf == NULL && strstr(err.message, "triangle 7: index 6 >= 6"), "%s", err.message);
+    m.positions[4] = 0;
     m.indices[0] = 6;
     CHECK_EQ(proto_encode_glb_meshopt(&m, NULL, &buf, &size, &err), ISO_E_ARGUMENT);
     m.triangle_count = 0;
@@ -1720,6 +1801,7 @@ int main(void)
     CHECK_RUN(test_glb_meshopt_round_trip);
     CHECK_RUN(test_meshopt_index_codec);
     CHECK_RUN(test_meshopt_vertex_codec);
+    CHECK_RUN(test_glb_meshopt_first_use);
     CHECK_RUN(test_glb_meshopt_refuses_and_empties);
     CHECK_RUN(test_gzip_pieces);
     CHECK_RUN(test_empty_mesh_gives_valid_files);
