@@ -5,8 +5,10 @@
 // lacks, so the KHR_draco_mesh_compression extension is handed a decoder with the same
 // decodeDracoFile contract built on npm's draco3d: everything else (the container, the
 // JSON, accessors, the extension's attribute mapping) is GLTFLoader's own code.
-// usage: node gltf_load.mjs FILE.glb WEB_DIR   (WEB_DIR/node_modules holds three and draco3d)
-import { readFileSync } from 'node:fs';
+// With CORNERS, also writes every triangle corner's world position there, in triangle order
+// (float32 x, y, z each): a decoded mesh compared corner by corner, whatever its numbering.
+// usage: node gltf_load.mjs FILE.glb WEB_DIR [CORNERS]   (WEB_DIR/node_modules holds three and draco3d)
+import { readFileSync, writeFileSync } from 'node:fs';
 import { createRequire } from 'node:module';
 import { pathToFileURL } from 'node:url';
 
@@ -64,5 +66,17 @@ loader.parse(buffer, '', (gltf) => {
     normals = normals && !!o.geometry.attributes.normal;
   });
   const box = new THREE.Box3().setFromObject(gltf.scene);
+  if (process.argv[4]) {
+    const corners = [], p = new THREE.Vector3();
+    gltf.scene.traverse((o) => {
+      if (!o.isMesh) return;
+      const index = o.geometry.index, position = o.geometry.attributes.position;
+      for (let i = 0; i < index.count; i++) {
+        p.fromBufferAttribute(position, index.getX(i)).applyMatrix4(o.matrixWorld);
+        corners.push(p.x, p.y, p.z);
+      }
+    });
+    writeFileSync(process.argv[4], new Float32Array(corners));
+  }
   console.log(`${triangles} ${vertices} ${normals} ${box.min.toArray().join(' ')} ${box.max.toArray().join(' ')}`);
 }, (error) => { console.error(String(error)); process.exit(1); });

@@ -240,7 +240,10 @@ def main_tests(s, tmp, blob):
         index = pos / np.array([0.75, 1.0, 1.25])  # origin 0, identity directions
         err = np.abs(trilinear(blob.astype(np.float64), index) - level)
         assert err.max() <= bound + 1e-3, f"max |f - L| {err.max()} > bound {bound}"
+        faces = np.frombuffer(payload[nv * 12:], np.dtype([("n", "u1"), ("v", "<u4", 3)]))
+        assert (faces["n"] == 3).all() and (faces["v"] < nv).all()
         state["pos"], state["bound"], state["nt"] = pos, bound, nt
+        state["corners"] = pos[faces["v"]]  # (nt, 3, 3): each triangle's corners
     check("mesh_ply_bound_holds", mesh_ply)
 
 
@@ -350,7 +353,9 @@ draco3d.createDecoderModule({}).then(m => {
     check("mesh_glb_loads_in_three_gltfloader", glb_three)
 
     # format=glb-meshopt: three's GLTFLoader with its MeshoptDecoder gets exactly the
-    # mesh's triangles and vertices, and the PLY's bounding box within half a qp step.
+    # mesh's triangles and vertices, and the PLY's bounding box within half a qp step; its
+    # vertices are numbered by first use, so the two are compared corner by corner: each
+    # triangle, in order, is the PLY's (a rotation of it) within half a qp step.
     # Its gzip form goes to a client that accepts gzip: the same bytes inflated, its own
     # ETag, and either ETag answers 304. The gzip form is made only when a client accepts
     # it (none before), then cached beside the body (the cache's bytes grow by its size).
@@ -367,10 +372,17 @@ draco3d.createDecoderModule({}).then(m => {
         assert 'filename="blob-' in r.getheader("Content-Disposition") and ".glb\"" in r.getheader("Content-Disposition")
         path = os.path.join(tmp, "blob.meshopt.glb")
         open(path, "wb").write(r.body)
-        out = subprocess.run(["node", "tests/http/gltf_load.mjs", path, os.path.abspath("web")],
+        corners_path = os.path.join(tmp, "blob.meshopt.corners")
+        out = subprocess.run(["node", "tests/http/gltf_load.mjs", path, os.path.abspath("web"), corners_path],
                              capture_output=True, text=True, timeout=60)
         assert out.returncode == 0, out.stdout + out.stderr
         tri, ver, normals, *box = out.stdout.split()
+        got = np.fromfile(corners_path, "<f4").astype(np.float64).reshape(-1, 3, 3)
+        want_corners = state["corners"]
+        assert got.shape == want_corners.shape, (got.shape, want_corners.shape)
+        extent = (state["pos"].max(0) - state["pos"].min(0)).max()
+        off = np.min([np.abs(np.roll(got, r, axis=1) - want_corners).max(axis=(1, 2)) for r in range(3)], axis=0)
+        assert off.max() <= extent / (2 ** 14 - 1) / 2 * 1.01 + 1e-5, (off.max(), int(off.argmax()))
         assert (int(tri), int(ver)) == (int(r.getheader("X-Iso-Triangles")), int(r.getheader("X-Iso-Vertices")))
         assert (int(tri), int(ver)) == (state["nt"], len(state["pos"])), (tri, ver)
         assert normals == "true"
