@@ -3,13 +3,12 @@
  * attributes (KHR_mesh_quantization), as three.js's GLTFLoader + MeshoptDecoder read it.
  *
  * Passes, in order:
- *   0. number by first use: the vertices renumbered in the order the triangles first use
- *      them (those no triangle uses after, in their order), the indices rewritten to the
- *      new numbers (each one checked against the vertex count on the way). The index
- *      codec then codes most new vertices as its cheap "next vertex" (CThead skin's index
- *      stream 27% smaller than in the extraction's order), and the vertex streams follow
- *      their triangles. With two threads the other one meanwhile checks the values and
- *      takes the positions' grid, which do not depend on the order;
+ *   0. number by first use: vertex v gets the next number at its first corner (those no
+ *      triangle uses come last, in their order), the indices rewritten to the new
+ *      numbers, each checked against the vertex count on the way. The index codec then
+ *      codes most new vertices as its cheap "next vertex" (CThead skin's index stream
+ *      27% smaller than in the extraction's order), and the vertex streams follow their
+ *      triangles. One pass, before the others (both streams need it);
  *   1. quantize: (a) the positions' grid, the mesh's bounding cube, whose corner and step
  *      the node's translation and scale carry back to world units; (b) positions to
  *      qp-bit integers on the grid (uint16, four per vertex as the codec wants strides of
@@ -190,24 +189,26 @@ static void encode_view(view *v)
 }
 
 /* Pass 0: order[new] = the old vertex, and the indices in the new numbers into
- * `renumbered`; `seen` (vertex_count entries) is scratch, old to new. Returns the first
- * corner whose index is not below the vertex count (nothing numbered then), else the
- * corner count. */
+ * `renumbered`; `seen` (vertex_count entries) is scratch, old to new; order holds one
+ * entry more than there are vertices. Returns the first corner whose index is not below
+ * the vertex count (nothing numbered then), else the corner count. */
 static size_t number_by_first_use(const iso_mesh *mesh, uint32_t *seen, uint32_t *order, uint32_t *renumbered)
 {
     const size_t n = mesh->vertex_count, corners = 3 * mesh->triangle_count;
     const uint32_t *in = mesh->indices;
     memset(seen, 0xff, n * sizeof *seen);
     uint32_t next = 0;
+    /* Without a branch on "new": a sixth of the corners are, in no pattern a predictor
+     * learns. order[next] is written every time and kept when next moves on. */
     for (size_t i = 0; i < corners; i++) {
         uint32_t v = in[i];
         if (v >= n)
             return i;
-        uint32_t k = seen[v];
-        if (k == UINT32_MAX) {
-            k = seen[v] = next++;
-            order[k] = v;
-        }
+        uint32_t k = seen[v], fresh = k == UINT32_MAX;
+        k = fresh ? next : k;
+        seen[v] = k;
+        order[next] = v;
+        next += fresh;
         renumbered[i] = k;
     }
     for (size_t v = 0; v < n && next < n; v++)
@@ -216,43 +217,33 @@ static size_t number_by_first_use(const iso_mesh *mesh, uint32_t *seen, uint32_t
     return corners;
 }
 
-/* Pass 0 on up to two threads: the numbering on one; on the other the values' check
- * (positions and normals finite; the numbering checks the indices) and the positions'
- * grid. Passes 1 and 2 then on up to two threads: the renumbered indices' codec (it takes
- * the longest) on one, both quantizings and the vertex streams on the other. */
+/* Passes 1 and 2 on up to two threads, after pass 0: the renumbered indices' codec (it
+ * takes the longest) on one; the values' check (positions and normals finite; pass 0
+ * checked the indices), the positions' grid, both quantizings and the vertex streams on
+ * the other. */
 typedef struct pack_job {
     const iso_mesh *mesh;
     const proto_encode_options *opt;
     quantized *q;
     void *positions, *normals;       /* the quantized data the views read */
-    uint32_t *seen, *order, *renumbered; /* pass 0's */
-    size_t bad_corner;               /* pass 0's: 3 * triangle_count when all are in range */
+    const uint32_t *order;           /* pass 0's: new vertex to old */
     int rc;                          /* the values' check */
     iso_error *err;
 } pack_job;
-
-static void number_share(void *context, int t, int threads)
-{
-    pack_job *job = context;
-    if (t == 0) {
-        iso_mesh values = *job->mesh;
-        values.triangle_count = 0; /* the indices are the numbering's to check */
-        if (!(job->rc = proto_mesh_check_data(&values, 1, job->err)))
-            position_grid(job->mesh, job->opt->position_bits, job->q);
-    }
-    if (t == threads - 1)
-        job->bad_corner = number_by_first_use(job->mesh, job->seen, job->order, job->renumbered);
-}
 
 static void pack_share(void *context, int t, int threads)
 {
     pack_job *job = context;
     quantized *q = job->q;
-    if (t == 0) {
-        quantize_positions(job->mesh, job->order, q, job->positions);
+    const iso_mesh *mesh = job->mesh;
+    iso_mesh values = *mesh;
+    values.triangle_count = 0; /* pass 0 checked the indices */
+    if (t == 0 && !(job->rc = proto_mesh_check_data(&values, 1, job->err))) {
+        position_grid(mesh, job->opt->position_bits, q);
+        quantize_positions(mesh, job->order, q, job->positions);
         encode_view(&q->views[VIEW_POSITION]);
         if (q->normals) {
-            quantize_normals(job->mesh, job->order, job->opt->normal_bits, job->normals);
+            quantize_normals(mesh, job->order, job->opt->normal_bits, job->normals);
             encode_view(&q->views[VIEW_NORMAL]);
         }
     }
@@ -382,19 +373,21 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
     /* One buffer for the glb: the codecs write into it where plan_buffer says, then the
      * streams move down behind the head and the rest is given back. */
     size_t capacity = plan_buffer(&q, opt);
-    unsigned char *buf = malloc(capacity);
     size_t position_bytes = mesh->vertex_count * q.views[VIEW_POSITION].stride;
     size_t vertex_bytes = position_bytes + mesh->vertex_count * q.views[VIEW_NORMAL].stride;
-    /* The quantized streams, then pass 0's tables: seen and order (a vertex each), the
-     * renumbered indices. */
-    unsigned char *vertex_data = malloc(vertex_bytes + (2 * mesh->vertex_count + 3 * mesh->triangle_count) * 4);
+    /* The quantized streams, then pass 0's tables: seen and order (a vertex each, order
+     * one more), the renumbered indices. Taken before the glb's buffer, which outlives
+     * the call (a server caches it): the scratch of the call before, freed, then fits it
+     * again, and its pages are not faulted in anew. */
+    unsigned char *vertex_data = malloc(vertex_bytes + (2 * mesh->vertex_count + 1 + 3 * mesh->triangle_count) * 4);
+    unsigned char *buf = malloc(capacity);
     if (!buf || !vertex_data) {
         free(buf);
         free(vertex_data);
         return iso_error_set(err, ISO_E_NOMEM, "no memory to encode a glb of %zu vertices", mesh->vertex_count);
     }
     uint32_t *seen = (uint32_t *)(void *)(vertex_data + vertex_bytes), *order = seen + mesh->vertex_count;
-    uint32_t *renumbered = order + mesh->vertex_count;
+    uint32_t *renumbered = order + mesh->vertex_count + 1;
     q.views[VIEW_POSITION].data = vertex_data;
     q.views[VIEW_NORMAL].data = vertex_data + position_bytes;
     q.views[VIEW_INDEX].data = renumbered;
@@ -405,18 +398,17 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
             q.views[i].packed = buf + at;
             at += q.views[i].bound + 4;
         }
-    pack_job job = {.mesh = mesh, .opt = opt, .q = &q, .positions = vertex_data,
-                    .normals = vertex_data + position_bytes, .seen = seen, .order = order,
-                    .renumbered = renumbered, .err = err};
-    int threads = iso_parallel_threads(opt->threads);
-    if (mesh->triangle_count < MESHOPT_TRIANGLES_PER_THREAD)
-        threads = 1;
-    threads = threads > 1 ? 2 : 1;
-    iso_parallel_run(threads, number_share, &job);
-    if (job.bad_corner < q.views[VIEW_INDEX].count)
+    if (number_by_first_use(mesh, seen, order, renumbered) < q.views[VIEW_INDEX].count) {
         rc = proto_mesh_check_data(mesh, 0, err); /* says which index */
-    else if (!(rc = job.rc))
-        iso_parallel_run(threads, pack_share, &job);
+    } else {
+        pack_job job = {.mesh = mesh, .opt = opt, .q = &q, .positions = vertex_data,
+                        .normals = vertex_data + position_bytes, .order = order, .err = err};
+        int threads = iso_parallel_threads(opt->threads);
+        if (mesh->triangle_count < MESHOPT_TRIANGLES_PER_THREAD)
+            threads = 1;
+        iso_parallel_run(threads > 1 ? 2 : 1, pack_share, &job);
+        rc = job.rc;
+    }
     free(vertex_data);
     if (rc) {
         free(buf);
