@@ -34,6 +34,14 @@ static double voxel_size(const iso_volume *vol, const proto_pipeline_request *re
     return req->extract.space == ISO_SPACE_INDEX ? 1 : iso_vol_min_spacing(vol);
 }
 
+/* An extraction's work added to the request's: cells and nodes visited count every
+ * extraction a request ran, not only the one whose mesh answers. */
+static void add_work(iso_extract_stats *to, const iso_extract_stats *from)
+{
+    to->nodes_visited += from->nodes_visited;
+    to->cells_visited += from->cells_visited;
+}
+
 /* The triangles of the mesh at the faithful tolerance (core/extract) into
  * res->faithful_triangles, extracted unless the request or its chain knows them. */
 static int faithful_triangles(const iso_tree *tree, const proto_pipeline_request *req,
@@ -54,8 +62,8 @@ static int faithful_triangles(const iso_tree *tree, const proto_pipeline_request
     iso_mesh_free(&m);
     res->faithful_triangles = rc ? 0 : stats.triangles;
     /* The work is the request's; the mesh and its error bound are not the answer's. */
-    res->stats.nodes_visited += rc ? 0 : stats.nodes_visited;
-    res->stats.cells_visited += rc ? 0 : stats.cells_visited;
+    if (!rc)
+        add_work(&res->stats, &stats);
     return rc;
 }
 
@@ -174,6 +182,9 @@ static int budget_by_measure(const iso_tree *tree, const iso_volume *vol,
         iso_mesh_free(&ladder);
         return rc;
     }
+    /* The ladder's extraction is this request's work whichever mesh answers. */
+    iso_extract_stats before = res->stats;
+    add_work(&res->stats, &stats);
     if (!chosen.fits || d.p99 >= res->distance.p99) {
         res->budget_other_p99 = chosen.fits ? d.p99 : -1;
         iso_mesh_free(&ladder);
@@ -183,6 +194,7 @@ static int budget_by_measure(const iso_tree *tree, const iso_volume *vol,
     iso_mesh_free(&res->mesh);
     res->mesh = ladder;
     res->stats = stats;
+    add_work(&res->stats, &before);
     res->chosen = chosen;
     res->distance = d;
     res->chain_level = -1;

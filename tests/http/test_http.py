@@ -514,6 +514,21 @@ draco3d.createDecoderModule({}).then(m => {
               flush=True)
     check("budget_faithful_tolerance", budget_faithful)
 
+    # X-Iso-Cells-Visited counts every extraction the request ran: a budget the faithful
+    # ladder's mesh fits is compared with the chain's level by extracting that mesh, so a
+    # request whose chain is cached still visits cells, whichever mesh answers (only one
+    # the chain answers alone, under the faithful mesh's triangles, visits none:
+    # tests/http/test_chain_file.py).
+    def budget_cells_visited():
+        q = "/v1/volumes/torus/mesh?level=0&budget=2000&normals=none&format="
+        first, again = s.get(q + "ply"), s.get(q + "stl")  # the second finds the chain cached
+        for r in (first, again):
+            assert r.status == 200 and r.getheader("X-Iso-Budget-Fits") == "true", r.status
+            assert float(r.getheader("X-Iso-Budget-Other-Distance-Mm")) > 0  # the ladder's, measured
+            assert int(r.getheader("X-Iso-Cells-Visited")) > 0, (r.getheader("X-Iso-Budget-Source"),
+                                                                  r.getheader("X-Iso-Cells-Visited"))
+    check("budget_cells_visited", budget_cells_visited)
+
     def budget_simplified():
         exact = s.get(f"/v1/volumes/blob/mesh?level={level}&format=ply&normals=none&measures=true")
         assert int(exact.getheader("X-Iso-Triangles")) == 3004
