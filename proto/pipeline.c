@@ -43,14 +43,12 @@ static void add_work(iso_extract_stats *to, const iso_extract_stats *from)
 }
 
 /* The triangles of the mesh at the faithful tolerance (core/extract) into
- * res->faithful_triangles, extracted unless the request or its chain knows them. */
+ * res->faithful_triangles, extracted unless the request's chain knows them. */
 static int faithful_triangles(const iso_tree *tree, const proto_pipeline_request *req,
                               proto_pipeline_result *res, iso_error *err)
 {
     if (!res->faithful_triangles)
-        res->faithful_triangles = req->faithful_triangles ? req->faithful_triangles
-                                  : req->chain              ? req->chain->faithful_triangles
-                                                            : 0;
+        res->faithful_triangles = req->chain ? req->chain->faithful_triangles : 0;
     if (res->faithful_triangles)
         return 0;
     iso_extract_params p = req->extract;

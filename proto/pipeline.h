@@ -36,9 +36,6 @@ typedef struct proto_pipeline_request {
                                  * from the chain instead of a fresh simplification */
     const iso_mesh_chain *chain;/* the chain of (level, tolerance, cap, space) when the
                                  * caller has one; NULL: built here when needed */
-    size_t faithful_triangles;  /* the mesh at the faithful tolerance has this many
-                                 * triangles, when the caller knows (a budget then needs no
-                                 * extraction to choose); 0: unknown */
     size_t max_triangles;       /* refuse a larger mesh (ISO_E_LIMIT); 0: no limit */
     int normals;                /* B-spline order: 0 none, 2, 3 or 4 */
     int measure;                /* 1: census, area, enclosed volume */
@@ -71,7 +68,9 @@ typedef struct proto_pipeline_result {
     double vertex_offset;       /* the chain level's move along its normals that keeps a
                                  * closed surface's volume (mesh.h), position units; 0: every
                                  * vertex is an exact-surface vertex */
-    size_t faithful_triangles;  /* as in the request, found here when a budget needed it */
+    size_t faithful_triangles;  /* the mesh at the faithful tolerance has this many
+                                 * triangles: the chain's count when req->chain has one,
+                                 * else found here when a budget needed it */
     int distance_measured;      /* `distance` below holds the final mesh's measured distance
                                  * from the surface of req->extract (a = that surface) */
     iso_mesh_distance distance;

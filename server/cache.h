@@ -42,9 +42,8 @@ typedef struct srv_body {
     double vertex_offset_mm;        /* its vertices' move along the normals (0: none) */
     const char *budget_source;      /* static: "chain" or "tolerance" (pipeline.h), or NULL */
     double budget_other_mm;         /* the measured p99 of the candidate not chosen, or -1 */
-    struct iso_mesh_chain *chain;   /* a cached simplification chain (owned), no data;
-                                     * triangles then counts the faithful tolerance's mesh
-                                     * (pipeline.h), 0 if unknown */
+    struct iso_mesh_chain *chain;   /* a cached simplification chain (owned), no data; it
+                                     * keeps the faithful tolerance's triangle count itself */
 } srv_body;
 
 /* A body owning data (malloc'd, taken over), with one reference. NULL on no memory (data

@@ -131,8 +131,7 @@ static int chain_file(const srv_mesh_job *job, const char *key, char *path, size
 /* A chain into the cache, in a body of no bytes that owns it and weighs what it holds;
  * without memory for that, it is dropped (a cache is optional). Returns the holder with a
  * reference for the caller (NULL when dropped: the chain is then destroyed unless kept). */
-static srv_body *cache_chain(const srv_mesh_job *job, const char *key, iso_mesh_chain *chain,
-                             size_t faithful_triangles)
+static srv_body *cache_chain(const srv_mesh_job *job, const char *key, iso_mesh_chain *chain)
 {
     srv_body *holder = srv_body_create(NULL, 0);
     if (!holder) {
@@ -141,7 +140,6 @@ static srv_body *cache_chain(const srv_mesh_job *job, const char *key, iso_mesh_
     }
     holder->chain = chain;
     holder->size = chain->bytes;
-    holder->triangles = faithful_triangles;
     srv_cache_put(job->cache, key, holder);
     return holder;
 }
@@ -158,7 +156,7 @@ static void keep_chain(const srv_mesh_job *job, const char *key, proto_pipeline_
     if (chain_file(job, key, path, sizeof path, &identity) &&
         iso_mesh_chain_save(res->chain_built, path, identity, &err))
         fprintf(stderr, "isoserve: %s: chain not written: %s\n", job->volume->entry->id, err.message);
-    srv_body_release(cache_chain(job, key, res->chain_built, res->faithful_triangles));
+    srv_body_release(cache_chain(job, key, res->chain_built));
     res->chain_built = NULL;
 }
 
@@ -177,7 +175,7 @@ static srv_body *chain_from_file(const srv_mesh_job *job, const char *key)
         fprintf(stderr, "isoserve: %s: %s; rebuilding the chain\n", job->volume->entry->id, err.message);
         return NULL;
     }
-    return cache_chain(job, key, chain, 0);
+    return cache_chain(job, key, chain);
 }
 
 srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
@@ -191,10 +189,8 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     srv_body *chain = NULL;
     if (job->cache && (req.distance >= 0 || req.budget)) {
         chain_key(job, key, sizeof key);
-        if ((chain = srv_cache_get(job->cache, key)) || (chain = chain_from_file(job, key))) {
+        if ((chain = srv_cache_get(job->cache, key)) || (chain = chain_from_file(job, key)))
             req.chain = chain->chain;
-            req.faithful_triangles = chain->triangles;
-        }
     }
     int rc = proto_pipeline_run(job->volume->tree, job->volume->vol, &req, &res, &err);
     srv_body_release(chain);
