@@ -7,14 +7,21 @@
 
 #define LADDER_STEPS 20
 
+/* One rung. stats describe the mesh the rung leaves, but its nodes and cells visited add
+ * up over every rung the search ran: they are the request's work, not only the answer's. */
 static int run(const iso_tree *tree, const iso_extract_params *base, double tolerance,
                iso_mesh *mesh, iso_extract_stats *stats, iso_budget_result *result,
                iso_error *err)
 {
     iso_extract_params p = *base;
     p.tolerance = tolerance;
+    size_t nodes = result->extractions ? stats->nodes_visited : 0;
+    size_t cells = result->extractions ? stats->cells_visited : 0;
     result->extractions++;
-    return iso_extract(tree, &p, mesh, stats, err);
+    int rc = iso_extract(tree, &p, mesh, stats, err);
+    stats->nodes_visited += nodes;
+    stats->cells_visited += cells;
+    return rc;
 }
 
 /* The ladder from params->tolerance up to `top`: bisection for the finest rung that fits

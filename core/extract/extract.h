@@ -97,7 +97,9 @@ typedef struct iso_budget_result {
 
 /* Extracts at params->level with the smallest ladder tolerance >= params->tolerance whose
  * mesh has at most `budget` triangles (budget >= 1). Costs about log2(21) + 1 extractions
- * at worst, the coarse ones being the cheap ones. Returns what iso_extract returns. */
+ * at worst, the coarse ones being the cheap ones. stats are the answer's mesh's, but for
+ * nodes_visited and cells_visited, which count every extraction run (result->extractions).
+ * Returns what iso_extract returns. */
 int iso_extract_budget(const iso_tree *tree, const iso_extract_params *params,
                        size_t budget, iso_mesh *mesh, iso_extract_stats *stats, iso_budget_result *result,
                        iso_error *err);

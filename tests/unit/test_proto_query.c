@@ -399,9 +399,18 @@ static void test_budget_picks_finest_fit(void)
     iso_extract_stats st2 = {0};
     CHECK_OK(iso_extract(tree, &finer, &mesh, &st2, &err), &err);
     CHECKF(st2.triangles > budget, "tolerance %g also fits (%zu)", finer.tolerance, st2.triangles);
+    /* The cells visited are the search's: the answer's rung and every rung tried before. */
+    iso_extract_params chosen = params;
+    chosen.tolerance = res.tolerance;
+    iso_extract_stats answer = {0};
+    CHECK_OK(iso_extract(tree, &chosen, &mesh, &answer, &err), &err);
+    CHECKF(res.extractions > 1 && st.cells_visited > answer.cells_visited + full.cells_visited / 2,
+           "%d extractions visited %zu cells; the answer's alone %zu, the exact one %zu",
+           res.extractions, st.cells_visited, answer.cells_visited, full.cells_visited);
     /* A generous budget keeps the requested tolerance and runs once. */
     CHECK_OK(iso_extract_budget(tree, &params, full.triangles, &mesh, &st, &res, &err), &err);
     CHECK(res.fits && res.tolerance == 0 && res.extractions == 1 && st.triangles == full.triangles);
+    CHECK_EQ(st.cells_visited, full.cells_visited);
     /* An impossible budget returns the coarsest rung's mesh and says it does not fit. */
     CHECK_OK(iso_extract_budget(tree, &params, 1, &mesh, &st, &res, &err), &err);
     CHECK(!res.fits || st.triangles <= 1);
