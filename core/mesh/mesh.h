@@ -319,10 +319,11 @@ double iso_mesh_value_error(const iso_volume *vol, const iso_mesh *mesh, iso_spa
  * 0), each from the one before, so the chain costs little more than its first step; each
  * level is simplified over its own compact vertices, level 1 in two slabs on two threads
  * (each with its cut locked, collapsing in steps of error), the others on one thread while
- * another measures (chain.c). Every level indexes the one position array, a copy of level 0's: every vertex of every level is a vertex of the
- * exact surface, so its value error is the exact surface's, with one exception: on a
- * closed surface, collapses cut chords and a coarse level encloses less (2-3% on a blob
- * of a few hundred triangles), so a level whose enclosed volume strays more than
+ * another measures (chain.c). Every level indexes the one position array, a copy of
+ * level 0's: every vertex of every level is a vertex of the exact surface, so its value
+ * error is the exact surface's, with one exception: on a closed surface, collapses cut
+ * chords and a coarse level encloses less (2-3% on a blob of a few hundred triangles),
+ * so a level whose enclosed volume strays more than
  * ISO_CHAIN_VOLUME_SLACK from level 0's is moved, every vertex by the same `offset` along
  * its normal (iso_mesh_volume_offset), which gives the volume back; its vertices are then
  * |offset| from exact ones, its measured distance is the moved level's, and the caller
