@@ -125,15 +125,16 @@ int proto_encode_glb(const iso_mesh *mesh, const proto_encode_options *opt,
 int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *opt,
                              unsigned char **out, size_t *out_size, iso_error *err);
 
-/* One gzip member (RFC 1952) holding `in`, at zlib's fastest level, for HTTP's
- * Content-Encoding: gzip. Returns 0 or ISO_E_NOMEM / ISO_E_LIMIT (over 4 GiB). */
+/* One gzip member (RFC 1952) holding `in`, deflated by gzip.c's greedy matcher (about as
+ * small as zlib's fastest level, several times as fast), for HTTP's Content-Encoding: gzip.
+ * Returns 0 or ISO_E_NOMEM / ISO_E_LIMIT (over 4 GiB). */
 int proto_gzip(const unsigned char *in, size_t size, unsigned char **out, size_t *out_size,
                iso_error *err);
 
 /* A piece of a buffer to gzip: it ends at `end` (the last piece ends at the buffer's end,
  * whatever `end` says); `huffman`: entropy coding alone (a table per 64 KB, gzip.c), for
- * bytes with few repeats, such as meshopt's vertex streams: about as small there as level
- * 1's matching and about 5 times as fast. */
+ * bytes with few repeats, such as meshopt's vertex streams: about as small there as
+ * matching and about 4 times as fast; else matches (gzip.c's greedy LZ77). */
 typedef struct proto_gzip_piece {
     size_t end;
     int huffman;
@@ -147,9 +148,8 @@ int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_pie
                       int threads, unsigned char **out, size_t *out_size, iso_error *err);
 
 /* The pieces in which to gzip a glb made by proto_encode_glb_meshopt: the container and
- * the vertex streams (Huffman only), then the index stream (level 1, whose matches find
- * the index codec's repeats), cut in two when it is long so that two threads share the
- * work evenly. Fills pieces[0..count-1] and returns count (2 or 3); 1 (the whole) if the
+ * the vertex streams (Huffman only), then the index stream (matches, which find the index
+ * codec's repeats), cut in two when it is long so that two threads share the work evenly. Fills pieces[0..count-1] and returns count (2 or 3); 1 (the whole) if the
  * bytes are not such a glb. */
 int proto_glb_meshopt_gzip_pieces(const unsigned char *glb, size_t size,
                                   proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX]);

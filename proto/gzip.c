@@ -6,17 +6,24 @@
  * pigz does) with its own strategy and on up to two threads; then the header, the joined
  * stream, and the trailer (the CRC-32 and length of the whole input).
  *
- * Level 1 is zlib's. Huffman-only pieces are written here (zlib's Huffman-only mode still
- * runs its match loop's bookkeeping per byte: about 8 ns a byte, against about 2 here),
- * as RFC 1951 dynamic blocks of literals, one per HUFFMAN_BLOCK bytes, each in turn:
- *   1. count the block's bytes;
+ * Both strategies are coded here as RFC 1951 dynamic blocks, one per BLOCK_BYTES of input
+ * (a table per 64 KB follows the vertex streams' changes, positions then normals, for
+ * about 100 bytes of header each):
+ * - Huffman only: literals, for bytes with few repeats (zlib's Huffman-only mode still
+ *   runs its match loop's bookkeeping per byte, about 4 times this coder's time);
+ * - matches: greedy LZ77 in the manner of the fastest levels of libdeflate and zlib-ng,
+ *   which suits the index codec's repeats: one hash probe of the next 4 bytes, a 32 KB
+ *   window, the match taken whole (up to 258 bytes) and its bytes not hashed.
+ * A block is written in passes:
+ *   1. parse: the block's symbols (literals, or for matches also lengths and distances,
+ *      one 32-bit item each) and their counts;
  *   2. code lengths: Huffman's two-queue construction over the counts sorted, then
  *      lengths past 15 bits folded back (JPEG's Annex K.3 adjustment of the counts per
  *      length), handed out to the symbols in order of count; canonical codes, bit
  *      reversed (deflate writes codes from their first bit);
- *   3. the block header: the literal and distance code lengths, themselves coded with a
- *      code-length code (lengths up to 7 bits, no run-length symbols);
- *   4. the bytes' codes and the end-of-block code;
+ *   3. the block header: the literal/length and distance code lengths, themselves coded
+ *      with a code-length code (lengths up to 7 bits, no run-length symbols);
+ *   4. the symbols' codes and extra bits, and the end-of-block code;
  * and a piece that is not the last ends with an empty stored block (the sync flush). */
 #include "encode.h"
 
@@ -32,39 +39,51 @@
  * cost more to hand over than to do. */
 #define GZIP_BYTES_PER_THREAD (1u << 20)
 
-/* Bytes per Huffman-only block: a table per 64 KB follows the vertex streams' changes
- * (positions, then normals) for about 100 bytes of header each. */
-#define HUFFMAN_BLOCK (64u << 10)
+/* Input bytes per block (see the top). */
+#define BLOCK_BYTES (64u << 10)
 
-/* Bits out, first bit first (deflate's order). */
+/* The matcher: positions hashed by their next 4 bytes into 2^LZ_HASH_BITS slots (one
+ * probe each); deflate's window and longest match. */
+#define LZ_HASH_BITS 15
+#define LZ_MIN 4
+#define LZ_WINDOW 32768u
+#define LZ_MAX 258u
+
+enum { LITERALS = 257, END = 256, LENGTH_CODES = 29, LITLEN = LITERALS + LENGTH_CODES, DISTANCES = 30,
+       CODE_LENGTHS = 19 };
+
+/* Bits out, first bit first (deflate's order). After bits_flush at most 7 bits wait, so
+ * 56 more may be put before the next flush; a flush stores 8 bytes, so the output needs
+ * 8 bytes of slack past its bound. */
 typedef struct bit_writer {
     unsigned char *out;
     uint64_t bits;
-    int count;
+    unsigned count;
 } bit_writer;
 
-static inline void bits_put(bit_writer *w, uint32_t value, int n)
+static inline void bits_put(bit_writer *w, uint32_t value, unsigned n)
 {
     w->bits |= (uint64_t)value << w->count;
     w->count += n;
-    if (w->count >= 32) {
-        for (int b = 0; b < 4; b++)
-            *w->out++ = (unsigned char)(w->bits >> (8 * b));
-        w->bits >>= 32;
-        w->count -= 32;
-    }
+}
+
+static inline void bits_flush(bit_writer *w)
+{
+    memcpy(w->out, &w->bits, 8); /* little-endian, as every target of this server */
+    w->out += w->count >> 3;
+    w->bits >>= w->count & ~7u;
+    w->count &= 7;
 }
 
 /* Pads to a byte boundary and writes what is left. */
-static void bits_flush(bit_writer *w)
+static void bits_align(bit_writer *w)
 {
-    while (w->count > 0) {
+    bits_flush(w);
+    if (w->count) {
         *w->out++ = (unsigned char)w->bits;
-        w->bits >>= 8;
-        w->count -= 8;
+        w->bits = 0;
+        w->count = 0;
     }
-    w->bits = 0;
-    w->count = 0;
 }
 
 /* Step 2: code lengths (at most `limit` bits) for n symbols of counts `freq` (0: unused,
@@ -144,11 +163,70 @@ static void canonical_codes(const uint8_t *length, int n, uint32_t *code)
     }
 }
 
-/* Steps 1-4 for one block of n > 0 bytes. */
-static void huffman_block(bit_writer *w, const unsigned char *in, size_t n)
+/* A block's codes: literal/length symbols and distances. */
+typedef struct block_codes {
+    uint8_t lit_length[LITLEN], dist_length[DISTANCES];
+    uint32_t lit_code[LITLEN], dist_code[DISTANCES];
+} block_codes;
+
+/* At least two symbols of a code used (zlib's decoders want a complete code), so that
+ * code_lengths has a tree to build. */
+static void two_used(uint32_t *freq, int n)
 {
-    enum { LITERALS = 257, END = 256, CODE_LENGTHS = 19 };
-    uint32_t freq[LITERALS] = {0}, part[3][256] = {{0}};
+    int used = 0;
+    for (int s = 0; s < n && used < 2; s++)
+        used += freq[s] > 0;
+    for (int s = 0; s < n && used < 2; s++)
+        if (!freq[s])
+            freq[s] = 1, used++;
+}
+
+/* Steps 2 and 3: the codes of the counts (lit_freq's END set), nlit literal/length and
+ * ndist distance symbols, and the block header (not final, dynamic). */
+static void block_header(bit_writer *w, uint32_t *lit_freq, int nlit, uint32_t *dist_freq, int ndist,
+                         block_codes *c)
+{
+    two_used(lit_freq, nlit);
+    two_used(dist_freq, ndist);
+    code_lengths(lit_freq, nlit, 15, c->lit_length);
+    canonical_codes(c->lit_length, nlit, c->lit_code);
+    code_lengths(dist_freq, ndist, 15, c->dist_length);
+    canonical_codes(c->dist_length, ndist, c->dist_code);
+    uint32_t cl_freq[CODE_LENGTHS] = {0}, cl_code[CODE_LENGTHS];
+    uint8_t cl_length[CODE_LENGTHS];
+    for (int s = 0; s < nlit; s++)
+        cl_freq[c->lit_length[s]]++;
+    for (int s = 0; s < ndist; s++)
+        cl_freq[c->dist_length[s]]++;
+    two_used(cl_freq, CODE_LENGTHS);
+    code_lengths(cl_freq, CODE_LENGTHS, 7, cl_length);
+    canonical_codes(cl_length, CODE_LENGTHS, cl_code);
+    static const uint8_t cl_order[CODE_LENGTHS] = {16, 17, 18, 0, 8, 7, 9, 6, 10, 5, 11, 4, 12, 3, 13, 2, 14, 1, 15};
+    int hclen = CODE_LENGTHS;
+    while (hclen > 4 && cl_length[cl_order[hclen - 1]] == 0)
+        hclen--;
+    bits_put(w, 0 | 2 << 1, 3);                 /* not final, dynamic codes */
+    bits_put(w, (uint32_t)(nlit - 257), 5);     /* HLIT */
+    bits_put(w, (uint32_t)(ndist - 1), 5);      /* HDIST */
+    bits_put(w, (uint32_t)(hclen - 4), 4);      /* HCLEN */
+    bits_flush(w);
+    for (int k = 0; k < hclen; k++) {
+        bits_put(w, cl_length[cl_order[k]], 3);
+        if (k == 9) /* 19 lengths of 3 bits and 7 waiting would fill all 64 */
+            bits_flush(w);
+    }
+    bits_flush(w);
+    for (int s = 0; s < nlit + ndist; s++) {
+        uint8_t l = s < nlit ? c->lit_length[s] : c->dist_length[s - nlit];
+        bits_put(w, cl_code[l], cl_length[l]);
+        bits_flush(w);
+    }
+}
+
+/* Counts of n bytes into freq (added). */
+static void count_bytes(const unsigned char *in, size_t n, uint32_t *freq)
+{
+    uint32_t part[3][256] = {{0}};
     size_t i = 0;
     for (; i + 4 <= n; i += 4) { /* four tables: no chain of increments on one counter */
         freq[in[i]]++;
@@ -160,70 +238,193 @@ static void huffman_block(bit_writer *w, const unsigned char *in, size_t n)
         freq[in[i]]++;
     for (int s = 0; s < 256; s++)
         freq[s] += part[0][s] + part[1][s] + part[2][s];
-    freq[END] = 1;
-    uint8_t length[LITERALS];
-    uint32_t code[LITERALS];
-    code_lengths(freq, LITERALS, 15, length);
-    canonical_codes(length, LITERALS, code);
-    /* The code-length code over the 257 literal lengths and the two distance lengths
-     * (one bit each: no distance is used, but zlib's decoders want a complete code). */
-    uint32_t cl_freq[CODE_LENGTHS] = {0}, cl_code[CODE_LENGTHS];
-    uint8_t cl_length[CODE_LENGTHS];
-    for (int s = 0; s < LITERALS; s++)
-        cl_freq[length[s]]++;
-    cl_freq[1] += 2;
-    int distinct = 0;
-    for (int s = 0; s < CODE_LENGTHS; s++)
-        distinct += cl_freq[s] > 0;
-    if (distinct < 2) /* every literal the same length as the distances: add one unused */
-        cl_freq[cl_freq[0] ? 2 : 0] = 1;
-    code_lengths(cl_freq, CODE_LENGTHS, 7, cl_length);
-    canonical_codes(cl_length, CODE_LENGTHS, cl_code);
-    static const uint8_t cl_order[CODE_LENGTHS] = {16, 17, 18, 0, 8, 7, 9, 6, 10, 5, 11, 4, 12, 3, 13, 2, 14, 1, 15};
-    int hclen = CODE_LENGTHS;
-    while (hclen > 4 && cl_length[cl_order[hclen - 1]] == 0)
-        hclen--;
-    bits_put(w, 0 | 2 << 1, 3);                         /* not final, dynamic codes */
-    bits_put(w, LITERALS - 257, 5);                     /* HLIT */
-    bits_put(w, 2 - 1, 5);                              /* HDIST */
-    bits_put(w, (uint32_t)(hclen - 4), 4);              /* HCLEN */
-    for (int k = 0; k < hclen; k++)
-        bits_put(w, cl_length[cl_order[k]], 3);
-    for (int s = 0; s < LITERALS; s++)
-        bits_put(w, cl_code[length[s]], cl_length[length[s]]);
-    for (int d = 0; d < 2; d++)
-        bits_put(w, cl_code[1], cl_length[1]);
-    for (i = 0; i < n; i++)
-        bits_put(w, code[in[i]], length[in[i]]);
-    bits_put(w, code[END], length[END]);
 }
 
-/* A Huffman-only piece: its blocks, then the sync flush's empty stored block, or for the
- * last piece an empty final fixed-code block. Returns the bytes written to out, which
- * holds huffman_bound(n). */
-static size_t huffman_bound(size_t n)
+/* A Huffman-only block of n > 0 bytes: steps 1-4. */
+static void huffman_block(bit_writer *w, const unsigned char *in, size_t n)
 {
-    return n / HUFFMAN_BLOCK * 700 + 700 + n * 15 / 8 + 16;
+    uint32_t freq[LITERALS] = {0}, dist_freq[2] = {1, 1};
+    count_bytes(in, n, freq);
+    freq[END] = 1;
+    block_codes c;
+    block_header(w, freq, LITERALS, dist_freq, 2, &c);
+    /* Three codes of at most 15 bits per flush. Merged so that one load gives both. */
+    uint32_t code[LITERALS];
+    for (int s = 0; s < LITERALS; s++)
+        code[s] = c.lit_code[s] | (uint32_t)c.lit_length[s] << 16;
+    size_t i = 0;
+    for (; i + 3 <= n; i += 3) {
+        uint32_t a = code[in[i]], b = code[in[i + 1]], d = code[in[i + 2]];
+        bits_put(w, a & 0xffff, a >> 16);
+        bits_put(w, b & 0xffff, b >> 16);
+        bits_put(w, d & 0xffff, d >> 16);
+        bits_flush(w);
+    }
+    for (; i < n; i++) {
+        bits_put(w, code[in[i]] & 0xffff, code[in[i]] >> 16);
+        bits_flush(w);
+    }
+    bits_put(w, c.lit_code[END], c.lit_length[END]);
+    bits_flush(w);
 }
 
-static size_t huffman_piece(const unsigned char *in, size_t n, int last, unsigned char *out)
+/* Extra bits of each length symbol (from 257) and distance symbol (RFC 1951 3.2.5). */
+static const uint8_t length_extra[LENGTH_CODES] = {0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2,
+                                                   2, 3, 3, 3, 3, 4, 4, 4, 4, 5, 5, 5, 5, 0};
+static const uint8_t dist_extra[DISTANCES] = {0, 0, 0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6,
+                                              6, 7, 7, 8, 8, 9, 9, 10, 10, 11, 11, 12, 12, 13, 13};
+
+/* A match as one item: its length symbol (bits 0-8), length extra (9-13), distance
+ * symbol (14-18), distance extra (19-31); a literal is its byte. Symbols by the bit
+ * patterns of RFC 1951's tables: from 8 up (lengths) and 4 up (distances), each power of
+ * two takes 4 (2) symbols, picked by the bits below the highest. */
+static inline uint32_t match_item(unsigned length, unsigned distance)
+{
+    unsigned l = length - 3, sym = 257 + l, lext = 0;
+    if (length == LZ_MAX) {
+        sym = 285;
+    } else if (l >= 8) {
+        unsigned b = 31 - (unsigned)__builtin_clz(l), bits = b - 2;
+        sym = 257 + 4 * (b - 1) + (l >> bits & 3);
+        lext = l & ((1u << bits) - 1);
+    }
+    unsigned d = distance - 1, dsym = d, dext = 0;
+    if (d >= 4) {
+        unsigned b = 31 - (unsigned)__builtin_clz(d), bits = b - 1;
+        dsym = 2 * b + (d >> bits & 1);
+        dext = d & ((1u << bits) - 1);
+    }
+    return sym | lext << 9 | dsym << 14 | dext << 19;
+}
+
+static inline uint32_t load32(const unsigned char *p)
+{
+    uint32_t v;
+    memcpy(&v, p, 4);
+    return v;
+}
+
+static inline uint64_t load64(const unsigned char *p)
+{
+    uint64_t v;
+    memcpy(&v, p, 8);
+    return v;
+}
+
+/* The length of the match of in[at..] with in[from..] (from < at), 4 bytes known equal,
+ * at most max. */
+static inline size_t match_length(const unsigned char *in, size_t from, size_t at, size_t max)
+{
+    size_t n = LZ_MIN;
+    for (; n + 8 <= max; n += 8) {
+        uint64_t x = load64(in + at + n) ^ load64(in + from + n);
+        if (x)
+            return n + ((unsigned)__builtin_ctzll(x) >> 3);
+    }
+    while (n < max && in[at + n] == in[from + n])
+        n++;
+    return n;
+}
+
+/* The matcher's state across a piece's blocks. */
+typedef struct matcher {
+    uint32_t head[1u << LZ_HASH_BITS]; /* the last position with each hash (0 at first: a
+                                          real position, checked like any other) */
+    uint32_t items[BLOCK_BYTES + LZ_MAX];
+} matcher;
+
+/* Step 1 for a block of matches: the items from `at` until the block's end (a match may
+ * run past it) and their counts; returns the position after the last item. */
+static size_t lz_parse(matcher *m, const unsigned char *in, size_t size, size_t at, size_t end, size_t *count,
+                       uint32_t *lit_freq, uint32_t *dist_freq)
+{
+    size_t k = 0;
+    while (at < end) {
+        if (at + LZ_MIN > size) { /* the last bytes: no match fits */
+            lit_freq[in[at]]++;
+            m->items[k++] = in[at++];
+            continue;
+        }
+        uint32_t v = load32(in + at), h = (v * 2654435761u) >> (32 - LZ_HASH_BITS);
+        size_t from = m->head[h];
+        m->head[h] = (uint32_t)at;
+        if (at - from - 1 < LZ_WINDOW && load32(in + from) == v) {
+            size_t left = size - at, n = match_length(in, from, at, left < LZ_MAX ? left : LZ_MAX);
+            uint32_t item = match_item((unsigned)n, (unsigned)(at - from));
+            lit_freq[item & 511]++;
+            dist_freq[item >> 14 & 31]++;
+            m->items[k++] = item;
+            at += n;
+        } else {
+            lit_freq[in[at]]++;
+            m->items[k++] = in[at++];
+        }
+    }
+    *count = k;
+    return at;
+}
+
+/* Step 4 for a block of matches. */
+static void lz_write(bit_writer *w, const uint32_t *items, size_t count, const block_codes *c)
+{
+    for (size_t k = 0; k < count; k++) {
+        uint32_t item = items[k], sym = item & 511;
+        bits_put(w, c->lit_code[sym], c->lit_length[sym]);
+        if (sym > END) {
+            uint32_t dsym = item >> 14 & 31;
+            bits_put(w, item >> 9 & 31, length_extra[sym - 257]);
+            bits_put(w, c->dist_code[dsym], c->dist_length[dsym]);
+            bits_put(w, item >> 19, dist_extra[dsym]);
+        }
+        bits_flush(w);
+    }
+    bits_put(w, c->lit_code[END], c->lit_length[END]);
+    bits_flush(w);
+}
+
+/* The bytes a piece of n bytes may take, either strategy: at most 15 bits a literal and
+ * 48 bits a match of 4 bytes or more, a header per block, the ending, the flush's slack. */
+static size_t piece_bound(size_t n)
+{
+    return n / BLOCK_BYTES * 700 + 700 + n * 15 / 8 + 32;
+}
+
+/* A piece's blocks, then the sync flush's empty stored block, or for the last piece an
+ * empty final fixed-code block. m NULL: Huffman only. Returns the bytes written to out,
+ * which holds piece_bound(n). */
+static size_t deflate_blocks(const unsigned char *in, size_t n, int last, matcher *m, unsigned char *out)
 {
     bit_writer w = {.out = out};
-    for (size_t at = 0; at < n; at += HUFFMAN_BLOCK)
-        huffman_block(&w, in + at, n - at < HUFFMAN_BLOCK ? n - at : HUFFMAN_BLOCK);
+    if (m)
+        memset(m->head, 0, sizeof m->head);
+    for (size_t at = 0; at < n;) {
+        size_t end = n - at < BLOCK_BYTES ? n : at + BLOCK_BYTES;
+        if (!m) {
+            huffman_block(&w, in + at, end - at);
+            at = end;
+            continue;
+        }
+        uint32_t lit_freq[LITLEN] = {0}, dist_freq[DISTANCES] = {0};
+        size_t count;
+        at = lz_parse(m, in, n, at, end, &count, lit_freq, dist_freq);
+        lit_freq[END] = 1;
+        block_codes c;
+        block_header(&w, lit_freq, LITLEN, dist_freq, DISTANCES, &c);
+        lz_write(&w, m->items, count, &c);
+    }
     if (last) {
         bits_put(&w, 1 | 1 << 1, 3); /* final, fixed codes: the end-of-block code alone */
         bits_put(&w, 0, 7);
     } else {
         bits_put(&w, 0, 3); /* a stored block of no bytes */
-        bits_flush(&w);
+        bits_align(&w);
         bits_put(&w, 0xffff0000u, 32);
     }
-    bits_flush(&w);
+    bits_align(&w);
     return (size_t)(w.out - out);
 }
 
-/* One piece's deflate stream (malloc'd) or its zlib error. */
+/* One piece's deflate stream (malloc'd). */
 typedef struct deflated {
     const unsigned char *in;
     size_t size;
@@ -231,49 +432,22 @@ typedef struct deflated {
     unsigned char *out;
     size_t out_size;
     uLong crc;
-    int rc; /* 0, ISO_E_NOMEM or ISO_E_INTERNAL */
+    int rc; /* 0 or ISO_E_NOMEM */
 } deflated;
 
 static void deflate_piece(deflated *d)
 {
-    if (d->huffman) {
-        d->out = malloc(huffman_bound(d->size));
-        if (!d->out) {
-            d->rc = ISO_E_NOMEM;
-            return;
-        }
-        d->out_size = huffman_piece(d->in, d->size, d->last, d->out);
-        d->crc = crc32_z(0, d->in, d->size);
-        return;
-    }
-    z_stream z = {0};
-    /* Level 1, the fastest; raw deflate (-15): the gzip wrapper is written around the
-     * joined pieces. */
-    if (deflateInit2(&z, 1, Z_DEFLATED, -15, 8, Z_DEFAULT_STRATEGY) != Z_OK) {
+    matcher *m = d->huffman ? NULL : malloc(sizeof *m);
+    d->out = malloc(piece_bound(d->size));
+    if (!d->out || (!d->huffman && !m)) {
+        free(m);
         d->rc = ISO_E_NOMEM;
         return;
     }
-    size_t bound = deflateBound(&z, (uLong)d->size) + 16; /* + the sync flush's marker */
-    d->out = malloc(bound);
-    if (!d->out) {
-        deflateEnd(&z);
-        d->rc = ISO_E_NOMEM;
-        return;
-    }
-    z.next_in = (Bytef *)(uintptr_t)d->in;
-    z.avail_in = (uInt)d->size;
-    z.next_out = d->out;
-    z.avail_out = (uInt)bound;
-    int rc = deflate(&z, d->last ? Z_FINISH : Z_SYNC_FLUSH);
-    d->out_size = bound - z.avail_out;
-    deflateEnd(&z);
-    if (rc != (d->last ? Z_STREAM_END : Z_OK) || z.avail_in) {
-        d->rc = ISO_E_INTERNAL;
-        return;
-    }
+    d->out_size = deflate_blocks(d->in, d->size, d->last, m, d->out);
+    free(m);
     d->crc = crc32_z(0, d->in, d->size);
 }
-
 typedef struct gzip_job {
     deflated *pieces;
     int count;
@@ -334,10 +508,8 @@ int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_pie
     }
     for (int i = 0; i < count; i++)
         free(d[i].out);
-    if (rc == ISO_E_NOMEM)
-        return iso_error_set(err, rc, "gzip: no memory to compress %zu bytes", size);
     if (rc)
-        return iso_error_set(err, rc, "gzip: deflate failed within its own bound");
+        return iso_error_set(err, rc, "gzip: no memory to compress %zu bytes", size);
     return 0;
 }
 

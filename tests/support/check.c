@@ -113,6 +113,25 @@ unsigned char *check_deflate(const void *data, size_t size, int window, int leve
     return out;
 }
 
+void check_gunzip(const void *gz, size_t gz_size, const void *want, size_t size)
+{
+    unsigned char *out = malloc(size + 1);
+    z_stream z = {0};
+    CHECK(out && inflateInit2(&z, 16 + 15) == Z_OK);
+    if (!out)
+        return;
+    z.next_in = (Bytef *)(uintptr_t)gz;
+    z.avail_in = (uInt)gz_size;
+    z.next_out = out;
+    z.avail_out = (uInt)size + 1;
+    int rc = inflate(&z, Z_FINISH);
+    CHECKF(rc == Z_STREAM_END && z.avail_in == 0 && z.total_out == size, "inflate %d, %u left, %lu out of %zu", rc,
+           z.avail_in, z.total_out, size);
+    CHECK(z.total_out != size || !size || !memcmp(out, want, size));
+    inflateEnd(&z);
+    free(out);
+}
+
 void check_write_file(const char *path, const void *a, size_t a_len, const void *b, size_t b_len)
 {
     FILE *f = fopen(path, "wb");

@@ -36,6 +36,9 @@ void check_write_file(const char *path, const void *a, size_t a_len, const void 
  * known offset inflates to a known number of bytes. Failures are CHECK failures. */
 unsigned char *check_deflate(const void *data, size_t size, int window, int level,
                              size_t *out_size);
+/* The gzip member gz (one, nothing after it) inflates with zlib to exactly want's size
+ * bytes; failures are CHECK failures. */
+void check_gunzip(const void *gz, size_t gz_size, const void *want, size_t size);
 
 #define CHECK(cond) \
     do { if (!(cond)) check_fail_at(__FILE__, __LINE__, "%s", #cond); } while (0)

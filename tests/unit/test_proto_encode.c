@@ -1213,29 +1213,6 @@ static void *meshopt_view(const char *ext, const unsigned char *bin, size_t bin_
     return out;
 }
 
-/* The gzip member `gz` inflated (zlib, gzip wrapper only) equals `want`; the stream ends
- * where the member does. */
-static void check_gunzip(const unsigned char *gz, size_t gz_size, const unsigned char *want, size_t size)
-{
-    unsigned char *out = malloc(size + 1);
-    z_stream z = {0};
-    CHECK(out && inflateInit2(&z, 16 + 15) == Z_OK);
-    if (!out) {
-        free(out);
-        return;
-    }
-    z.next_in = (Bytef *)(uintptr_t)gz;
-    z.avail_in = (uInt)gz_size;
-    z.next_out = out;
-    z.avail_out = (uInt)size + 1;
-    int rc = inflate(&z, Z_FINISH);
-    CHECKF(rc == Z_STREAM_END && z.avail_in == 0 && z.total_out == size, "inflate %d, %u left, %lu out of %zu", rc,
-           z.avail_in, z.total_out, size);
-    CHECK(z.total_out != size || !memcmp(out, want, size));
-    inflateEnd(&z);
-    free(out);
-}
-
 /* The numbering by first use the meshopt glb sends, computed the plain way: number[old]
  * is the new number of m's vertex old, order[new] the old vertex (the unused ones last,
  * in their order). */
