@@ -23,7 +23,13 @@
  *   5. maximum: every sample of pass 2 not measured in pass 4, searched only until some
  *      triangle lies within M (the nearest triangle of the previous sample is tried first):
  *      such a sample cannot raise the maximum; any other gets its exact distance and
- *      raises M. So the maximum is exact over all samples of both kinds. With an earlier
+ *      raises M. So the maximum is exact over all samples of both kinds. Samples go BLOCK
+ *      source triangles (or vertices) at a time: when a target triangle lies within
+ *      sqrt(M) - r of the centre of the block's box, r its half diagonal, no sample of the
+ *      block can be farther than sqrt(M) (distance moves by at most the distance moved),
+ *      and the block is skipped whole; so is a triangle of several samples by its own box.
+ *      Where M is large (specks of CT noise that vanish from a level keep it at tens of
+ *      voxels), most blocks go so. With an earlier
  *      measure to reuse (iso_mesh_distance_reuse: a chain's previous level), a source
  *      triangle identical to one of the earlier mesh's (same indices, same order, same
  *      positions, so the same samples) whose samples were all found within some distance
@@ -53,6 +59,7 @@
 #define NO_TRIANGLE UINT32_MAX
 #define KNOWN_NONE (-1.0)
 #define KNOWN_OWN (-2.0)
+#define BLOCK 64 /* PASS 5: source triangles or vertices tried at once against one bound */
 
 typedef struct grid {
     double lo[3], h;
@@ -109,10 +116,10 @@ static void triangle_corners(const iso_mesh *m, size_t t, double c[3][3])
 
 static int cell_of(const grid *g, double x, int axis)
 {
-    double f = floor((x - g->lo[axis]) / g->h);
+    double f = (x - g->lo[axis]) / g->h;
     if (!(f >= 0))
         return 0;
-    return f >= g->n[axis] ? g->n[axis] - 1 : (int)f;
+    return f >= g->n[axis] ? g->n[axis] - 1 : (int)f; /* truncation: floor, f >= 0 */
 }
 
 static size_t cell_index(const grid *g, int i, int j, int k)
@@ -444,41 +451,52 @@ static void nearest(const iso_mesh_grid *ix, const double p[3], double stop, sea
         search_rings(&ix->coarse, ix, p, INT32_MAX, s);
 }
 
+/* PASS 5's first try in one fine cell: the first of its triangles within `stop` (squared)
+ * of p, trying only those whose boxes lie that close. Returns 1 with s holding it, else 0. */
+static int probe_cell(const iso_mesh_grid *ix, size_t at, const double p[3], double stop, search *s)
+{
+    const grid *g = &ix->fine;
+    for (uint32_t e = g->start[at]; e < g->start[at + 1]; e++) {
+        if (box_gap_sq(ix->boxes + 6 * (size_t)g->items[e], p) > stop)
+            continue;
+        double tc[3][3];
+        corners_of(ix->corners + 9 * (size_t)g->items[e], tc);
+        double d = point_triangle_sq(p, tc);
+        if (d <= stop) {
+            s->best = d, s->triangle = g->items[e];
+            return 1;
+        }
+    }
+    return 0;
+}
+
 /* PASS 5's first try: any triangle within `stop` (squared) of p, among the fine cells the
  * box p +- sqrt(stop) covers (when it covers at most PROBE_CELLS a side), p's own cell
- * first, trying only triangles whose boxes lie within `stop`. Returns 1 with s holding
- * the one found, else 0 with s untouched: the search must then find the nearest. */
+ * first. Returns 1 with s holding the one found, else 0 with s untouched: the search must
+ * then find the nearest. */
 static int probe(const iso_mesh_grid *ix, const double p[3], double stop, search *s)
 {
     const grid *g = &ix->fine;
-    double r = fmin(sqrt(stop), g->h); /* most samples lie much nearer than the maximum */
+    double r = sqrt(stop);
+    r = r < g->h ? r : g->h; /* most samples lie much nearer than the maximum */
     int lo[3], hi[3], c[3];
     for (int a = 0; a < 3; a++) {
         lo[a] = cell_of(g, p[a] - r, a), hi[a] = cell_of(g, p[a] + r, a), c[a] = cell_of(g, p[a], a);
         if (hi[a] - lo[a] >= PROBE_CELLS)
             return 0;
     }
-    for (int pass = 0; pass < 2; pass++)
-        for (int k = lo[2]; k <= hi[2]; k++)
-            for (int j = lo[1]; j <= hi[1]; j++)
-                for (int i = lo[0]; i <= hi[0]; i++) {
-                    int cell[3] = {i, j, k}, own = i == c[0] && j == c[1] && k == c[2];
-                    size_t at = cell_index(g, i, j, k);
-                    if (own != (pass == 0) || cell_gap_sq(g, p, cell) > stop)
-                        continue;
-                    for (uint32_t e = g->start[at]; e < g->start[at + 1]; e++) {
-                        const float *f = ix->corners + 9 * (size_t)g->items[e];
-                        if (box_gap_sq(ix->boxes + 6 * (size_t)g->items[e], p) > stop)
-                            continue;
-                        double tc[3][3];
-                        corners_of(f, tc);
-                        double d = point_triangle_sq(p, tc);
-                        if (d <= stop) {
-                            s->best = d, s->triangle = g->items[e];
-                            return 1;
-                        }
-                    }
-                }
+    size_t own = cell_index(g, c[0], c[1], c[2]);
+    if (probe_cell(ix, own, p, stop, s))
+        return 1;
+    for (int k = lo[2]; k <= hi[2]; k++)
+        for (int j = lo[1]; j <= hi[1]; j++)
+            for (int i = lo[0]; i <= hi[0]; i++) {
+                int cell[3] = {i, j, k};
+                size_t at = cell_index(g, i, j, k);
+                if (at != own && g->start[at] != g->start[at + 1] && cell_gap_sq(g, p, cell) <= stop &&
+                    probe_cell(ix, at, p, stop, s))
+                    return 1;
+            }
     return 0;
 }
 
@@ -519,6 +537,7 @@ typedef struct direction {
     size_t drawn;             /* PASS 3 points drawn (0: the centroids are the samples) */
     float *dist, *weight;     /* per percentile sample */
     double start_max;         /* the largest percentile sample's distance (PASS 5) */
+    int exhaustive;           /* PASS 5 without block tests (for checks) */
     double part_max[ISO_PARALLEL_MAX_THREADS];
     int part_failed[ISO_PARALLEL_MAX_THREADS]; /* a share had no memory for its points */
 } direction;
@@ -641,18 +660,82 @@ static double raise_max(const iso_mesh_grid *dst, const double p[3], uint32_t *h
     return s.best;
 }
 
+/* PASS 5's block test. The points of a block (a run of source triangles' corners, or of
+ * vertices) lie in box lo..hi, whose half diagonal is r from its centre c; distance to a
+ * surface grows by at most the distance moved, so when some target triangle lies within
+ * sqrt(max) - r of c, no point of the block (nor any sample inside its triangles) lies
+ * farther than sqrt(max) from the target, and none can raise the maximum. The previous
+ * witness (*hint) is tried first, then the fine cells around c. A slack of 1e-7 of the
+ * coordinates' size keeps rounding from letting a sample past the bound. Returns 1 with
+ * *bound the square of a distance no point of the block exceeds, else 0. */
+static int block_within(const iso_mesh_grid *dst, const float lo[3], const float hi[3], double max,
+                        uint32_t *hint, double *bound)
+{
+    double c[3], r = 0, size = 0;
+    for (int a = 0; a < 3; a++) {
+        double half = 0.5 * ((double)hi[a] - lo[a]);
+        c[a] = 0.5 * ((double)hi[a] + lo[a]);
+        r += half * half;
+        size = fmax(size, fabs(c[a]) + half);
+    }
+    r = sqrt(r) + 1e-7 * size;
+    double room = sqrt(max) - r;
+    if (!(room > 0))
+        return 0;
+    search s = {INFINITY, NO_TRIANGLE, 0};
+    if (*hint != NO_TRIANGLE) {
+        double tc[3][3];
+        corners_of(dst->corners + 9 * (size_t)*hint, tc);
+        s.best = point_triangle_sq(c, tc), s.triangle = *hint;
+    }
+    if (!(s.best <= room * room) && !probe(dst, c, room * room, &s))
+        return 0;
+    *hint = s.triangle;
+    double u = sqrt(s.best) + r;
+    *bound = u * u;
+    return 1;
+}
+
+static void box_open(float lo[3], float hi[3])
+{
+    for (int a = 0; a < 3; a++)
+        lo[a] = INFINITY, hi[a] = -INFINITY;
+}
+
+static void box_add(float lo[3], float hi[3], const float *p)
+{
+    for (int a = 0; a < 3; a++)
+        lo[a] = p[a] < lo[a] ? p[a] : lo[a], hi[a] = p[a] > hi[a] ? p[a] : hi[a];
+}
+
+/* The box of source triangles t0..t1 - 1's corners. */
+static void triangles_box(const iso_mesh *m, size_t t0, size_t t1, float lo[3], float hi[3])
+{
+    box_open(lo, hi);
+    for (size_t i = 3 * t0; i < 3 * t1; i++)
+        box_add(lo, hi, m->positions + 3 * (size_t)m->indices[i]);
+}
+
 /* PASS 5 for source triangle t's centroids (pts: room for them). A triangle whose known
- * bound is within *max cannot raise it and is skipped; one whose samples lie on the
- * target's triangle of the same corners tries that triangle first. Returns the square of
- * a distance none of its samples exceeds. */
+ * bound is within *max cannot raise it and is skipped; so is one of several samples whose
+ * corners pass the block test alone. One whose samples lie on the target's triangle of
+ * the same corners tries that triangle first. Returns the square of a distance none of
+ * its samples exceeds. */
 static double raise_max_triangle(const direction *d, size_t t, double (*pts)[3], uint32_t *hint,
                                  double *max)
 {
     double known = d->known ? d->known[t] : KNOWN_NONE, bound = 0, c[3][3];
     if (known >= 0 && known <= *max)
         return known;
+    int n = (int)lround(sqrt((double)(d->first[t + 1] - d->first[t])));
+    float lo[3], hi[3];
+    if (n > 1 && known != KNOWN_OWN && !d->exhaustive) {
+        triangles_box(d->src, t, t + 1, lo, hi);
+        if (block_within(d->dst, lo, hi, *max, hint, &bound))
+            return bound;
+    }
     triangle_corners(d->src, t, c);
-    int count = centroids(c, (int)lround(sqrt((double)(d->first[t + 1] - d->first[t]))), pts);
+    int count = centroids(c, n, pts);
     for (int k = 0; k < count; k++) {
         double own = known == KNOWN_OWN ? point_triangle_sq(pts[k], c) : INFINITY;
         bound = fmax(bound, own <= *max ? own : raise_max(d->dst, pts[k], hint, max));
@@ -660,8 +743,49 @@ static double raise_max_triangle(const direction *d, size_t t, double (*pts)[3],
     return bound;
 }
 
+/* PASS 5 for source triangles t0..t1 - 1: a block test over them all first (a skipped
+ * triangle's bound is the smaller of the block's and what was known of it), else each on
+ * its own. */
+static void raise_max_block(const direction *d, size_t t0, size_t t1, double (*pts)[3], uint32_t *hint,
+                            double *max)
+{
+    float lo[3], hi[3];
+    double u;
+    triangles_box(d->src, t0, t1, lo, hi);
+    if (!d->exhaustive && block_within(d->dst, lo, hi, *max, hint, &u)) {
+        for (size_t t = t0; d->bound && t < t1; t++) {
+            double known = d->known ? d->known[t] : KNOWN_NONE;
+            d->bound[t] = known >= 0 && known < u ? known : u;
+        }
+        return;
+    }
+    for (size_t t = t0; t < t1; t++) {
+        double bound = raise_max_triangle(d, t, pts, hint, max);
+        if (d->bound)
+            d->bound[t] = bound;
+    }
+}
+
+/* PASS 5 for the used vertices i0..i1 - 1 of the list: a block test, else each on its own. */
+static void raise_max_vertices(const direction *d, size_t i0, size_t i1, uint32_t *hint, double *max)
+{
+    const float *positions = d->src->positions;
+    float lo[3], hi[3];
+    double u;
+    box_open(lo, hi);
+    for (size_t i = i0; i < i1; i++)
+        box_add(lo, hi, positions + 3 * (size_t)d->vertices[i]);
+    if (!d->exhaustive && block_within(d->dst, lo, hi, *max, hint, &u))
+        return;
+    for (size_t i = i0; i < i1; i++) {
+        const float *f = positions + 3 * (size_t)d->vertices[i];
+        double p[3] = {f[0], f[1], f[2]};
+        raise_max(d->dst, p, hint, max);
+    }
+}
+
 /* PASS 5 on one thread's share: the centroids (when pass 3 drew its own points) and the
- * vertices. */
+ * vertices, BLOCK at a time. */
 static void measure_max(void *context, int part, int parts)
 {
     direction *d = context;
@@ -671,18 +795,12 @@ static void measure_max(void *context, int part, int parts)
     double (*pts)[3] = d->drawn ? malloc(256 * 256 * sizeof *pts) : NULL;
     size_t t0 = m->triangle_count * (size_t)part / (size_t)parts;
     size_t t1 = m->triangle_count * (size_t)(part + 1) / (size_t)parts;
-    for (size_t t = t0; pts && t < t1; t++) {
-        double bound = raise_max_triangle(d, t, pts, &hint, &max);
-        if (d->bound)
-            d->bound[t] = bound;
-    }
+    for (size_t t = t0; pts && t < t1; t += BLOCK)
+        raise_max_block(d, t, t + BLOCK < t1 ? t + BLOCK : t1, pts, &hint, &max);
     size_t v0 = d->vertex_count * (size_t)part / (size_t)parts;
     size_t v1 = d->vertex_count * (size_t)(part + 1) / (size_t)parts;
-    for (size_t i = v0; i < v1; i++) {
-        const float *f = m->positions + 3 * (size_t)d->vertices[i];
-        double p[3] = {f[0], f[1], f[2]};
-        raise_max(d->dst, p, &hint, &max);
-    }
+    for (size_t i = v0; i < v1; i += BLOCK)
+        raise_max_vertices(d, i, i + BLOCK < v1 ? i + BLOCK : v1, &hint, &max);
     d->part_max[part] = sqrt(max);
     d->part_failed[part] |= d->drawn && !pts;
     free(pts);
@@ -868,7 +986,8 @@ static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh
             reuse->bound[t] = INFINITY; /* nothing known until a pass finds it */
     direction d = {.src = src, .dst = dst, .first = first, .area = area, .vertices = vertices,
                    .vertex_count = vertex_count, .drawn = drawn, .dist = dist, .weight = weight,
-                   .known = known, .bound = reuse ? reuse->bound : NULL};
+                   .known = known, .bound = reuse ? reuse->bound : NULL,
+                   .exhaustive = reuse && reuse->exhaustive};
     int workers = iso_parallel_threads(threads);
     iso_parallel_run(workers, measure_percentile, &d); /* PASS 3, 4 */
     for (int w = 0; w < workers; w++)

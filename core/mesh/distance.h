@@ -31,6 +31,8 @@ typedef struct iso_mesh_distance_reuse {
                                     * samples lie on a: each is tried against its triangle) */
     double *bound;                 /* out, per triangle of b (NULL: not wanted): the same for
                                     * this measure, for the next one's prior_bound */
+    int exhaustive;                /* nonzero: every sample searched on its own, no block of
+                                    * them skipped by a bound (for checks: same results) */
 } iso_mesh_distance_reuse;
 
 /* iso_mesh_distance_compute with a's grid ga and b's grid gb given (either may be NULL:

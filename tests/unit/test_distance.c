@@ -583,6 +583,43 @@ static iso_mesh level_view(const iso_mesh_chain *chain, int k)
     return m;
 }
 
+/* Every bound (squared, per triangle of b) at least its triangle's largest sample distance
+ * to a by brute force (s: scratch). */
+static void check_bounds(const iso_mesh *b, const iso_mesh *a, double spacing, const double *bound, int k,
+                         sample **s, size_t *scap)
+{
+    for (size_t t = 0; t < b->triangle_count && !check_failed(); t++) {
+        size_t n = 0;
+        brute_triangle(b, t, a, spacing, s, &n, scap);
+        double most = 0;
+        for (size_t i = 0; i < n; i++)
+            most = fmax(most, (*s)[i].d);
+        CHECKF(most <= sqrt(bound[t]) + 1e-6, "level %d triangle %zu: %g past its bound %g", k, t, most,
+               sqrt(bound[t]));
+    }
+}
+
+/* The small sphere's measures: a cap small enough that the maximum takes its own pass. */
+static const size_t cap = 64;
+static const double spacing = 1.5;
+
+/* The sphere of radius 3 in field:sphere:24: its exact surface and its chain (one thread).
+ * Returns the volume (the caller destroys it and the chain), or NULL when a CHECK failed. */
+static iso_volume *small_sphere_chain(iso_mesh *exact, iso_mesh_chain **chain)
+{
+    iso_error err;
+    iso_volume *vol = field_surface("field:sphere:24", 3.0, exact);
+    if (!vol)
+        return NULL;
+    CHECK_OK(iso_mesh_chain_build(exact, 1, 1, chain, &err), &err);
+    if (!*chain) {
+        iso_mesh_free(exact);
+        iso_vol_destroy(vol);
+        return NULL;
+    }
+    return vol;
+}
+
 /* The reuse between a chain's levels (distance.h), with a cap small enough that the
  * maximum takes its own pass: level k measured with level k - 1's bounds gives bit for bit
  * what it gives alone; every bound it leaves is at least its triangle's largest centroid
@@ -592,15 +629,10 @@ static void test_reuse_between_levels_changes_nothing(void)
 {
     iso_error err;
     iso_mesh exact;
-    iso_volume *vol = field_surface("field:sphere:24", 3.0, &exact);
+    iso_mesh_chain *chain = NULL;
+    iso_volume *vol = small_sphere_chain(&exact, &chain);
     if (!vol)
         return;
-    iso_mesh_chain *chain = NULL;
-    CHECK_OK(iso_mesh_chain_build(&exact, 1, 1, &chain, &err), &err);
-    if (!chain)
-        return;
-    const size_t cap = 64;
-    const double spacing = 1.5;
     iso_mesh a = level_view(chain, 0);
     double *prior = NULL, *zeros = calloc(exact.triangle_count, sizeof *zeros);
     size_t matched_total = 0, scap = 64;
@@ -616,17 +648,7 @@ static void test_reuse_between_levels_changes_nothing(void)
         CHECK_EQ(alone.drawn_b, cap);
         CHECK(alone.p99 == with.p99 && alone.max == with.max && alone.max_ba == with.max_ba &&
               alone.p99_ba == with.p99_ba && alone.mean == with.mean);
-        for (size_t t = 0; t < b.triangle_count; t++) {
-            size_t n = 0;
-            brute_triangle(&b, t, &a, spacing, &s, &n, &scap);
-            double most = 0;
-            for (size_t i = 0; i < n; i++)
-                most = fmax(most, s[i].d);
-            CHECKF(most <= sqrt(bound[t]) + 1e-6, "level %d triangle %zu: %g past its bound %g", k, t,
-                   most, sqrt(bound[t]));
-            if (check_failed())
-                break;
-        }
+        check_bounds(&b, &a, spacing, bound, k, &s, &scap);
         /* The prior's triangles matched here: those the false bound must reach. */
         double *told = malloc(b.triangle_count * sizeof *told);
         reuse.prior_bound = zeros, reuse.bound = told;
@@ -654,6 +676,78 @@ static void test_reuse_between_levels_changes_nothing(void)
     iso_vol_destroy(vol);
 }
 
+/* m's triangles and vertices into out (initialised here), with a tetrahedron of side 1
+ * at (x, 0, 0) added before them: a speck far from the rest, as CT noise leaves, whose
+ * samples come first. */
+static void with_speck(const iso_mesh *m, double x, iso_mesh *out)
+{
+    iso_mesh_init(out);
+    CHECK(iso_mesh_reserve(out, m->vertex_count + 4, m->triangle_count + 4) == 0);
+    memcpy(out->positions, m->positions, 3 * m->vertex_count * sizeof(float));
+    memcpy(out->indices + 12, m->indices, 3 * m->triangle_count * sizeof(uint32_t));
+    float p[12] = {(float)x, 0, 0, (float)x + 1, 0, 0, (float)x, 1, 0, (float)x, 0, 1};
+    uint32_t v = (uint32_t)m->vertex_count, t[12] = {v, v + 2, v + 1, v, v + 1, v + 3, v, v + 3, v + 2,
+                                                     v + 1, v + 2, v + 3};
+    memcpy(out->positions + 3 * m->vertex_count, p, sizeof p);
+    memcpy(out->indices, t, sizeof t);
+    out->vertex_count = m->vertex_count + 4;
+    out->triangle_count = m->triangle_count + 4;
+}
+
+/* The block tests of the maximum's pass (distance.c, PASS 5) against every sample searched
+ * alone: a sphere's chain levels against the exact sphere, a speck 30 voxels off added to
+ * the level on odd levels and to the exact side on even ones (so that the maximum is large
+ * one way and whole blocks of samples fall within it), at a cap small enough that the maximum takes its own
+ * pass. Every distance is the same bit for bit, on one thread and two; every bound a
+ * block leaves is at least its triangle's largest sample distance by brute force; and
+ * some bounds differ from the exhaustive pass's (so the blocks are what ran). */
+static void test_block_bounds_change_nothing(void)
+{
+    iso_error err;
+    iso_mesh exact, specked;
+    iso_mesh_chain *chain = NULL;
+    iso_volume *vol = small_sphere_chain(&exact, &chain);
+    if (!vol)
+        return;
+    size_t differ = 0, scap = 64;
+    sample *s = malloc(scap * sizeof *s);
+    with_speck(&exact, -30, &specked);
+    for (int k = 1; k < chain->levels && !check_failed(); k++) {
+        iso_mesh level = level_view(chain, k), b;
+        if (k % 2) /* the speck on the level's side on odd levels, on the exact side on even */
+            with_speck(&level, -30, &b);
+        else
+            b = level;
+        const iso_mesh *a = k % 2 ? &exact : &specked;
+        double *fast = malloc(b.triangle_count * sizeof *fast), *slow = malloc(b.triangle_count * sizeof *slow);
+        iso_mesh_distance_reuse all = {.exhaustive = 1, .bound = slow}, blocks = {.bound = fast};
+        iso_mesh_distance one, two, alone;
+        CHECK_OK(iso_mesh_distance_between(a, NULL, &b, NULL, spacing, cap, 1, &all, &alone, &err), &err);
+        CHECK_OK(iso_mesh_distance_between(a, NULL, &b, NULL, spacing, cap, 1, &blocks, &one, &err), &err);
+        CHECK_OK(iso_mesh_distance_between(a, NULL, &b, NULL, spacing, cap, 2, NULL, &two, &err), &err);
+        CHECK(alone.drawn_a == cap && alone.drawn_b == cap);
+        CHECKF((k % 2 ? alone.max_ba : alone.max_ab) > 25, "level %d: max %g, %g", k, alone.max_ab,
+               alone.max_ba);
+        CHECK(alone.p99_ab == one.p99_ab && alone.p99_ba == one.p99_ba && alone.max_ab == one.max_ab &&
+              alone.max_ba == one.max_ba && alone.mean == one.mean);
+        CHECK(one.p99_ab == two.p99_ab && one.p99_ba == two.p99_ba && one.max_ab == two.max_ab &&
+              one.max_ba == two.max_ba && one.mean == two.mean);
+        for (size_t t = 0; t < b.triangle_count; t++)
+            differ += fast[t] != slow[t];
+        check_bounds(&b, a, spacing, fast, k, &s, &scap);
+        free(fast);
+        free(slow);
+        if (k % 2)
+            iso_mesh_free(&b);
+    }
+    CHECKF(differ > 0, "no block test skipped a triangle");
+    free(s);
+    iso_mesh_free(&specked);
+    iso_mesh_chain_destroy(chain);
+    iso_mesh_free(&exact);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_parallel_squares_are_a_quarter_apart);
@@ -664,5 +758,6 @@ int main(void)
     CHECK_RUN(test_chain_levels_are_measured_and_closed);
     CHECK_RUN(test_chain_in_slabs_stays_closed);
     CHECK_RUN(test_reuse_between_levels_changes_nothing);
+    CHECK_RUN(test_block_bounds_change_nothing);
     return check_finish();
 }
