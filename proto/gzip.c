@@ -32,6 +32,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <zlib.h>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
 #include "base/base.h"
 
@@ -90,15 +93,26 @@ static void bits_align(bit_writer *w)
  * length 0), at least two of them used. */
 static void code_lengths(const uint32_t *freq, int n, int limit, uint8_t *length)
 {
-    int order[320], used = 0;
+    /* The used symbols by count, ascending, ties by symbol: a radix sort, a stable pass
+     * per byte of the counts (two bytes but in a block of one value repeated). */
+    int order[320], spare[320], used = 0, high = 0;
     for (int s = 0; s < n; s++) {
         length[s] = 0;
-        if (freq[s]) { /* insertion by count, ascending: n is at most 286 */
-            int i = used++;
-            for (; i > 0 && freq[order[i - 1]] > freq[s]; i--)
-                order[i] = order[i - 1];
-            order[i] = s;
+        if (freq[s]) {
+            order[used++] = s;
+            high |= freq[s] >= 1u << 16;
         }
+    }
+    for (int pass = 0; pass < (high ? 4 : 2); pass++) {
+        int start[257] = {0};
+        int shift = 8 * pass;
+        for (int k = 0; k < used; k++)
+            start[(freq[order[k]] >> shift & 255) + 1]++;
+        for (int b = 0; b < 256; b++)
+            start[b + 1] += start[b];
+        for (int k = 0; k < used; k++)
+            spare[start[freq[order[k]] >> shift & 255]++] = order[k];
+        memcpy(order, spare, (size_t)used * sizeof *order);
     }
     /* Two queues: the leaves by count, the joined nodes in the order made (their counts
      * never decrease). Node k < used is leaf order[k]; node used + j is join j. */
@@ -424,7 +438,67 @@ static size_t deflate_blocks(const unsigned char *in, size_t n, int last, matche
     return (size_t)(w.out - out);
 }
 
-/* One piece's deflate stream (malloc'd). */
+/* The CRC-32 of n bytes (gzip's, zlib's crc32_z). With PCLMULQDQ the bulk is folded 64
+ * bytes at a time by carry-less products (Intel's "Fast CRC Computation for Generic
+ * Polynomials Using PCLMULQDQ"; the constants are x^(k*32) mod P for the fold distances,
+ * then a Barrett reduction), about 5 times as fast as zlib's tables; zlib does the rest. */
+#if defined(__x86_64__) && defined(__GNUC__)
+__attribute__((target("pclmul,sse4.1"))) static uint32_t crc_fold(const unsigned char *p, size_t n, uint32_t crc)
+{
+    const __m128i k1k2 = _mm_set_epi64x(0x01c6e41596, 0x0154442bd4), k3k4 = _mm_set_epi64x(0x00ccaa009e, 0x01751997d0),
+                  k5 = _mm_set_epi64x(0, 0x0163cd6124), poly = _mm_set_epi64x(0x01f7011641, 0x01db710641),
+                  low32 = _mm_setr_epi32(~0, 0, ~0, 0);
+    /* n >= 64, a multiple of 16; crc is the inverted running value. */
+    __m128i x1 = _mm_loadu_si128((const __m128i *)p), x2 = _mm_loadu_si128((const __m128i *)(p + 16)),
+            x3 = _mm_loadu_si128((const __m128i *)(p + 32)), x4 = _mm_loadu_si128((const __m128i *)(p + 48));
+    x1 = _mm_xor_si128(x1, _mm_cvtsi32_si128((int)crc));
+    for (p += 64, n -= 64; n >= 64; p += 64, n -= 64) {
+        __m128i a = _mm_clmulepi64_si128(x1, k1k2, 0x00), b = _mm_clmulepi64_si128(x2, k1k2, 0x00),
+                c = _mm_clmulepi64_si128(x3, k1k2, 0x00), d = _mm_clmulepi64_si128(x4, k1k2, 0x00);
+        x1 = _mm_xor_si128(_mm_xor_si128(_mm_clmulepi64_si128(x1, k1k2, 0x11), a), _mm_loadu_si128((const __m128i *)p));
+        x2 = _mm_xor_si128(_mm_xor_si128(_mm_clmulepi64_si128(x2, k1k2, 0x11), b),
+                           _mm_loadu_si128((const __m128i *)(p + 16)));
+        x3 = _mm_xor_si128(_mm_xor_si128(_mm_clmulepi64_si128(x3, k1k2, 0x11), c),
+                           _mm_loadu_si128((const __m128i *)(p + 32)));
+        x4 = _mm_xor_si128(_mm_xor_si128(_mm_clmulepi64_si128(x4, k1k2, 0x11), d),
+                           _mm_loadu_si128((const __m128i *)(p + 48)));
+    }
+    /* Four lanes folded into one, then the 16-byte blocks left. */
+    __m128i next[3] = {x2, x3, x4};
+    for (int k = 0; k < 3; k++)
+        x1 = _mm_xor_si128(_mm_xor_si128(_mm_clmulepi64_si128(x1, k3k4, 0x11), _mm_clmulepi64_si128(x1, k3k4, 0x00)),
+                           next[k]);
+    for (; n >= 16; p += 16, n -= 16)
+        x1 = _mm_xor_si128(_mm_xor_si128(_mm_clmulepi64_si128(x1, k3k4, 0x11), _mm_clmulepi64_si128(x1, k3k4, 0x00)),
+                           _mm_loadu_si128((const __m128i *)p));
+    /* 128 bits to 64, then 64 to 32 (Barrett). */
+    x2 = _mm_clmulepi64_si128(x1, k3k4, 0x10);
+    x1 = _mm_xor_si128(_mm_srli_si128(x1, 8), x2);
+    x2 = _mm_srli_si128(x1, 4);
+    x1 = _mm_xor_si128(_mm_clmulepi64_si128(_mm_and_si128(x1, low32), k5, 0x00), x2);
+    x2 = _mm_clmulepi64_si128(_mm_and_si128(x1, low32), poly, 0x10);
+    x2 = _mm_clmulepi64_si128(_mm_and_si128(x2, low32), poly, 0x00);
+    return (uint32_t)_mm_extract_epi32(_mm_xor_si128(x1, x2), 1);
+}
+
+static uLong crc_of(const unsigned char *p, size_t n)
+{
+    uLong crc = 0;
+    if (n >= 64 && __builtin_cpu_supports("pclmul") && __builtin_cpu_supports("sse4.1")) {
+        size_t bulk = n & ~(size_t)15;
+        crc = ~crc_fold(p, bulk, ~0u) & 0xffffffffu;
+        p += bulk, n -= bulk;
+    }
+    return crc32_z(crc, p, n);
+}
+#else
+static uLong crc_of(const unsigned char *p, size_t n)
+{
+    return crc32_z(0, p, n);
+}
+#endif
+
+/* One piece's deflate stream, written at `out` (piece_bound(size) bytes). */
 typedef struct deflated {
     const unsigned char *in;
     size_t size;
@@ -438,16 +512,15 @@ typedef struct deflated {
 static void deflate_piece(deflated *d)
 {
     matcher *m = d->huffman ? NULL : malloc(sizeof *m);
-    d->out = malloc(piece_bound(d->size));
-    if (!d->out || (!d->huffman && !m)) {
-        free(m);
+    if (!d->huffman && !m) {
         d->rc = ISO_E_NOMEM;
         return;
     }
     d->out_size = deflate_blocks(d->in, d->size, d->last, m, d->out);
     free(m);
-    d->crc = crc32_z(0, d->in, d->size);
+    d->crc = crc_of(d->in, d->size);
 }
+
 typedef struct gzip_job {
     deflated *pieces;
     int count;
@@ -468,48 +541,51 @@ int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_pie
     *out_size = 0;
     if (size > UINT32_MAX)
         return iso_error_set(err, ISO_E_LIMIT, "gzip: cannot compress %zu bytes", size);
+    /* One buffer: the header, each piece's room (its bound), the trailer; the pieces are
+     * moved down against each other when done. */
+    enum { HEADER = 10, TRAILER = 8 };
     deflated d[PROTO_GZIP_PIECES_MAX];
-    size_t from = 0;
+    size_t from = 0, room = HEADER;
     for (int i = 0; i < count; i++) {
         size_t end = i == count - 1 ? size : pieces[i].end;
         assert(end >= from && end <= size);
         d[i] = (deflated){.in = in + from, .size = end - from, .huffman = pieces[i].huffman, .last = i == count - 1};
+        room += piece_bound(end - from);
         from = end;
     }
+    unsigned char *buf = malloc(room + TRAILER);
+    if (!buf)
+        return iso_error_set(err, ISO_E_NOMEM, "gzip: no memory to compress %zu bytes", size);
+    d[0].out = buf + HEADER;
+    for (int i = 1; i < count; i++)
+        d[i].out = d[i - 1].out + piece_bound(d[i - 1].size);
     gzip_job job = {.pieces = d, .count = count};
     threads = size < GZIP_BYTES_PER_THREAD ? 1 : iso_parallel_threads(threads);
     iso_parallel_run(threads < count ? threads : count, gzip_share, &job);
     int rc = 0;
-    size_t total = 10 + 8;
-    for (int i = 0; i < count; i++) {
-        rc = rc ? rc : d[i].rc;
-        total += d[i].out_size;
-    }
-    unsigned char *buf = rc ? NULL : malloc(total);
-    if (!rc && !buf)
-        rc = ISO_E_NOMEM;
-    if (!rc) {
-        /* The header: magic, deflate, no flags, no time, fastest (XFL 4), Unix. */
-        static const unsigned char header[10] = {0x1f, 0x8b, 8, 0, 0, 0, 0, 0, 4, 3};
-        memcpy(buf, header, sizeof header);
-        size_t at = sizeof header;
-        uLong crc = 0;
-        for (int i = 0; i < count; i++) {
-            memcpy(buf + at, d[i].out, d[i].out_size);
-            at += d[i].out_size;
-            crc = crc32_combine(crc, d[i].crc, (z_off_t)d[i].size);
-        }
-        for (int b = 0; b < 4; b++)
-            buf[at++] = (unsigned char)(crc >> (8 * b));
-        for (int b = 0; b < 4; b++)
-            buf[at++] = (unsigned char)((uint32_t)size >> (8 * b));
-        *out = buf;
-        *out_size = at;
-    }
     for (int i = 0; i < count; i++)
-        free(d[i].out);
-    if (rc)
+        rc = rc ? rc : d[i].rc;
+    if (rc) {
+        free(buf);
         return iso_error_set(err, rc, "gzip: no memory to compress %zu bytes", size);
+    }
+    /* The header: magic, deflate, no flags, no time, fastest (XFL 4), Unix. */
+    static const unsigned char header[HEADER] = {0x1f, 0x8b, 8, 0, 0, 0, 0, 0, 4, 3};
+    memcpy(buf, header, sizeof header);
+    size_t at = sizeof header;
+    uLong crc = 0;
+    for (int i = 0; i < count; i++) {
+        memmove(buf + at, d[i].out, d[i].out_size);
+        at += d[i].out_size;
+        crc = crc32_combine(crc, d[i].crc, (z_off_t)d[i].size);
+    }
+    for (int b = 0; b < 4; b++)
+        buf[at++] = (unsigned char)(crc >> (8 * b));
+    for (int b = 0; b < 4; b++)
+        buf[at++] = (unsigned char)((uint32_t)size >> (8 * b));
+    unsigned char *fit = realloc(buf, at); /* gives back the rooms' unused ends */
+    *out = fit ? fit : buf;
+    *out_size = at;
     return 0;
 }
 
