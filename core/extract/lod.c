@@ -12,6 +12,10 @@
 #include "mc.h"
 
 #define BRICK_SAMPLES (ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES)
+/* Where a lattice set lies along one axis of a unit of at most two blocks: on a block
+ * plane (even classes 0, 2, 4) or strictly inside a block (odd classes 1, 3). */
+#define UNIT_CLASSES (2 * (ISO_BRICK_CELLS / ISO_TREE_BLOCK) + 1)
+#define BLOCKS_PER_BRICK (ISO_BRICK_CELLS / ISO_TREE_BLOCK)
 /* Steps placing a loop's centre on the level: 28 bisections leave 2^-28 of a brick's
  * diagonal, below a float's resolution at any index past 1; false position stops earlier,
  * once |f - level| is below 2^-32 of the values at its bracket's two ends. */
@@ -38,19 +42,23 @@ typedef struct lod {
     const iso_volume *vol;
     double level;
     int cap;
-    uint32_t dims[3], count[3];
-    uint8_t *shift;               /* per brick: log2 of its stride (PASS 1) */
+    uint32_t dims[3], count[3], blocks[3];
+    uint8_t *shift;               /* per block: log2 of its stride (PASS 1) */
     const iso_march_part *fine;   /* PASS 2's stride-1 bricks, marched by march.c */
     iso_mesh *mesh;
     vertex_map map;
     double error;                 /* largest |f(v) - level| measured */
     size_t cells;
-    /* The brick at hand: its box, the strides around it (brick_around), the samples of its
-     * box read so far, and the vertices of the segments strictly inside it; the last two
-     * valid where their stamp is the brick's. */
+    /* The brick at hand: its box, the samples of its box read so far, and the vertices of
+     * the segments strictly inside one of its units; the last two valid where their stamp
+     * is the brick's. */
     uint32_t lo[3], hi[3], n[3];
-    uint8_t around[27];
     uint32_t stamp;
+    /* The unit at hand (a block, or a brick marched at stride 8 whole): its box, and the
+     * strides of the lattice sets in its closed box by class (unit_around). */
+    uint32_t ulo[3], uhi[3];
+    uint8_t around[UNIT_CLASSES][UNIT_CLASSES][UNIT_CLASSES]; /* [z][y][x] */
+    uint8_t point_class[3][ISO_BRICK_SAMPLES], span_class[3][ISO_BRICK_CELLS];
     double value[BRICK_SAMPLES];
     uint32_t value_stamp[BRICK_SAMPLES];
     /* Row z * 9 + y has bit x set where sample (x, y, z) (brick-local) is above. */
@@ -66,54 +74,134 @@ typedef struct lod {
 
 /* ---- PASS 1: plan ---- */
 
-static void plan(lod *c, double tolerance)
+static size_t block_index(const lod *c, const uint32_t q[3])
 {
-    const iso_bricks *g = &c->tree->bricks;
-    for (size_t b = 0; b < iso_bricks_total(g); b++) {
-        int l = ISO_TREE_LEVELS;
-        if (g->min[b] <= c->level && c->level < g->max[b])
-            while (l > 0 && !(iso_tree_level_error(c->tree, b, l) <= tolerance))
-                l--;
-        c->shift[b] = (uint8_t)l;
+    return ((size_t)q[2] * c->blocks[1] + q[1]) * c->blocks[0] + q[0];
+}
+
+/* The blocks of brick b per axis (2, or 1 where the border clips the brick to one block),
+ * and its first block. */
+static void brick_blocks(const lod *c, const uint32_t b[3], uint32_t first[3], uint32_t m[3])
+{
+    for (int d = 0; d < 3; d++) {
+        first[d] = BLOCKS_PER_BRICK * b[d];
+        m[d] = c->blocks[d] - first[d] < BLOCKS_PER_BRICK ? c->blocks[d] - first[d] : BLOCKS_PER_BRICK;
     }
 }
 
-/* Bit cls set where the class cls = w0 + 3 w1 + 9 w2 of brick_around has w_d = w. */
-static const uint32_t where_mask[3][3] = {{0x1249249, 0x2492492, 0x4924924},
-                                          {0x1c0e07, 0xe07038, 0x70381c0},
-                                          {0x1ff, 0x3fe00, 0x7fc0000}};
-
-/* The strides of the lattice sets in brick b's closed box, by where a set lies per axis
- * (on the box's low plane, strictly inside, on its high plane): the finest of the bricks
- * holding it, whose closed boxes are [8i, 8i + 8] per axis. With a cap, a set on the
- * volume's border has stride 1: the cap's cells are data cells. */
-static void brick_around(lod *c, const uint32_t b[3])
+static int brick_active(const lod *c, size_t at)
 {
-    /* The 3x3x3 bricks around b (b at the middle), ISO_TREE_LEVELS where there is none. */
-    uint8_t near[27];
-    for (int k = 0; k < 27; k++) {
-        int64_t q[3] = {(int64_t)b[0] + k % 3 - 1, (int64_t)b[1] + k / 3 % 3 - 1, (int64_t)b[2] + k / 9 - 1};
-        int inside = 1;
-        for (int d = 0; d < 3; d++)
-            inside &= q[d] >= 0 && q[d] < (int64_t)c->count[d];
-        near[k] = inside ? c->shift[((size_t)q[2] * c->count[1] + (size_t)q[1]) * c->count[0] + (size_t)q[0]]
-                         : ISO_TREE_LEVELS;
+    const iso_bricks *g = &c->tree->bricks;
+    return g->min[at] <= c->level && c->level < g->max[at];
+}
+
+/* Every brick whose [min, max] holds the level: stride 8 whole if its level 3 error is
+ * within the tolerance, else per block the coarsest of strides 4, 2 whose error is, or 1.
+ * The other bricks' blocks get stride 8, which touches nothing (all their samples lie on
+ * one side of the level). No sample is read. */
+static void plan(lod *c, double tolerance)
+{
+    const iso_tree *tree = c->tree;
+    size_t at = 0;
+    for (uint32_t k = 0; k < c->count[2]; k++)
+        for (uint32_t j = 0; j < c->count[1]; j++)
+            for (uint32_t i = 0; i < c->count[0]; i++, at++) {
+                uint32_t b[3] = {i, j, k}, first[3], m[3];
+                brick_blocks(c, b, first, m);
+                int whole = !brick_active(c, at) || iso_tree_level_error(tree, at) <= tolerance;
+                for (uint32_t z = 0; z < m[2]; z++)
+                    for (uint32_t y = 0; y < m[1]; y++)
+                        for (uint32_t x = 0; x < m[0]; x++) {
+                            uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
+                            int l = ISO_TREE_LEVELS;
+                            if (!whole)
+                                for (l = ISO_TREE_BLOCK_LEVELS; l > 0; l--)
+                                    if (iso_tree_block_error(tree, at, (int)(x | y << 1 | z << 2), l) <= tolerance)
+                                        break;
+                            c->shift[block_index(c, q)] = (uint8_t)l;
+                        }
+            }
+}
+
+/* A given plan, made valid: stride 8 only where every block of the brick has it (else 4). */
+static void plan_given(lod *c, const uint8_t *given)
+{
+    for (uint32_t k = 0; k < c->count[2]; k++)
+        for (uint32_t j = 0; j < c->count[1]; j++)
+            for (uint32_t i = 0; i < c->count[0]; i++) {
+                uint32_t b[3] = {i, j, k}, first[3], m[3];
+                brick_blocks(c, b, first, m);
+                int whole = 1;
+                for (uint32_t z = 0; z < m[2]; z++)
+                    for (uint32_t y = 0; y < m[1]; y++)
+                        for (uint32_t x = 0; x < m[0]; x++) {
+                            uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
+                            whole &= given[block_index(c, q)] >= ISO_TREE_LEVELS;
+                        }
+                for (uint32_t z = 0; z < m[2]; z++)
+                    for (uint32_t y = 0; y < m[1]; y++)
+                        for (uint32_t x = 0; x < m[0]; x++) {
+                            uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
+                            uint8_t l = given[block_index(c, q)];
+                            c->shift[block_index(c, q)] = whole ? ISO_TREE_LEVELS : l < ISO_TREE_LEVELS ? l : ISO_TREE_BLOCK_LEVELS;
+                        }
+            }
+}
+
+/* Makes [lo, hi] (m[] blocks from block first[]) the unit at hand and the strides of the
+ * lattice sets in its closed box, by where a set lies per axis (class: a block plane, or
+ * strictly inside a block): the finest of the blocks holding it, whose closed boxes are
+ * [4i, 4i + 4] per axis. With a cap, a set on the volume's border has stride 1: the cap's
+ * cells are data cells. */
+static void unit_around(lod *c, const uint32_t first[3], const uint32_t m[3])
+{
+    for (int d = 0; d < 3; d++) {
+        c->ulo[d] = first[d] * ISO_TREE_BLOCK;
+        uint32_t end = (first[d] + m[d]) * ISO_TREE_BLOCK;
+        c->uhi[d] = end < c->dims[d] - 1 ? end : c->dims[d] - 1;
+        for (uint32_t r = 0; r <= c->uhi[d] - c->ulo[d]; r++)
+            c->point_class[d][r] = (uint8_t)(r == c->uhi[d] - c->ulo[d] ? 2 * m[d] : r / ISO_TREE_BLOCK * 2 + (r % ISO_TREE_BLOCK != 0));
+        for (uint32_t r = 0; r < c->uhi[d] - c->ulo[d]; r++)
+            c->span_class[d][r] = (uint8_t)(r / ISO_TREE_BLOCK * 2 + 1);
     }
-    /* The minimum over where a set lies, one axis at a time: on the low plane the bricks at
-     * offsets -1 and 0 hold it, inside only 0, on the high plane 0 and +1. */
-    for (int d = 0, scale = 1; d < 3; d++, scale *= 3)
-        for (int k = 0; k < 27; k++) {
-            if (k / scale % 3 != 1)
-                continue;
-            uint8_t below = near[k - scale], middle = near[k], over = near[k + scale];
-            near[k - scale] = below < middle ? below : middle;
-            near[k + scale] = over < middle ? over : middle;
-        }
-    uint32_t border = 0; /* with a cap: the classes on the volume's border */
-    for (int d = 0; d < 3 && c->cap; d++)
-        border |= (b[d] == 0 ? where_mask[d][0] : 0) | (b[d] + 1 == c->count[d] ? where_mask[d][2] : 0);
-    for (int cls = 0; cls < 27; cls++)
-        c->around[cls] = border >> cls & 1 ? 0 : near[cls];
+    /* The blocks from first - 1 to first + m per axis, ISO_TREE_LEVELS where there is none. */
+    uint8_t near[BLOCKS_PER_BRICK + 2][BLOCKS_PER_BRICK + 2][BLOCKS_PER_BRICK + 2];
+    for (uint32_t z = 0; z < m[2] + 2; z++)
+        for (uint32_t y = 0; y < m[1] + 2; y++)
+            for (uint32_t x = 0; x < m[0] + 2; x++) {
+                int64_t q[3] = {(int64_t)first[0] + x - 1, (int64_t)first[1] + y - 1, (int64_t)first[2] + z - 1};
+                int inside = 1;
+                for (int d = 0; d < 3; d++)
+                    inside &= q[d] >= 0 && q[d] < (int64_t)c->blocks[d];
+                uint32_t u[3] = {(uint32_t)q[0], (uint32_t)q[1], (uint32_t)q[2]};
+                near[z][y][x] = inside ? c->shift[block_index(c, u)] : ISO_TREE_LEVELS;
+            }
+    /* Class k holds blocks k / 2 - 1 + 1 and k / 2 + 1 of near (a plane) or (k - 1) / 2 + 1
+     * (inside): the first and last of those per axis. */
+    for (uint32_t kz = 0; kz <= 2 * m[2]; kz++)
+        for (uint32_t ky = 0; ky <= 2 * m[1]; ky++)
+            for (uint32_t kx = 0; kx <= 2 * m[0]; kx++) {
+                uint32_t k[3] = {kx, ky, kz}, from[3], to[3];
+                for (int d = 0; d < 3; d++) {
+                    from[d] = k[d] % 2 ? (k[d] - 1) / 2 + 1 : k[d] / 2;
+                    to[d] = k[d] % 2 ? from[d] : k[d] / 2 + 1;
+                }
+                uint8_t finest = ISO_TREE_LEVELS;
+                for (uint32_t z = from[2]; z <= to[2]; z++)
+                    for (uint32_t y = from[1]; y <= to[1]; y++)
+                        for (uint32_t x = from[0]; x <= to[0]; x++)
+                            finest = near[z][y][x] < finest ? near[z][y][x] : finest;
+                int border = 0;
+                for (int d = 0; d < 3 && c->cap; d++)
+                    border |= (k[d] == 0 && first[d] == 0) || (k[d] == 2 * m[d] && first[d] + m[d] == c->blocks[d]);
+                c->around[kz][ky][kx] = border ? 0 : finest;
+            }
+}
+
+/* The stride (log2) of the lattice set with classes k[] in the unit at hand. */
+static inline unsigned set_shift(const lod *c, const uint8_t k[3])
+{
+    return c->around[k[2]][k[1]][k[0]];
 }
 
 /* ---- PASS 3: the coarse bricks (PASS 2, march_fine, is below) ---- */
@@ -243,9 +331,9 @@ static int add_vertex(lod *c, const double x[3], uint32_t *id)
  * on first use, where iso_mc_edge_t puts it between the segment's two samples. */
 static int crossing(lod *c, const uint32_t p[3], int axis, uint32_t length, uint32_t *id)
 {
-    int inner = 1;
+    int inner = 1; /* strictly inside the unit at hand across the axis: only it holds the segment */
     for (int d = 0; d < 3; d++)
-        if (d != axis && (p[d] == c->lo[d] || p[d] == c->hi[d]))
+        if (d != axis && (p[d] == c->ulo[d] || p[d] == c->uhi[d]))
             inner = 0;
     size_t local = (((size_t)(p[2] - c->lo[2]) * ISO_BRICK_SAMPLES + (p[1] - c->lo[1])) * ISO_BRICK_SAMPLES +
                     (p[0] - c->lo[0])) * 3 + (size_t)axis;
@@ -290,7 +378,7 @@ static int crossing(lod *c, const uint32_t p[3], int axis, uint32_t length, uint
     }
     c->error = e > c->error ? e : c->error; /* NaN (a NaN or infinite sample) proves nothing */
     if (inner) {
-        /* Only this brick holds the segment, at its own stride: no other length occurs. */
+        /* Only this unit holds the segment, at its own stride: no other length occurs. */
         c->inner_stamp[local] = c->stamp;
         c->inner_id[local] = *id;
         return 0;
@@ -349,43 +437,27 @@ static int regular_cell(lod *c, const uint32_t o[3], const uint32_t size[3])
     return 0;
 }
 
-/* The strides (log2) of the cell at o's sets: face[2 * a + side] the face across axis a
- * (side 1 the high one), edge[a][k] the edge along axis a whose other two coordinates are
- * high where bit d of k is set (k = sum of (p[d] != o[d]) << d). A set's stride is
- * around[] of where it lies per axis (brick_around): on the brick's low plane (0), strictly
- * inside (1), on its high plane (2); a cell's face or edge spans the inside of every axis
- * it runs along. */
-static void cell_sets(const lod *c, const uint32_t o[3], const uint32_t size[3], uint8_t face[6], uint8_t edge[3][8])
+/* 1 if every face of the cell at o (size[] cells per axis) and every edge and line in
+ * them has the unit's stride `shift`: the classes of its closed faces (set_shift). */
+static int cell_is_regular(const lod *c, const uint32_t o[3], const uint32_t size[3], unsigned shift)
 {
-    int where[3][2], scale[3] = {1, 3, 9};
+    uint8_t first[3], last[3];
     for (int d = 0; d < 3; d++) {
-        where[d][0] = o[d] == c->lo[d] ? 0 : 1;
-        where[d][1] = o[d] + size[d] == c->hi[d] ? 2 : 1;
+        first[d] = c->point_class[d][o[d] - c->ulo[d]];
+        last[d] = c->point_class[d][o[d] + size[d] - c->ulo[d]];
     }
     for (int a = 0; a < 3; a++) {
         int b = (a + 1) % 3, d2 = (a + 2) % 3;
-        for (int side = 0; side < 2; side++)
-            face[2 * a + side] = c->around[scale[a] * where[a][side] + scale[b] + scale[d2]];
-        for (int k = 0; k < 4; k++)
-            edge[a][(k & 1) << b | (k >> 1) << d2] =
-                c->around[scale[a] + scale[b] * where[b][k & 1] + scale[d2] * where[d2][k >> 1]];
+        for (int side = 0; side < 2; side++) {
+            uint8_t k[3];
+            k[a] = side ? last[a] : first[a];
+            for (k[b] = first[b]; k[b] <= last[b]; k[b]++)
+                for (k[d2] = first[d2]; k[d2] <= last[d2]; k[d2]++)
+                    if (set_shift(c, k) != shift)
+                        return 0;
+        }
     }
-}
-
-/* 1 if every face and edge of a cell of the brick at hand has the cell's own stride, for
- * a cell touching the brick's planes given by touch (bit 2d: the low plane of axis d, bit
- * 2d + 1: the high one). Its faces and edges are the sets that lie inside the brick along
- * at least one axis and, along every other, on a plane the cell touches. finer: bit cls
- * set where around[cls] differs from the brick's stride. */
-static int cell_is_regular(unsigned touch, uint32_t finer)
-{
-    uint32_t held = (1u << 27) - 1, inside = 0;
-    for (int d = 0; d < 3; d++) {
-        held &= where_mask[d][1] | ((touch >> (2 * d) & 1) ? where_mask[d][0] : 0) |
-                ((touch >> (2 * d + 1) & 1) ? where_mask[d][2] : 0);
-        inside |= where_mask[d][1];
-    }
-    return !(held & inside & finer);
+    return 1;
 }
 
 static int add_segment(lod *c, loop_segment s)
@@ -406,27 +478,37 @@ static int add_segment(lod *c, loop_segment s)
  * each side split at its own stride. At most 4 * 8 points. */
 #define MAX_POLYGON (4 * ISO_BRICK_CELLS)
 
-/* The polygon of one square of a transition cell's face into points[] (at most
- * MAX_POLYGON), returning its point count: corner[4] the square's corners in order, step[k]
- * the stride of the side from corner k to the next, at whose multiples it is split (the
- * volume's last sample may end it off them). */
-static int split_square(const uint32_t corner[4][3], const uint32_t step[4], uint32_t points[][3])
+/* Appends to points[] the points strictly between p and q (a square's side, along one
+ * axis) where the side is split: at the multiples of each stretch's own stride, the
+ * stride of the lattice set that holds it (a side may cross a block plane, and a stride-8
+ * side holds stretches of two blocks; the volume's last sample may end it off them).
+ * Returns the new count. */
+static int split_side(const lod *c, const uint32_t p[3], const uint32_t q[3], uint32_t points[][3], int m)
 {
-    int m = 0;
-    for (int k = 0; k < 4; k++) {
-        const uint32_t *p = corner[k], *q = corner[(k + 1) % 4];
-        int axis = p[0] != q[0] ? 0 : p[1] != q[1] ? 1 : 2;
-        memcpy(points[m++], p, sizeof points[0]);
-        if (q[axis] > p[axis]) {
-            for (uint32_t x = (p[axis] / step[k] + 1) * step[k]; x < q[axis]; x += step[k]) {
-                memcpy(points[m], p, sizeof points[0]);
-                points[m++][axis] = x;
-            }
-        } else {
-            for (uint32_t x = (p[axis] - 1) / step[k] * step[k]; x > q[axis]; x -= step[k]) {
-                memcpy(points[m], p, sizeof points[0]);
-                points[m++][axis] = x;
-            }
+    int axis = p[0] != q[0] ? 0 : p[1] != q[1] ? 1 : 2;
+    uint8_t k[3];
+    for (int d = 0; d < 3; d++)
+        if (d != axis)
+            k[d] = c->point_class[d][p[d] - c->ulo[d]];
+    if (q[axis] > p[axis]) {
+        for (uint32_t x = p[axis];;) {
+            k[axis] = c->span_class[axis][x - c->ulo[axis]];
+            uint32_t step = 1u << set_shift(c, k);
+            x = (x / step + 1) * step;
+            if (x >= q[axis])
+                break;
+            memcpy(points[m], p, sizeof points[0]);
+            points[m++][axis] = x;
+        }
+    } else {
+        for (uint32_t x = p[axis];;) {
+            k[axis] = c->span_class[axis][x - 1 - c->ulo[axis]];
+            uint32_t step = 1u << set_shift(c, k);
+            x = (x - 1) / step * step;
+            if (x <= q[axis])
+                break;
+            memcpy(points[m], p, sizeof points[0]);
+            points[m++][axis] = x;
         }
     }
     return m;
@@ -641,37 +723,33 @@ static int fan_loops(lod *c, const double middle[3], iso_error *err)
     return 0;
 }
 
-/* The segments of one face of a transition cell, across axis a (side 1 the high one), of
- * stride f: cut into squares of f, each side split at its own stride (a side inside the
- * face has the face's, one on its border lies on one of the cell's edges and has that
- * edge's). A square whose sides hold no crossing is skipped: its corners alike and no side
- * split, or every sample of its box alike. */
-static int face_segments(lod *c, const uint32_t o[3], const uint32_t size[3], int a, int side, uint32_t f,
-                         const uint8_t edge_shift[3][8])
+/* The segments of the squares of [b0, b1) x [c0, c1) (along axes b and d2) of a transition
+ * cell's face in `plane` across axis a (side 1 the high one), squares of stride f: each
+ * square's sides split at their own strides (split_side). A square whose sides hold no
+ * crossing is skipped: its corners alike and no side split, or every sample of its box
+ * alike. */
+static int region_segments(lod *c, int a, int side, uint32_t plane, const uint32_t from[2], const uint32_t to[2],
+                           uint32_t f)
 {
     static const int bc[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
     int b = (a + 1) % 3, d2 = (a + 2) % 3;
-    /* The border's strides: along b at d2 low and high, along d2 at b low and high. */
-    uint32_t along_b[2], along_c[2];
-    for (unsigned h = 0; h < 2; h++) {
-        along_b[h] = 1u << edge_shift[b][(unsigned)side << a | h << d2];
-        along_c[h] = 1u << edge_shift[d2][(unsigned)side << a | h << b];
-    }
-    uint32_t plane = o[a] + size[a] * (uint32_t)side;
-    for (uint32_t jc = 0; jc < size[d2]; jc += f)
-        for (uint32_t jb = 0; jb < size[b]; jb += f) {
-            uint32_t wb = size[b] - jb < f ? size[b] - jb : f, wc = size[d2] - jc < f ? size[d2] - jc : f;
-            uint32_t b_low = jb == 0 ? along_c[0] : f, b_high = jb + wb == size[b] ? along_c[1] : f;
-            uint32_t c_low = jc == 0 ? along_b[0] : f, c_high = jc + wc == size[d2] ? along_b[1] : f;
-            int split = c_low < wb || c_high < wb || b_low < wc || b_high < wc;
-            uint32_t corner[4][3], step[4];
+    for (uint32_t jc = from[1]; jc < to[1]; jc += f)
+        for (uint32_t jb = from[0]; jb < to[0]; jb += f) {
+            uint32_t wb = to[0] - jb < f ? to[0] - jb : f, wc = to[1] - jc < f ? to[1] - jc : f;
+            uint32_t corner[4][3];
             for (int k = 0; k < 4; k++) {
                 int q = side ? k : 3 - k; /* (b, c, a) is right-handed: reversed below */
                 corner[k][a] = plane;
-                corner[k][b] = o[b] + jb + wb * (uint32_t)bc[q][0];
-                corner[k][d2] = o[d2] + jc + wc * (uint32_t)bc[q][1];
+                corner[k][b] = jb + wb * (uint32_t)bc[q][0];
+                corner[k][d2] = jc + wc * (uint32_t)bc[q][1];
             }
-            if (!split) {
+            uint32_t points[MAX_POLYGON][3];
+            int m = 0;
+            for (int k = 0; k < 4; k++) {
+                memcpy(points[m++], corner[k], sizeof points[0]);
+                m = split_side(c, corner[k], corner[(k + 1) % 4], points, m);
+            }
+            if (m == 4) {
                 unsigned alike = 0;
                 for (int k = 0; k < 4; k++)
                     alike += above(c, corner[k]);
@@ -686,18 +764,38 @@ static int face_segments(lod *c, const uint32_t o[3], const uint32_t size[3], in
                 if (!box_mixed(c, box_lo, box_hi))
                     continue;
             }
-            /* Side k runs along b for even k, along d2 for odd k (corner k to k + 1). */
-            step[0] = side ? c_low : c_high;
-            step[1] = b_high;
-            step[2] = side ? c_high : c_low;
-            step[3] = b_low;
-            uint32_t points[MAX_POLYGON][3];
-            int m = 4;
-            if (split)
-                m = split_square((const uint32_t(*)[3])corner, step, points);
-            else
-                memcpy(points, corner, sizeof corner);
             int rc = polygon_segments(c, (const uint32_t(*)[3])points, m);
+            if (rc)
+                return rc;
+        }
+    return 0;
+}
+
+/* The segments of one face of a transition cell, across axis a (side 1 the high one): the
+ * face in regions, one per block face it spans (a face of stride 8 is one region), each
+ * cut into squares of its own stride. */
+static int face_segments(lod *c, const uint32_t o[3], const uint32_t size[3], int a, int side)
+{
+    int b = (a + 1) % 3, d2 = (a + 2) % 3;
+    uint32_t plane = o[a] + size[a] * (uint32_t)side;
+    uint8_t k[3];
+    k[a] = c->point_class[a][plane - c->ulo[a]];
+    k[b] = c->span_class[b][o[b] - c->ulo[b]];
+    k[d2] = c->span_class[d2][o[d2] - c->ulo[d2]];
+    if (set_shift(c, k) == ISO_TREE_LEVELS) {
+        /* Every block holding the first region has stride 8, so the brick across does: the
+         * face is one region. */
+        uint32_t from[2] = {o[b], o[d2]}, to[2] = {o[b] + size[b], o[d2] + size[d2]};
+        return region_segments(c, a, side, plane, from, to, 1u << ISO_TREE_LEVELS);
+    }
+    for (uint32_t rc0 = o[d2]; rc0 < o[d2] + size[d2]; rc0 = (rc0 / ISO_TREE_BLOCK + 1) * ISO_TREE_BLOCK)
+        for (uint32_t rb0 = o[b]; rb0 < o[b] + size[b]; rb0 = (rb0 / ISO_TREE_BLOCK + 1) * ISO_TREE_BLOCK) {
+            uint32_t rb1 = (rb0 / ISO_TREE_BLOCK + 1) * ISO_TREE_BLOCK, rc1 = (rc0 / ISO_TREE_BLOCK + 1) * ISO_TREE_BLOCK;
+            uint32_t from[2] = {rb0, rc0}, to[2] = {rb1 < o[b] + size[b] ? rb1 : o[b] + size[b],
+                                                   rc1 < o[d2] + size[d2] ? rc1 : o[d2] + size[d2]};
+            k[b] = c->span_class[b][rb0 - c->ulo[b]];
+            k[d2] = c->span_class[d2][rc0 - c->ulo[d2]];
+            int rc = region_segments(c, a, side, plane, from, to, 1u << set_shift(c, k));
             if (rc)
                 return rc;
         }
@@ -708,8 +806,6 @@ static int face_segments(lod *c, const uint32_t o[3], const uint32_t size[3], in
  * whose samples all lie on one side of the level holds no segment and is skipped. */
 static int transition_cell(lod *c, const uint32_t o[3], const uint32_t size[3], iso_error *err)
 {
-    uint8_t face_shift[6], edge_shift[3][8];
-    cell_sets(c, o, size, face_shift, edge_shift);
     c->segment_count = 0;
     for (int a = 0; a < 3; a++)
         for (int side = 0; side < 2; side++) {
@@ -720,8 +816,7 @@ static int transition_cell(lod *c, const uint32_t o[3], const uint32_t size[3], 
             }
             if (!box_mixed(c, lo, hi))
                 continue;
-            int rc = face_segments(c, o, size, a, side, 1u << face_shift[2 * a + side],
-                                   (const uint8_t(*)[8])edge_shift);
+            int rc = face_segments(c, o, size, a, side);
             if (rc)
                 return iso_error_set(err, rc, "out of memory extracting the surface");
         }
@@ -733,38 +828,34 @@ static int transition_cell(lod *c, const uint32_t o[3], const uint32_t size[3], 
     return fan_loops(c, middle, err);
 }
 
-static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *err)
+/* The cells of the unit at hand at stride 2^shift, the last per axis narrower where the
+ * unit ends off the stride: marching cubes where a cell is regular, else a transition
+ * cell. */
+static int march_unit(lod *c, unsigned shift, iso_error *err)
 {
-    size_t lo[3], hi[3];
-    iso_bricks_box(c->vol, b, lo, hi);
-    for (int d = 0; d < 3; d++) {
-        c->lo[d] = (uint32_t)lo[d];
-        c->hi[d] = (uint32_t)hi[d];
-        c->n[d] = (uint32_t)(hi[d] - lo[d] + 1);
-    }
-    c->stamp++;
-    brick_around(c, b);
     uint32_t s = 1u << shift;
-    uint32_t finer = 0; /* the classes around it finer than it (none: every cell is regular) */
-    for (int cls = 0; cls < 27; cls++)
-        finer |= (uint32_t)(c->around[cls] != shift) << cls;
-    /* Whether a cell is regular depends only on which of the brick's planes it touches. */
+    int uniform = 1; /* every set around has the unit's stride: every cell is regular */
+    for (int z = 0; z < UNIT_CLASSES; z++)
+        for (int y = 0; y < UNIT_CLASSES; y++)
+            for (int x = 0; x < UNIT_CLASSES; x++)
+                uniform &= c->around[z][y][x] == shift || z > c->point_class[2][c->uhi[2] - c->ulo[2]] ||
+                           y > c->point_class[1][c->uhi[1] - c->ulo[1]] || x > c->point_class[0][c->uhi[0] - c->ulo[0]];
+    /* Whether a cell is regular depends only on which of the unit's planes it touches. */
     int8_t by_touch[64];
     memset(by_touch, -1, sizeof by_touch);
-    classify_whole(c);
-    for (uint32_t z = 0; z + 1 < c->n[2]; z += s)
-        for (uint32_t y = 0; y + 1 < c->n[1]; y += s)
-            for (uint32_t x = 0; x + 1 < c->n[0]; x += s) {
-                uint32_t o[3] = {c->lo[0] + x, c->lo[1] + y, c->lo[2] + z}, size[3], far[3];
+    for (uint32_t z = c->ulo[2]; z < c->uhi[2]; z += s)
+        for (uint32_t y = c->ulo[1]; y < c->uhi[1]; y += s)
+            for (uint32_t x = c->ulo[0]; x < c->uhi[0]; x += s) {
+                uint32_t o[3] = {x, y, z}, size[3], far[3];
                 unsigned touch = 0;
                 for (int d = 0; d < 3; d++) {
-                    size[d] = c->hi[d] - o[d] < s ? c->hi[d] - o[d] : s; /* the last may be narrower */
+                    size[d] = c->uhi[d] - o[d] < s ? c->uhi[d] - o[d] : s;
                     far[d] = o[d] + size[d];
-                    touch |= (unsigned)(o[d] == c->lo[d]) << (2 * d) | (unsigned)(o[d] + size[d] == c->hi[d]) << (2 * d + 1);
+                    touch |= (unsigned)(o[d] == c->ulo[d]) << (2 * d) | (unsigned)(far[d] == c->uhi[d]) << (2 * d + 1);
                 }
                 c->cells++;
                 if (by_touch[touch] < 0)
-                    by_touch[touch] = (int8_t)(!finer || cell_is_regular(touch, finer));
+                    by_touch[touch] = (int8_t)(uniform || cell_is_regular(c, o, size, shift));
                 int rc;
                 if (by_touch[touch]) {
                     rc = regular_cell(c, o, size);
@@ -778,20 +869,68 @@ static int march_brick(lod *c, const uint32_t b[3], unsigned shift, iso_error *e
     return 0;
 }
 
+/* Brick b, not wholly stride 1: its samples classified once, then at stride 8 whole, or
+ * block after block at the block's own stride. */
+static int march_brick(lod *c, const uint32_t b[3], iso_error *err)
+{
+    size_t lo[3], hi[3];
+    iso_bricks_box(c->vol, b, lo, hi);
+    for (int d = 0; d < 3; d++) {
+        c->lo[d] = (uint32_t)lo[d];
+        c->hi[d] = (uint32_t)hi[d];
+        c->n[d] = (uint32_t)(hi[d] - lo[d] + 1);
+    }
+    c->stamp++;
+    classify_whole(c);
+    uint32_t first[3], m[3];
+    brick_blocks(c, b, first, m);
+    if (c->shift[block_index(c, first)] == ISO_TREE_LEVELS) {
+        unit_around(c, first, m);
+        return march_unit(c, ISO_TREE_LEVELS, err);
+    }
+    static const uint32_t one[3] = {1, 1, 1};
+    for (uint32_t z = 0; z < m[2]; z++)
+        for (uint32_t y = 0; y < m[1]; y++)
+            for (uint32_t x = 0; x < m[0]; x++) {
+                uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
+                unit_around(c, q, one);
+                int rc = march_unit(c, c->shift[block_index(c, q)], err);
+                if (rc)
+                    return rc;
+            }
+    return 0;
+}
 
-/* PASS 2: the stride-1 bricks, march.c's kernel on those (with no min/max, on the bricks
- * the level cannot cross too: they are read and give nothing). marked is scratch, a byte
- * per brick. */
+/* 1 if every block of brick b (at grid index at) has stride 1. */
+static int brick_fine(const lod *c, const uint32_t b[3])
+{
+    uint32_t first[3], m[3];
+    brick_blocks(c, b, first, m);
+    for (uint32_t z = 0; z < m[2]; z++)
+        for (uint32_t y = 0; y < m[1]; y++)
+            for (uint32_t x = 0; x < m[0]; x++) {
+                uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
+                if (c->shift[block_index(c, q)])
+                    return 0;
+            }
+    return 1;
+}
+
+/* PASS 2: the bricks whose blocks all have stride 1, march.c's kernel on those (with no
+ * min/max, on the bricks the level cannot cross too: they are read and give nothing).
+ * marked is scratch, a byte per brick. */
 static int march_fine(lod *c, const iso_extract_params *params, uint8_t *marked, iso_march_part **fine,
                       iso_error *err)
 {
-    const iso_bricks *g = &c->tree->bricks;
-    for (size_t b = 0; b < iso_bricks_total(g); b++) {
-        int active = g->min[b] <= c->level && c->level < g->max[b];
-        marked[b] = active ? c->shift[b] == 0 : params->no_minmax;
-    }
+    size_t at = 0;
+    for (uint32_t k = 0; k < c->count[2]; k++)
+        for (uint32_t j = 0; j < c->count[1]; j++)
+            for (uint32_t i = 0; i < c->count[0]; i++, at++) {
+                uint32_t b[3] = {i, j, k};
+                marked[at] = brick_active(c, at) ? brick_fine(c, b) : params->no_minmax;
+            }
     iso_march_stats ms;
-    int rc = iso_march_selected(c->vol, g, c->level, marked, params->threads, c->mesh, &ms, fine, err);
+    int rc = iso_march_selected(c->vol, &c->tree->bricks, c->level, marked, params->threads, c->mesh, &ms, fine, err);
     if (rc)
         return rc;
     c->fine = *fine;
@@ -800,14 +939,37 @@ static int march_fine(lod *c, const iso_extract_params *params, uint8_t *marked,
     return 0;
 }
 
-/* 1 if no brick the level crosses is coarse. */
+/* 1 if no block of a brick the level crosses is coarse. */
 static int all_fine(const lod *c)
 {
-    const iso_bricks *g = &c->tree->bricks;
-    for (size_t b = 0; b < iso_bricks_total(g); b++)
-        if (g->min[b] <= c->level && c->level < g->max[b] && c->shift[b])
-            return 0;
+    size_t at = 0;
+    for (uint32_t k = 0; k < c->count[2]; k++)
+        for (uint32_t j = 0; j < c->count[1]; j++)
+            for (uint32_t i = 0; i < c->count[0]; i++, at++) {
+                uint32_t b[3] = {i, j, k};
+                if (brick_active(c, at) && !brick_fine(c, b))
+                    return 0;
+            }
     return 1;
+}
+
+/* The largest level error (tree.h) of brick b's coarse blocks, as planned. */
+static double brick_fit(const lod *c, size_t at, const uint32_t b[3])
+{
+    uint32_t first[3], m[3];
+    brick_blocks(c, b, first, m);
+    if (c->shift[block_index(c, first)] == ISO_TREE_LEVELS)
+        return iso_tree_level_error(c->tree, at);
+    double worst = 0;
+    for (uint32_t z = 0; z < m[2]; z++)
+        for (uint32_t y = 0; y < m[1]; y++)
+            for (uint32_t x = 0; x < m[0]; x++) {
+                uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
+                unsigned l = c->shift[block_index(c, q)];
+                double e = l ? iso_tree_block_error(c->tree, at, (int)(x | y << 1 | z << 2), (int)l) : 0;
+                worst = e > worst ? e : worst;
+            }
+    return worst;
 }
 
 /* iso_lod_extract's work, with the plan given or (shift NULL) made; with exact not NULL,
@@ -820,14 +982,15 @@ static int extract(const iso_tree *tree, const iso_extract_params *params, const
     for (int d = 0; d < 3; d++) {
         c.dims[d] = (uint32_t)tree->vol->dims[d];
         c.count[d] = g->count[d];
+        c.blocks[d] = (c.dims[d] - 1 + ISO_TREE_BLOCK - 1) / ISO_TREE_BLOCK;
     }
     iso_mesh_clear(mesh);
-    size_t total = iso_bricks_total(g);
-    c.shift = malloc(2 * (total ? total : 1));
+    size_t total = iso_bricks_total(g), blocks = (size_t)c.blocks[0] * c.blocks[1] * c.blocks[2];
+    c.shift = malloc(blocks + total + 1);
     if (!c.shift)
         return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
     if (shift)
-        memcpy(c.shift, shift, total);
+        plan_given(&c, shift);
     else
         plan(&c, params->tolerance);
     if (!shift && exact && (*exact = all_fine(&c))) {
@@ -835,22 +998,22 @@ static int extract(const iso_tree *tree, const iso_extract_params *params, const
         return 0;
     }
     iso_march_part *fine = NULL;
-    int rc = march_fine(&c, params, c.shift + total, &fine, err);
+    int rc = march_fine(&c, params, c.shift + blocks, &fine, err);
     for (uint32_t k = 0; k < g->count[2] && !rc; k++)
         for (uint32_t j = 0; j < g->count[1] && !rc; j++)
             for (uint32_t i = 0; i < g->count[0] && !rc; i++) {
                 size_t at = ((size_t)k * g->count[1] + j) * g->count[0] + i;
-                int active = g->min[at] <= c.level && c.level < g->max[at];
+                int active = brick_active(&c, at);
                 if (!active && !params->no_minmax)
                     continue;
                 stats->nodes_visited++;
-                if (!active || !c.shift[at])
+                uint32_t b[3] = {i, j, k};
+                if (!active || brick_fine(&c, b))
                     continue; /* marched by march_fine */
                 stats->nodes_polygonized++;
-                double fit = iso_tree_level_error(tree, at, c.shift[at]);
+                double fit = brick_fit(&c, at, b);
                 stats->fit_error = fit > stats->fit_error ? fit : stats->fit_error;
-                uint32_t b[3] = {i, j, k};
-                rc = march_brick(&c, b, c.shift[at], err);
+                rc = march_brick(&c, b, err);
             }
     stats->cells_visited = c.cells;
     stats->error_bound = c.error;

@@ -531,8 +531,9 @@ int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress,
     tree->volume_crc = iso_tree_volume_crc(vol);
     l.nodes = NULL;
     int rc = bricks_from_leaves(vol, tree, &l, threads, &tree->bricks, err);
+    iso_tree_scale_make((double)tree->nodes[0].max - (double)tree->nodes[0].min, &tree->scale);
     if (!rc)
-        rc = iso_levels_build(vol, &tree->bricks, threads, &tree->level_error, err);
+        rc = iso_levels_build(vol, &tree->bricks, &tree->scale, threads, &tree->level_code, err);
     if (rc) {
         iso_tree_destroy(tree);
         free(l.boxes);
@@ -557,7 +558,7 @@ void iso_tree_destroy(iso_tree *tree)
     else
         free(tree->nodes);
     iso_bricks_free(&tree->bricks);
-    free(tree->level_error);
+    free(tree->level_code);
     free(tree);
 }
 
@@ -568,8 +569,8 @@ size_t iso_tree_bytes(const iso_tree *tree)
 
 size_t iso_tree_memory(const iso_tree *tree)
 {
-    return iso_tree_bytes(tree) +
-           iso_bricks_total(&tree->bricks) * (2 * sizeof(float) + ISO_TREE_LEVELS * sizeof(uint16_t));
+    return iso_tree_bytes(tree) + iso_bricks_total(&tree->bricks) * (2 * sizeof(float) + ISO_TREE_CODES) +
+           sizeof tree->scale;
 }
 
 uint32_t iso_tree_volume_crc(const iso_volume *vol)
@@ -592,9 +593,10 @@ uint32_t iso_tree_volume_crc(const iso_volume *vol)
 #define TREE_MAGIC "ISOTREE"
 /* 2: splits above brick size aligned to the brick grid; 3: the bricks' fan floors after
  * the nodes; 4: the bricks' level errors instead (tree.h), so that loading need not
- * compute them again; 5: those errors in 2 bytes each. An older file is refused as
- * stale, and the caller rebuilds it. */
-#define TREE_VERSION 5
+ * compute them again; 5: those errors in 2 bytes each; 6: one-byte codes, per block at
+ * levels 1 and 2 and per brick at level 3. An older file is refused as stale, and the
+ * caller rebuilds it. */
+#define TREE_VERSION 6
 
 typedef struct tree_header {
     char magic[8];          /* "ISOTREE\0" */
@@ -604,7 +606,7 @@ typedef struct tree_header {
     uint32_t type;
     uint32_t volume_crc;    /* iso_tree_volume_crc of the volume it was built from */
     uint64_t node_count;
-    uint32_t node_crc;      /* CRC-32 of the bytes after the header: nodes, then floors */
+    uint32_t node_crc;      /* CRC-32 of the bytes after the header: nodes, then level codes */
     uint32_t header_crc;    /* CRC-32 of the header with this field zero */
 } tree_header;
 
@@ -628,14 +630,14 @@ int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err)
     h.type = (uint32_t)tree->vol->type;
     h.volume_crc = tree->volume_crc;
     h.node_count = tree->node_count;
-    size_t floor_bytes = iso_bricks_total(&tree->bricks) * ISO_TREE_LEVELS * sizeof(uint16_t);
+    size_t code_bytes = iso_bricks_total(&tree->bricks) * ISO_TREE_CODES;
     uLong crc = crc32(0L, (const Bytef *)tree->nodes, (uInt)iso_tree_bytes(tree));
-    h.node_crc = (uint32_t)crc32(crc, (const Bytef *)tree->level_error, (uInt)floor_bytes);
+    h.node_crc = (uint32_t)crc32(crc, (const Bytef *)tree->level_code, (uInt)code_bytes);
     h.header_crc = header_crc(h);
 
     iso_file_part parts[] = {{&h, sizeof h},
                              {tree->nodes, iso_tree_bytes(tree)},
-                             {tree->level_error, floor_bytes}};
+                             {tree->level_code, code_bytes}};
     return iso_file_replace(path, parts, sizeof parts / sizeof *parts, err);
 }
 
@@ -691,7 +693,7 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
     memcpy(&h, map, sizeof h);
     uint32_t count[3];
     iso_bricks_count(vol, count);
-    size_t floors = (size_t)count[0] * count[1] * count[2] * ISO_TREE_LEVELS; /* per brick (tree.h) */
+    size_t codes = (size_t)count[0] * count[1] * count[2] * ISO_TREE_CODES; /* per brick (tree.h) */
     int rc = 0;
     if (memcmp(h.magic, TREE_MAGIC, sizeof TREE_MAGIC) != 0)
         rc = iso_error_set(err, ISO_E_FORMAT, "%s: not a hierarchy file (bad magic)", path);
@@ -707,25 +709,16 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
                            path, (unsigned long long)h.dims[0], (unsigned long long)h.dims[1],
                            (unsigned long long)h.dims[2]);
     else if (h.node_count > (bytes - sizeof h) / sizeof(iso_tree_node) ||
-             sizeof h + h.node_count * sizeof(iso_tree_node) + floors * sizeof(uint16_t) != bytes)
+             sizeof h + h.node_count * sizeof(iso_tree_node) + codes != bytes)
         rc = iso_error_set(err, ISO_E_CORRUPT,
                            "%s: %zu bytes do not hold the %llu nodes the header announces and %zu level errors",
-                           path, bytes, (unsigned long long)h.node_count, floors);
+                           path, bytes, (unsigned long long)h.node_count, codes);
     else if ((uint32_t)crc32(0L, (const Bytef *)map + sizeof h, (uInt)(bytes - sizeof h)) != h.node_crc)
         rc = iso_error_set(err, ISO_E_CORRUPT, "%s: node checksum mismatch", path);
     else if (h.volume_crc != iso_tree_volume_crc(vol))
         rc = iso_error_set(err, ISO_E_STALE, "%s: built from different samples than this volume", path);
     else
         rc = check_structure(vol, (const iso_tree_node *)((const char *)map + sizeof h), h.node_count, path, err);
-    const uint16_t *floor = NULL;
-    if (rc == 0) {
-        floor = (const uint16_t *)((const char *)map + sizeof h + h.node_count * sizeof(iso_tree_node));
-        for (size_t b = 0; rc == 0 && b < floors; b++)
-            if (!(iso_tree_level_decode(floor[b]) >= 0))
-                rc = iso_error_set(err, ISO_E_CORRUPT, "%s: brick %zu's level %zu error is %g", path,
-                                   b / ISO_TREE_LEVELS, b % ISO_TREE_LEVELS + 1,
-                                   (double)iso_tree_level_decode(floor[b]));
-    }
     if (rc) {
         munmap(map, bytes);
         return rc;
@@ -741,12 +734,14 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
     tree->volume_crc = h.volume_crc;
     tree->mapping = map;
     tree->mapping_bytes = bytes;
-    tree->level_error = malloc(floors * sizeof(uint16_t));
-    if (!tree->level_error) {
+    /* Every byte is a code (tree.h): a forged one can only be caught by rebuilding. */
+    tree->level_code = malloc(codes ? codes : 1);
+    if (!tree->level_code) {
         iso_tree_destroy(tree);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory loading %s", path);
     }
-    memcpy(tree->level_error, floor, floors * sizeof(uint16_t));
+    memcpy(tree->level_code, (const char *)map + sizeof h + h.node_count * sizeof(iso_tree_node), codes);
+    iso_tree_scale_make((double)tree->nodes[0].max - (double)tree->nodes[0].min, &tree->scale);
     if ((rc = iso_bricks_build(vol, 0, &tree->bricks, err))) {
         iso_tree_destroy(tree);
         return rc;

@@ -78,37 +78,37 @@ void iso_bricks_box(const iso_volume *vol, const uint32_t brick[3], size_t lo[3]
 
 #define ISO_TREE_BRICK ISO_BRICK_CELLS /* the stored leaves are the grid's bricks */
 
-/* The coarse levels of a brick. Level l (1..ISO_TREE_LEVELS) is the brick's sample grid
+/* The coarse levels. Level l (1..ISO_TREE_LEVELS) of a box of samples is its sample grid
  * taken every 2^l samples per axis; its error is Lemma 1 over each cell of that grid,
- *     err_l = max over samples s of the brick |p(s) - T_l(s)|,
+ *     err_l = max over samples s of the box |p(s) - T_l(s)|,
  * T_l the trilinear through the corners of the level's cell holding s: it bounds |f - T_l|
- * over the whole brick, so a surface marched on the level's grid has every vertex on a
- * grid edge within err_l of the level (extract.h). Computed in the build and saved with
- * the nodes, so extraction chooses each brick's level a-priori, reading no fine sample of
- * a brick it coarsens. In a brick clipped by the volume's border the level's last cell
- * per axis ends at the last sample, narrower (the same grid extraction marches). INFINITY
- * where a NaN sample makes the fit meaningless. Kept as the top 16 bits of a float
- * (bfloat16: 8 bits of mantissa), rounded up, so an error is never understated and is
- * overstated by under 0.8%: 6 bytes per brick, which keeps the hierarchy within 10% of a
- * byte volume's size. */
+ * over the whole box, so a surface marched on the level's grid has every vertex on a grid
+ * edge within err_l of the level (extract.h). Levels 1 and 2 (strides 2 and 4) are kept per
+ * block, the brick's 2 x 2 x 2 sub-boxes of ISO_TREE_BLOCK cells per axis; level 3 (stride
+ * 8) per brick: extraction then coarsens a block where its own cells fit, not only where
+ * the whole brick's do. In a box clipped by the volume's border the level's last cell per
+ * axis ends at the last sample, narrower (the same grid extraction marches). Computed in
+ * the build and saved with the nodes, so extraction chooses each block's level a-priori,
+ * reading no fine sample of a block it coarsens.
+ *
+ * Each error is kept as a one-byte code, rounded up (an error is never understated): code
+ * k > 0 stands for R 2^((k - 238) / 16), R the root's max - min, so codes step by 4.4% from
+ * 3.5e-5 R to 2 R; 0 is an exact 0 (constant boxes, and no level crosses those), 255 is
+ * INFINITY (a NaN sample, or a volume with infinite samples). 17 bytes per brick. */
 #define ISO_TREE_LEVELS 3
+#define ISO_TREE_BLOCK 4
+#define ISO_TREE_BLOCK_LEVELS 2 /* levels 1 .. 2 per block; level 3 per brick */
+#define ISO_TREE_CODES (1 + 8 * ISO_TREE_BLOCK_LEVELS) /* per brick: level 3, then per block */
 
-/* A level error as stored: the float's top half, rounded up in magnitude (so a positive
- * error never shrinks; INFINITY and NaN stay what they are). */
-static inline uint16_t iso_tree_level_encode(float e)
-{
-    union { float f; uint32_t u; } v = {e};
-    uint32_t top = v.u >> 16;
-    if ((v.u & 0xffffu) && (v.u & 0x7f800000u) != 0x7f800000u)
-        top++;
-    return (uint16_t)top;
-}
+/* The values the 256 codes stand for, from the root's range (above). */
+typedef struct iso_tree_scale {
+    double value[256];
+} iso_tree_scale;
 
-static inline float iso_tree_level_decode(uint16_t stored)
-{
-    union { uint32_t u; float f; } v = {(uint32_t)stored << 16};
-    return v.f;
-}
+/* The scale of a tree whose root spans range = max - min (rounded outward as stored). */
+void iso_tree_scale_make(double range, iso_tree_scale *scale);
+/* The smallest code whose value is >= e (255 for NaN or past 2 R). */
+uint8_t iso_tree_code(const iso_tree_scale *scale, double e);
 
 typedef struct iso_box {
     uint32_t lo[3], hi[3]; /* inclusive sample indices; hi[a] - lo[a] cells along a */
@@ -126,7 +126,8 @@ typedef struct iso_tree {
     uint32_t volume_crc;    /* CRC-32 of dims, type and samples: ties a file to its volume */
     double build_ms;        /* time to build (or to load and verify the file) */
     iso_bricks bricks;      /* regular min/max grid for exact extraction; computed, not saved */
-    uint16_t *level_error;  /* per brick, ISO_TREE_LEVELS errors: iso_tree_level_error; saved */
+    uint8_t *level_code;    /* per brick, ISO_TREE_CODES codes (iso_tree_level_error); saved */
+    iso_tree_scale scale;   /* what the codes stand for */
     void *mapping;          /* file mapping when loaded with iso_tree_load, else NULL */
     size_t mapping_bytes;
 } iso_tree;
@@ -158,10 +159,19 @@ int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err);
  * sample CRC): ISO_E_FORMAT/ISO_E_CORRUPT/ISO_E_STALE otherwise. Safe on untrusted files. */
 int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_error *err);
 
-/* Fit error of brick `brick` (index in the grid, x fastest) at level l, 1..ISO_TREE_LEVELS. */
-static inline float iso_tree_level_error(const iso_tree *tree, size_t brick, int l)
+/* Fit error of brick `brick` (index in the grid, x fastest) at level 3. */
+static inline double iso_tree_level_error(const iso_tree *tree, size_t brick)
 {
-    return iso_tree_level_decode(tree->level_error[brick * ISO_TREE_LEVELS + (size_t)(l - 1)]);
+    return tree->scale.value[tree->level_code[brick * ISO_TREE_CODES]];
+}
+
+/* Fit error of block `block` (0..7: x | y << 1 | z << 2 within the brick) of brick `brick`
+ * at level l, 1..ISO_TREE_BLOCK_LEVELS. A brick with fewer than 8 blocks (clipped to one
+ * block along an axis) has 0 for those it lacks. */
+static inline double iso_tree_block_error(const iso_tree *tree, size_t brick, int block, int l)
+{
+    return tree->scale.value[tree->level_code[brick * ISO_TREE_CODES + 1 + (size_t)block * ISO_TREE_BLOCK_LEVELS +
+                                              (size_t)(l - 1)]];
 }
 
 /* The root box of vol. */

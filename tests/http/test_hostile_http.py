@@ -654,10 +654,10 @@ def truncated_file_rebuilt(tmp):
         f.truncate(size - 7)
     s = test_http.Server(["--catalog", cat, "--cache-dir", cache])
     try:
-        bricks = (-(-(48 - 1) // 8)) ** 3  # three 2-byte level errors per brick of 8^3 cells after the nodes
-        nodes = (size - 64 - 6 * bricks) // 16
+        bricks = (-(-(48 - 1) // 8)) ** 3  # 17 one-byte level codes per brick of 8^3 cells after the nodes
+        nodes = (size - 64 - 17 * bricks) // 16
         want = (f"isoserve: ml: {path}: {size - 7} bytes do not hold the {nodes} nodes the header announces "
-                f"and {3 * bricks} level errors; rebuilding")
+                f"and {17 * bricks} level errors; rebuilding")
         assert want in s.log(), s.log()
         assert s.get("/v1/volumes/ml/mesh?level=0.5").status == 200
     finally:

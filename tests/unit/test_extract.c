@@ -185,8 +185,9 @@ static void test_d2_spike_takes_log_steps(void)
         iso_extract_stats st;
         extract(tree, 0.5, 0.01, &m, &st);
         CHECK_EQ(st.triangles, 1);
-        /* The brick kernel reads the one active brick, 8^3 cells, and nothing else. */
-        CHECK_EQ(st.cells_visited, 512);
+        /* The one active brick, block by block: the spike's block at stride 1 (4^3 cells);
+         * the other seven are constant, one stride-4 cell each. Nothing else. */
+        CHECK_EQ(st.cells_visited, 64 + 7);
         /* Each stored level visits the active child and its inactive sibling: 2 per
          * halving; then the brick itself and the 6 sub-boxes of >= 8 cells around the
          * spike that the walk below it tries. */
@@ -358,8 +359,10 @@ static void test_tree_file_round_trip_and_refusals(void)
     if (back) {
         CHECK_EQ(back->node_count, tree->node_count);
         CHECK(memcmp(back->nodes, tree->nodes, iso_tree_bytes(tree)) == 0);
-        /* The bricks' fan floors are saved after the nodes and read back to the same bits. */
-        CHECK(memcmp(back->level_error, tree->level_error, iso_bricks_total(&tree->bricks) * ISO_TREE_LEVELS * sizeof(uint16_t)) == 0);
+        /* The level codes are saved after the nodes and read back to the same bytes, on the
+         * same scale. */
+        CHECK(memcmp(back->level_code, tree->level_code, iso_bricks_total(&tree->bricks) * ISO_TREE_CODES) == 0);
+        CHECK(memcmp(&back->scale, &tree->scale, sizeof tree->scale) == 0);
         iso_tree_destroy(back);
     }
     FILE *f = fopen(path, "rb");
@@ -483,12 +486,47 @@ static void test_coarse_bricks_join_without_weld(void)
     }
 }
 
-/* ---- the bricks' level errors ---- */
+/* ---- the level errors ---- */
 
-/* Every brick's error at level l is the largest Lemma 1 error of the cells of its 2^l
- * grid, each scanned in full (iso_tree_scan_box), the last cell of a clipped brick
- * narrower: on fields with partial and one-cell bricks, a volume with constant regions,
- * and a float volume with a NaN (its cells: infinite error). */
+/* Lemma 1 over the cells of the stride grid on the box [lo, hi], each scanned in full
+ * (iso_tree_scan_box), the last cell per axis narrower. */
+static double box_level_error(const iso_volume *vol, const size_t lo[3], const size_t hi[3], uint32_t s)
+{
+    double want = 0;
+    for (size_t z = lo[2]; z < hi[2]; z += s)
+        for (size_t y = lo[1]; y < hi[1]; y += s)
+            for (size_t x = lo[0]; x < hi[0]; x += s) {
+                iso_box cell = {{(uint32_t)x, (uint32_t)y, (uint32_t)z},
+                                {(uint32_t)(x + s < hi[0] ? x + s : hi[0]), (uint32_t)(y + s < hi[1] ? y + s : hi[1]),
+                                 (uint32_t)(z + s < hi[2] ? z + s : hi[2])}};
+                double mn, mx, er;
+                iso_tree_scan_box(vol, &cell, &mn, &mx, &er);
+                want = er == er && er > want ? er : (er == er ? want : INFINITY);
+            }
+    return want;
+}
+
+/* The code kept for an error: never below it, at most one step (2^(1/16)) above it, on
+ * the scale of the root's range. */
+static void check_code(const iso_tree *tree, double got, double want, int constant, const char *what)
+{
+    double range = (double)tree->nodes[0].max - (double)tree->nodes[0].min;
+    if (constant) {
+        CHECKF(got == 0, "%s: a constant brick keeps %g", what, got);
+        return;
+    }
+    CHECKF(got >= want, "%s: %.9g kept for Lemma 1's %.9g", what, got, want);
+    if (isfinite(want) && want > range * exp2(-237 / 16.0))
+        CHECKF(got <= want * exp2(1 / 16.0) * (1 + 1e-12), "%s: %.9g kept for %.9g", what, got, want);
+    else if (isfinite(want))
+        CHECKF(got <= range * exp2(-237 / 16.0) * (1 + 1e-12), "%s: %.9g kept for %.9g", what, got, want);
+}
+
+/* Every brick's error at level 3 and every block's at levels 1 and 2 is the largest Lemma 1
+ * error of the cells of its 2^l grid, each scanned in full, the last cell of a clipped box
+ * narrower, kept rounded up by at most a step of the code: on fields with partial and
+ * one-cell bricks and blocks, a volume with constant regions, and a float volume with a
+ * NaN (its cells: infinite error). */
 static void test_level_errors_are_lemma1_per_coarse_cell(void)
 {
     static const char *fields[] = {"field:ml:41x37x29", "field:sphere:10x18x26", "field:torus:33x33x17"};
@@ -513,46 +551,75 @@ static void test_level_errors_are_lemma1_per_coarse_cell(void)
         iso_vol_update_stats(vol);
         iso_tree *tree = surface_build(vol);
         const iso_bricks *g = &tree->bricks;
-        size_t finite = 0, infinite = 0;
+        size_t finite = 0, infinite = 0, blocks = 0;
+        char what[96];
         for (uint32_t k = 0; k < g->count[2]; k++)
             for (uint32_t j = 0; j < g->count[1]; j++)
                 for (uint32_t i = 0; i < g->count[0]; i++) {
                     uint32_t brick[3] = {i, j, k};
                     size_t lo[3], hi[3], at = ((size_t)k * g->count[1] + j) * g->count[0] + i;
                     iso_bricks_box(vol, brick, lo, hi);
-                    for (int l = 1; l <= ISO_TREE_LEVELS; l++) {
-                        uint32_t s = 1u << l;
-                        double want = 0;
-                        for (size_t z = lo[2]; z < hi[2]; z += s)
-                            for (size_t y = lo[1]; y < hi[1]; y += s)
-                                for (size_t x = lo[0]; x < hi[0]; x += s) {
-                                    /* The last cell of a clipped brick ends at its last sample. */
-                                    iso_box cell = {{(uint32_t)x, (uint32_t)y, (uint32_t)z},
-                                                    {(uint32_t)(x + s < hi[0] ? x + s : hi[0]),
-                                                     (uint32_t)(y + s < hi[1] ? y + s : hi[1]),
-                                                     (uint32_t)(z + s < hi[2] ? z + s : hi[2])}};
-                                    double mn, mx, er;
-                                    iso_tree_scan_box(vol, &cell, &mn, &mx, &er);
-                                    want = er == er && er > want ? er : (er == er ? want : INFINITY);
-                                }
-                        float got = iso_tree_level_error(tree, at, l);
-                        /* A constant brick stores 0: no level crosses it. */
-                        float expected = g->min[at] == g->max[at]
-                                             ? 0.0f
-                                             : iso_tree_level_decode(iso_tree_level_encode(iso_float_up(want)));
-                        CHECK(expected >= want && (isinf(want) || expected <= want * (1 + 1.0 / 128) + 1e-30));
-                        CHECKF(got == expected, "%d: brick (%u, %u, %u) level %d: %.9g, Lemma 1 gives %.9g", f,
-                               i, j, k, l, got, want);
-                        finite += isfinite(got);
-                        infinite += !isfinite(got);
+                    int constant = g->min[at] == g->max[at];
+                    double got = iso_tree_level_error(tree, at);
+                    snprintf(what, sizeof what, "%d: brick (%u, %u, %u) level 3", f, i, j, k);
+                    check_code(tree, got, box_level_error(vol, lo, hi, 8), constant, what);
+                    finite += isfinite(got);
+                    infinite += !isfinite(got);
+                    for (int b = 0; b < 8; b++) {
+                        size_t blo[3], bhi[3];
+                        int present = 1;
+                        for (int d = 0; d < 3; d++) {
+                            blo[d] = lo[d] + (size_t)(b >> d & 1) * ISO_TREE_BLOCK;
+                            bhi[d] = blo[d] + ISO_TREE_BLOCK < hi[d] ? blo[d] + ISO_TREE_BLOCK : hi[d];
+                            present &= blo[d] < hi[d];
+                        }
+                        for (int l = 1; l <= ISO_TREE_BLOCK_LEVELS; l++) {
+                            got = iso_tree_block_error(tree, at, b, l);
+                            snprintf(what, sizeof what, "%d: brick (%u, %u, %u) block %d level %d", f, i, j, k, b, l);
+                            if (!present) {
+                                CHECKF(got == 0, "%s: a missing block keeps %g", what, got);
+                                continue;
+                            }
+                            blocks += l == 1;
+                            check_code(tree, got, box_level_error(vol, blo, bhi, 1u << l), constant, what);
+                            finite += isfinite(got);
+                            infinite += !isfinite(got);
+                        }
                     }
                 }
         /* Only field 4's NaN makes a level error infinite. */
         CHECKF(finite > 0 && (f == 4) == (infinite > 0), "%d: %zu finite, %zu infinite level errors", f, finite,
                infinite);
+        CHECKF(blocks > 8 * iso_bricks_total(g) / 2, "%d: %zu blocks in %zu bricks", f, blocks, iso_bricks_total(g));
         iso_tree_destroy(tree);
         iso_vol_destroy(vol);
     }
+}
+
+/* The code: 0 for 0, the first value at or above an error, INFINITY past twice the range
+ * or for NaN, and a value for every code that rises with it. */
+static void test_level_codes(void)
+{
+    iso_tree_scale scale;
+    iso_tree_scale_make(1000, &scale);
+    CHECK_EQ(iso_tree_code(&scale, 0), 0);
+    CHECK_EQ(iso_tree_code(&scale, NAN), 255);
+    CHECK_EQ(iso_tree_code(&scale, 2001), 255);
+    CHECK_EQ(iso_tree_code(&scale, 2000), 254);
+    CHECK_EQ(iso_tree_code(&scale, 1000), 238);
+    CHECK_EQ(iso_tree_code(&scale, 1e-30), 1);
+    CHECK(isinf(scale.value[255]));
+    for (int k = 1; k < 255; k++)
+        CHECK(scale.value[k] > scale.value[k - 1]);
+    for (int i = 0; i < 10000; i++) {
+        double e = 2000 * pow((double)i / 10000, 4);
+        uint8_t c = iso_tree_code(&scale, e);
+        CHECKF(scale.value[c] >= e && (c == 0 || c == 1 || scale.value[c - 1] < e), "error %g: code %d", e, c);
+    }
+    /* A volume whose root spans an infinite range keeps no finite error but 0. */
+    iso_tree_scale_make(INFINITY, &scale);
+    CHECK(isinf(scale.value[iso_tree_code(&scale, 1)]));
+    CHECK_EQ(iso_tree_code(&scale, 0), 0);
 }
 
 /* Dimensions 10, 18, 26 leave bricks one cell thick at the far end of every axis (the
@@ -651,7 +718,17 @@ static void test_tolerance_that_coarsens_nothing_is_exact(void)
     const iso_bricks *g = &tree->bricks;
     for (size_t b = 0; b < iso_bricks_total(g); b++)
         if (g->min[b] <= level && level < g->max[b])
-            finest = fmin(finest, iso_tree_level_error(tree, b, 1));
+            for (int k = 0; k < 8; k++) {
+                uint32_t brick[3] = {(uint32_t)(b % g->count[0]), (uint32_t)(b / g->count[0] % g->count[1]),
+                                     (uint32_t)(b / g->count[0] / g->count[1])};
+                size_t lo[3], hi[3];
+                iso_bricks_box(vol, brick, lo, hi);
+                int present = 1; /* a block the brick has: a clipped brick may lack some */
+                for (int d = 0; d < 3; d++)
+                    present &= lo[d] + (size_t)(k >> d & 1) * ISO_TREE_BLOCK < hi[d];
+                if (present)
+                    finest = fmin(finest, iso_tree_block_error(tree, b, k, 1));
+            }
     CHECKF(finest > 0 && isfinite(finest), "finest level error %g", finest);
     for (int variant = 0; variant < 3; variant++) {
         iso_mesh exact, tol;
@@ -670,11 +747,13 @@ static void test_tolerance_that_coarsens_nothing_is_exact(void)
         CHECK(memcmp(tol.positions, exact.positions, 3 * sizeof(float) * exact.vertex_count) == 0);
         CHECK(memcmp(tol.indices, exact.indices, 3 * sizeof(uint32_t) * exact.triangle_count) == 0);
         CHECK(st.error_bound == se.error_bound);
-        /* At the finest error one brick coarsens, and the answer is the other path's. */
+        /* At the finest error one block coarsens, and the answer is the other path's: its
+         * brick marched block by block. (The block here holds no crossing, so the surface
+         * itself is the exact one.) */
         p.tolerance = finest;
         CHECK(iso_extract(tree, &p, &tol, &st, &err) == 0);
-        CHECK(tol.triangle_count != exact.triangle_count || tol.vertex_count != exact.vertex_count ||
-              memcmp(tol.positions, exact.positions, 3 * sizeof(float) * exact.vertex_count) != 0);
+        CHECK_EQ(st.nodes_polygonized, 1);
+        CHECK_EQ(tol.triangle_count, exact.triangle_count);
         iso_mesh_free(&exact);
         iso_mesh_free(&tol);
     }
@@ -699,6 +778,7 @@ int main(void)
     CHECK_RUN(test_tolerance_on_one_cell_bricks);
     CHECK_RUN(test_tolerance_that_coarsens_nothing_is_exact);
     CHECK_RUN(test_level_errors_are_lemma1_per_coarse_cell);
+    CHECK_RUN(test_level_codes);
     CHECK_RUN(test_cthead_guarantee_and_trend);
     return check_finish();
 }

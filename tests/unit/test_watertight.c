@@ -136,10 +136,140 @@ static void test_coarse_bricks_meet_cells(void)
     iso_vol_destroy(vol);
 }
 
+/* f = x - 1.5 on 17^3 (2 x 2 x 2 bricks, 4 x 4 x 4 blocks), one block coarse: block
+ * (0, 0, 0) at stride 4, every other block at stride 1, so its brick is marched block by
+ * block and the other bricks by the kernel. The plane crosses the cells with x in [1, 2].
+ * The coarse block is one transition cell: its faces x = 0 and x = 4 hold no crossing;
+ * y = 0 and z = 0 lie on the border, held by it alone (stride 4), one segment each; y = 4
+ * and z = 4 meet stride-1 blocks, four segments each. The loop of 10 crossings is fanned
+ * around a centre: 10 triangles. The other 15 blocks with x in [0, 4] have 4 x 4 crossed
+ * cells, 2 triangles each: 480. Vertices: the 17 x 17 crossings of the plane's x-edges but
+ * the 15 of the coarse block's 5 x 5 that its loop does not use, and the centre: 275.
+ * Every vertex is on the plane. */
+static void test_one_coarse_block_among_fine_ones(void)
+{
+    iso_volume *vol = surface_make_volume(17, 17, 17, ISO_F32);
+    for (size_t k = 0; k < 17; k++)
+        for (size_t j = 0; j < 17; j++)
+            for (size_t i = 0; i < 17; i++)
+                iso_vol_set(vol, i, j, k, (double)i - 1.5);
+    iso_vol_update_stats(vol);
+    iso_error err;
+    iso_tree *tree = surface_build(vol);
+    uint8_t plan[4 * 4 * 4] = {0};
+    plan[0] = 2;
+    iso_extract_params p = {.level = 0, .tolerance = 1, .space = ISO_SPACE_INDEX, .threads = 1};
+    iso_mesh m;
+    iso_mesh_init(&m);
+    iso_extract_stats st = {0};
+    CHECK_OK(iso_lod_extract_planned(tree, &p, plan, &m, &st, &err), &err);
+    CHECK_EQ(m.triangle_count, 490);
+    CHECK_EQ(m.vertex_count, 275);
+    CHECK_EQ(st.nodes_polygonized, 1);
+    for (size_t v = 0; v < m.vertex_count; v++)
+        CHECKF(m.positions[3 * v] == 1.5f, "vertex %zu at x = %g", v, (double)m.positions[3 * v]);
+    iso_census c;
+    CHECK_OK(iso_census_compute(vol, &m, ISO_SPACE_INDEX, &c, &err), &err);
+    CHECK(c.open_edges == 0 && c.nonmanifold_edges == 0 && c.misoriented_edges == 0 && c.degenerate_triangles == 0);
+    /* The area is the plane's, 16 x 16, whatever the triangulation. */
+    CHECK_NEAR(iso_mesh_area(&m), 256.0, 1e-3);
+    /* The fit is exact everywhere, so the tolerance's own plan takes every brick at stride
+     * 8 whole: one cell for each of the 4 bricks with x < 8 that the level crosses, two
+     * triangles each, transition cells nowhere. */
+    p.tolerance = 0.25;
+    iso_mesh_clear(&m);
+    CHECK_OK(iso_extract(tree, &p, &m, &st, &err), &err);
+    CHECK_EQ(st.cells_visited, 4);
+    CHECK_EQ(st.triangles, 4 * 2);
+    iso_mesh_free(&m);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+/* Each brick's blocks from the tolerance's own plan: one rough block of a brick at stride
+ * 1 keeps it from stride 8, and its seven smooth blocks take stride 4. Field: the plane
+ * f = 0.5x + 0.3y + 0.2z, with noise only on the samples strictly inside block (1, 1, 1)
+ * (5..7 per axis), at level 6.1, which crosses 6 of the 8 bricks. Cells: brick 0's rough
+ * block at stride 1 (64) and its 7 other blocks at stride 4 (7), the 5 other bricks at
+ * stride 8 whole (5): 76. The vertex bound holds and the mesh is sound, capped and not. */
+static void test_rough_block_keeps_only_itself_fine(void)
+{
+    iso_volume *vol = surface_make_volume(17, 17, 17, ISO_F32);
+    for (size_t k = 0; k < 17; k++)
+        for (size_t j = 0; j < 17; j++)
+            for (size_t i = 0; i < 17; i++) {
+                int rough = i >= 5 && i <= 7 && j >= 5 && j <= 7 && k >= 5 && k <= 7;
+                iso_vol_set(vol, i, j, k, 0.5 * (double)i + 0.3 * (double)j + 0.2 * (double)k + (rough ? 2 * (surface_uniform() - 0.5) : 0));
+            }
+    iso_vol_update_stats(vol);
+    iso_tree *tree = surface_build(vol);
+    /* Block (1, 1, 1) is brick 0's block 7; its 7 other blocks are exact at stride 4 up to
+     * the float rounding of the samples. */
+    double rough = iso_tree_block_error(tree, 0, 7, 1);
+    CHECKF(rough > 0.1, "the rough block's stride-2 error %g", rough);
+    CHECK(iso_tree_level_error(tree, 0) > 0.05);
+    for (int b = 0; b < 7; b++)
+        CHECK(iso_tree_block_error(tree, 0, b, 2) < 1e-3);
+    iso_mesh m;
+    iso_mesh_init(&m);
+    iso_extract_stats st;
+    for (int cap = 0; cap < 2; cap++) {
+        extract(tree, 6.1, 0.05, cap, ISO_SPACE_INDEX, &m, &st);
+        check_sound(vol, &m, &st, 6.1, 0.05, cap, "rough block");
+        CHECKF(st.error_bound <= 0.05, "bound %g", st.error_bound);
+    }
+    extract(tree, 6.1, 0.05, 0, ISO_SPACE_INDEX, &m, &st);
+    CHECK_EQ(st.cells_visited, 64 + 7 + 5);
+    CHECK_EQ(st.nodes_polygonized, 6);
+    iso_mesh_free(&m);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
 /* ---- transition cells, every configuration ---- */
 
-/* The mesh of a forced plan (one log2 stride per brick), checked for cracks, folds and
- * zero-area triangles: any plan must be watertight. */
+/* Blocks per axis of vol (tree.h: ISO_TREE_BLOCK cells each, the last clipped). */
+static size_t blocks_along(const iso_volume *vol, int d)
+{
+    return (vol->dims[d] - 1 + ISO_TREE_BLOCK - 1) / ISO_TREE_BLOCK;
+}
+
+/* A plan per block from one per brick: every block of a brick takes the brick's stride. */
+static void blocks_from_bricks(const iso_volume *vol, const uint8_t *brick_plan, uint8_t *plan)
+{
+    size_t n[3], bricks[3];
+    for (int d = 0; d < 3; d++) {
+        n[d] = blocks_along(vol, d);
+        bricks[d] = (vol->dims[d] - 2) / ISO_BRICK_CELLS + 1;
+    }
+    for (size_t z = 0; z < n[2]; z++)
+        for (size_t y = 0; y < n[1]; y++)
+            for (size_t x = 0; x < n[0]; x++)
+                plan[(z * n[1] + y) * n[0] + x] = brick_plan[((z / 2) * bricks[1] + y / 2) * bricks[0] + x / 2];
+}
+
+/* A random plan per block: a brick at stride 8 whole one time in four, else each of its
+ * blocks at stride 1, 2 or 4. */
+static void random_block_plan(const iso_volume *vol, uint8_t *plan)
+{
+    size_t n[3], bricks[3];
+    for (int d = 0; d < 3; d++) {
+        n[d] = blocks_along(vol, d);
+        bricks[d] = (vol->dims[d] - 2) / ISO_BRICK_CELLS + 1;
+    }
+    uint8_t whole[64];
+    for (size_t b = 0; b < bricks[0] * bricks[1] * bricks[2] && b < sizeof whole; b++)
+        whole[b] = surface_uniform() < 0.25;
+    for (size_t z = 0; z < n[2]; z++)
+        for (size_t y = 0; y < n[1]; y++)
+            for (size_t x = 0; x < n[0]; x++) {
+                size_t b = ((z / 2) * bricks[1] + y / 2) * bricks[0] + x / 2;
+                plan[(z * n[1] + y) * n[0] + x] = whole[b] ? 3 : (uint8_t)(surface_uniform() * 3);
+            }
+}
+
+/* The mesh of a forced plan (one log2 stride per block, tree.h), checked for cracks, folds
+ * and zero-area triangles: any plan must be watertight. */
 static void check_plan(iso_volume *vol, const uint8_t *shift, int cap, const char *what, size_t *triangles)
 {
     iso_error err;
@@ -177,7 +307,9 @@ static double side_value(int inside)
 static void test_transition_cell_every_pattern(void)
 {
     iso_volume *vol = surface_make_volume(17, 9, 9, ISO_F32);
-    static const uint8_t plan[2] = {1, 0};
+    static const uint8_t bricks[2] = {1, 0};
+    uint8_t plan[4 * 2 * 2];
+    blocks_from_bricks(vol, bricks, plan);
     size_t triangles = 0;
     for (unsigned pattern = 0; pattern < (1u << 13) && !check_failed(); pattern++) {
         for (size_t k = 0; k < 9; k++)
@@ -198,12 +330,13 @@ static void test_transition_cell_every_pattern(void)
     iso_vol_destroy(vol);
 }
 
-/* Random plans (strides 1 to 8 per brick, so faces, edges and corners between any two) on
- * random fields, uncapped and capped: 4 x 2 x 2 bricks, the far ones clipped. */
+/* Random plans (strides 1, 2, 4 per block, 8 per brick, so faces, edges and corners
+ * between any two, inside a brick and across bricks) on random fields, uncapped and
+ * capped: 4 x 2 x 2 bricks, 8 x 4 x 3 blocks, the far ones clipped. */
 static void test_random_plans(void)
 {
     iso_volume *vol = surface_make_volume(31, 17, 12, ISO_F32);
-    uint8_t plan[4 * 3 * 2];
+    uint8_t plan[8 * 4 * 3];
     size_t triangles = 0;
     for (int trial = 0; trial < 300 && !check_failed(); trial++) {
         double w[3] = {0.2 + surface_uniform(), 0.2 + surface_uniform(), 0.2 + surface_uniform()};
@@ -214,8 +347,7 @@ static void test_random_plans(void)
                     iso_vol_set(vol, i, j, k, v + (trial % 3 == 0 ? surface_uniform() - 0.5 : 0) + 0.01234);
                 }
         iso_vol_update_stats(vol);
-        for (size_t b = 0; b < sizeof plan; b++)
-            plan[b] = (uint8_t)(surface_uniform() * 4);
+        random_block_plan(vol, plan);
         char what[64];
         snprintf(what, sizeof what, "random plan %d", trial);
         check_plan(vol, plan, trial & 1, what, &triangles);
@@ -247,12 +379,11 @@ static void test_centres_on_a_trilinear_field(void)
     iso_error err;
     iso_tree *tree;
     CHECK_OK(iso_tree_build(vol, 1, NULL, NULL, &tree, &err), &err);
-    uint8_t plan[4 * 3 * 2];
+    uint8_t plan[8 * 4 * 3];
     size_t centres = 0;
     double worst = 0, slack = surface_rounding_slack(vol);
     for (int trial = 0; trial < 400 && tree && !check_failed(); trial++) {
-        for (size_t b = 0; b < sizeof plan; b++)
-            plan[b] = (uint8_t)(surface_uniform() * 4);
+        random_block_plan(vol, plan);
         double level = vol->value_min + (vol->value_max - vol->value_min) * (0.3 + 0.4 * surface_uniform());
         iso_extract_params p = {.level = level, .tolerance = 1, .cap = trial & 1, .space = ISO_SPACE_INDEX};
         iso_mesh m;
@@ -505,6 +636,8 @@ int main(void)
 {
     CHECK_RUN(test_plane_is_one_coarse_cell);
     CHECK_RUN(test_coarse_bricks_meet_cells);
+    CHECK_RUN(test_one_coarse_block_among_fine_ones);
+    CHECK_RUN(test_rough_block_keeps_only_itself_fine);
     CHECK_RUN(test_transition_cell_every_pattern);
     CHECK_RUN(test_random_plans);
     CHECK_RUN(test_centres_on_a_trilinear_field);
