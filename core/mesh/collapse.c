@@ -37,6 +37,11 @@ typedef struct quadric {
     double a00, a01, a02, a11, a12, a22, b0, b1, b2, c, w;
 } quadric;
 
+typedef struct heap_entry {
+    double key;              /* the vertex's key, as in key[] */
+    uint32_t v;
+} heap_entry;
+
 struct iso_collapser {
     const float *pos;
     uint32_t *tri;           /* the triangles' corners, relabelled as vertices collapse */
@@ -44,7 +49,8 @@ struct iso_collapser {
     uint32_t *head, *next;   /* per vertex its first corner, per corner the next (NONE ends) */
     unsigned char *flags;    /* per vertex: LOCKED, REMOVED */
     quadric *q;
-    uint32_t *heap, *slot;   /* a binary min-heap of vertices, each vertex's place in it */
+    heap_entry *heap;        /* a binary min-heap of vertices */
+    uint32_t *slot;          /* each vertex's place in it */
     double *key;             /* per vertex: its cheapest collapse's cost */
     uint32_t *to;            /* per vertex: that collapse's target */
     size_t heap_count;
@@ -75,57 +81,60 @@ void iso_collapser_destroy(collapser *c)
 
 /* ---- the heap ---- */
 
-static void heap_place(collapser *c, size_t i, uint32_t v)
+/* Each entry carries its key, so that a sift compares children without a load from the
+ * per-vertex keys (a cache miss each, visited in cost order). */
+static void heap_place(collapser *c, size_t i, heap_entry e)
 {
-    c->heap[i] = v;
-    c->slot[v] = (uint32_t)i;
+    c->heap[i] = e;
+    c->slot[e.v] = (uint32_t)i;
 }
 
 static void heap_up(collapser *c, size_t i)
 {
-    uint32_t v = c->heap[i];
+    heap_entry e = c->heap[i];
     while (i > 0) {
         size_t parent = (i - 1) / 2;
-        if (!(c->key[c->heap[parent]] > c->key[v]))
+        if (!(c->heap[parent].key > e.key))
             break;
         heap_place(c, i, c->heap[parent]);
         i = parent;
     }
-    heap_place(c, i, v);
+    heap_place(c, i, e);
 }
 
 static void heap_down(collapser *c, size_t i)
 {
-    uint32_t v = c->heap[i];
+    heap_entry e = c->heap[i];
     for (;;) {
         size_t child = 2 * i + 1;
         if (child >= c->heap_count)
             break;
-        if (child + 1 < c->heap_count && c->key[c->heap[child + 1]] < c->key[c->heap[child]])
+        if (child + 1 < c->heap_count && c->heap[child + 1].key < c->heap[child].key)
             child++;
-        if (!(c->key[c->heap[child]] < c->key[v]))
+        if (!(c->heap[child].key < e.key))
             break;
         heap_place(c, i, c->heap[child]);
         i = child;
     }
-    heap_place(c, i, v);
+    heap_place(c, i, e);
 }
 
 /* v enters the heap, or moves in it, with cost key. */
 static void heap_set(collapser *c, uint32_t v, double key)
 {
+    c->key[v] = key;
     if (c->slot[v] == NONE) {
-        c->key[v] = key;
-        heap_place(c, c->heap_count++, v);
+        heap_place(c, c->heap_count++, (heap_entry){key, v});
         heap_up(c, c->heap_count - 1);
         return;
     }
-    double old = c->key[v];
-    c->key[v] = key;
+    size_t i = c->slot[v];
+    double old = c->heap[i].key;
+    c->heap[i].key = key;
     if (key < old)
-        heap_up(c, c->slot[v]);
+        heap_up(c, i);
     else
-        heap_down(c, c->slot[v]);
+        heap_down(c, i);
 }
 
 static void heap_remove(collapser *c, uint32_t v)
@@ -134,12 +143,12 @@ static void heap_remove(collapser *c, uint32_t v)
     if (i == NONE)
         return;
     c->slot[v] = NONE;
-    uint32_t last = c->heap[--c->heap_count];
+    heap_entry last = c->heap[--c->heap_count];
     if (i == c->heap_count)
         return;
     heap_place(c, i, last);
     heap_up(c, i);
-    heap_down(c, c->slot[last]);
+    heap_down(c, c->slot[last.v]);
 }
 
 /* ---- quadrics ---- */
@@ -173,7 +182,7 @@ static void quadric_join(quadric *into, const quadric *q)
 }
 
 /* The mean squared distance of q's planes from p, weighted by area. */
-static double quadric_error(const quadric *q, const float *p)
+static inline double quadric_error(const quadric *q, const float *p)
 {
     double x = p[0], y = p[1], z = p[2];
     double e = q->a00 * x * x + q->a11 * y * y + q->a22 * z * z +
@@ -182,7 +191,7 @@ static double quadric_error(const quadric *q, const float *p)
     return q->w > 0 ? fabs(e) / q->w : 0;
 }
 
-static double cost_of(const collapser *c, uint32_t u, uint32_t v)
+static inline double cost_of(const collapser *c, uint32_t u, uint32_t v)
 {
     return quadric_error(&c->q[u], c->pos + 3 * (size_t)v);
 }
@@ -190,12 +199,14 @@ static double cost_of(const collapser *c, uint32_t u, uint32_t v)
 /* The corner after and before corner k of its triangle. */
 static uint32_t after(const collapser *c, uint32_t k)
 {
-    return c->tri[k - k % 3 + (k % 3 + 1) % 3];
+    uint32_t r = k % 3;
+    return c->tri[r == 2 ? k - 2 : k + 1];
 }
 
 static uint32_t before(const collapser *c, uint32_t k)
 {
-    return c->tri[k - k % 3 + (k % 3 + 2) % 3];
+    uint32_t r = k % 3;
+    return c->tri[r == 0 ? k + 2 : k - 1];
 }
 
 /* PASS 4: u's cheapest collapse, its topology not checked (a lower bound of the allowed
@@ -209,9 +220,10 @@ static void order(collapser *c, uint32_t u)
     }
     double best = INFINITY;
     uint32_t to = NONE;
+    const quadric q = c->q[u]; /* in registers across the walk */
     for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
         uint32_t x = after(c, k);
-        double e = cost_of(c, u, x);
+        double e = quadric_error(&q, c->pos + 3 * (size_t)x);
         if (e < best)
             best = e, to = x;
     }
@@ -397,38 +409,38 @@ static void reorder(collapser *c, uint32_t u)
 
 /* PASS 2 for vertex u: 0 when its edges are each used once each way and its triangles
  * make one fan, BORDER when two of its edges are open and its triangles one fan from one
- * to the other, PINCHED otherwise. */
+ * to the other, PINCHED otherwise. xs and ys (room for u's valence) receive each of u's
+ * triangles' corner after and before u, so that the pairwise checks run on the stack's
+ * cache lines instead of walking the corner list again for each triangle. */
 #define BORDER 1
 #define PINCHED 2
-static int kind_of(const collapser *c, uint32_t u)
+static int kind_of(const collapser *c, uint32_t u, uint32_t *xs, uint32_t *ys)
 {
-    size_t n = 0, open = 0;
-    uint32_t start = c->head[u];
-    for (uint32_t k = c->head[u]; k != NONE; k = c->next[k]) {
-        uint32_t x = after(c, k), y = before(c, k);
+    size_t n = 0, open = 0, start = 0;
+    for (uint32_t k = c->head[u]; k != NONE; k = c->next[k])
+        xs[n] = after(c, k), ys[n++] = before(c, k);
+    for (size_t i = 0; i < n; i++) {
         size_t forward = 0, backward = 0, into = 0;
-        for (uint32_t j = c->head[u]; j != NONE; j = c->next[j])
-            forward += after(c, j) == x, backward += before(c, j) == x, into += after(c, j) == y;
+        for (size_t j = 0; j < n; j++)
+            forward += xs[j] == xs[i], backward += ys[j] == xs[i], into += xs[j] == ys[i];
         if (forward != 1 || backward > 1)
             return PINCHED;
         open += !backward;
         if (!into) /* no triangle leads into this one: an open fan starts here */
-            start = k;
-        n++;
+            start = i;
     }
     if (n < 3 || (open != 0 && open != 1))
         return PINCHED;
     /* One fan: walking from triangle to triangle across u's edges meets all n. */
-    uint32_t k = start;
-    size_t steps = 0;
+    size_t i = start, steps = 0;
     do {
-        uint32_t x = after(c, k), j;
-        for (j = c->head[u]; j != NONE && before(c, j) != x; j = c->next[j])
-            ;
-        k = j;
+        size_t j = 0;
+        while (j < n && ys[j] != xs[i])
+            j++;
+        i = j;
         steps++;
-    } while (k != NONE && k != start && steps <= n);
-    if (steps != n || (open ? k != NONE : k != start))
+    } while (i < n && i != start && steps <= n);
+    if (steps != n || (open ? i < n : i != start))
         return PINCHED;
     return open ? BORDER : 0;
 }
@@ -478,16 +490,43 @@ int iso_collapser_create(const iso_mesh *mesh, collapser **out, int *pinch_free)
             quadric_join(&c->q[x[k]], &q);
     }
     /* PASS 2, then PASS 4 over the free vertices */
+    size_t most = 0; /* the largest valence: kind_of's scratch */
+    for (uint32_t v = 0; v < mesh->vertex_count; v++) {
+        size_t n = 0;
+        for (uint32_t k = c->head[v]; k != NONE; k = c->next[k])
+            n++;
+        most = n > most ? n : most;
+    }
+    uint32_t *scratch = malloc(2 * (most + 1) * sizeof *scratch);
+    if (!scratch) {
+        iso_collapser_destroy(c);
+        *out = NULL;
+        return ISO_E_NOMEM;
+    }
     *pinch_free = 1;
     for (uint32_t v = 0; v < mesh->vertex_count; v++) {
-        int kind = c->head[v] == NONE ? 0 : kind_of(c, v);
+        int kind = c->head[v] == NONE ? 0 : kind_of(c, v, scratch, scratch + most + 1);
         c->flags[v] |= kind ? LOCKED : 0;
         c->flags[v] |= kind == BORDER ? ON_BORDER : 0;
         *pinch_free &= kind != PINCHED;
     }
+    free(scratch);
+    /* PASS 4 as order() would make it, over the corners in turn rather than vertex by
+     * vertex (the same first cheapest: a vertex's corner list runs in corner order), so
+     * that the triangles are read once in memory order. */
+    for (size_t v = 0; v < mesh->vertex_count; v++)
+        c->key[v] = INFINITY, c->to[v] = NONE;
+    for (uint32_t k = 0; k < 3 * mesh->triangle_count; k++) {
+        uint32_t u = c->tri[k];
+        if (c->flags[u] & LOCKED)
+            continue;
+        double e = cost_of(c, u, after(c, k));
+        if (e < c->key[u])
+            c->key[u] = e, c->to[u] = after(c, k);
+    }
     for (uint32_t v = 0; v < mesh->vertex_count; v++)
-        if (c->head[v] != NONE)
-            order(c, v);
+        if (c->to[v] != NONE)
+            heap_set(c, v, c->key[v]);
     return 0;
 }
 
@@ -496,8 +535,8 @@ size_t iso_collapser_run(collapser *c, size_t target_triangles, double target_er
     /* PASS 5 */
     double limit = target_error * target_error;
     while (c->alive > target_triangles && c->heap_count) {
-        uint32_t u = c->heap[0], a, b;
-        if (c->key[u] > limit)
+        uint32_t u = c->heap[0].v, a, b;
+        if (c->heap[0].key > limit)
             break;
         int ok = allowed(c, u, c->to[u], &a, &b);
         if (!ok) {
@@ -524,7 +563,7 @@ void iso_collapser_triangles(const collapser *c, uint32_t *out)
 
 double iso_collapser_next(const collapser *c)
 {
-    return c->heap_count ? sqrt(c->key[c->heap[0]]) : INFINITY;
+    return c->heap_count ? sqrt(c->heap[0].key) : INFINITY;
 }
 
 double iso_collapser_error(const collapser *c)
