@@ -1,7 +1,8 @@
 /* tree.c: building, saving and mapping the hierarchy of trilinear fits (see tree.h).
  *
  * PASS 1 (layout): walk the split rule breadth-first from the root, one box per node,
- *   until bricks; children of node n are appended together, so first_child is known.
+ *   until bricks; children of node n are appended together, at child[n] (kept only while
+ *   building: a loaded tree walks the same rule again, and extraction needs no child).
  * PASS 2 (fit): deepest nodes first, each node's min, max and the Lemma 1 error of the
  *   trilinear through its corners: bricks by scanning their samples, the nodes above by
  *   their children's min and max and a branch and bound over the bricks below them for
@@ -178,8 +179,16 @@ void iso_tree_scan_box(const iso_volume *vol, const iso_box *box, double *min, d
 typedef struct layout {
     iso_tree_node *nodes;
     iso_box *boxes;
+    uint32_t *child; /* node n's children are child[n] and child[n] + 1; 0: a brick leaf */
     size_t count, capacity;
 } layout;
+
+static void layout_free(layout *l)
+{
+    free(l->nodes);
+    free(l->boxes);
+    free(l->child);
+}
 
 static int layout_push(layout *l, const iso_box *b)
 {
@@ -193,9 +202,14 @@ static int layout_push(layout *l, const iso_box *b)
         if (!bx)
             return ISO_E_NOMEM;
         l->boxes = bx;
+        uint32_t *ch = realloc(l->child, cap * sizeof *ch);
+        if (!ch)
+            return ISO_E_NOMEM;
+        l->child = ch;
         l->capacity = cap;
     }
     memset(&l->nodes[l->count], 0, sizeof l->nodes[0]);
+    l->child[l->count] = 0;
     l->boxes[l->count++] = *b;
     return 0;
 }
@@ -210,7 +224,7 @@ static int lay_out(const iso_volume *vol, layout *l)
         if (iso_box_is_brick(&box))
             continue;
         iso_box_split(&box, &left, &right);
-        l->nodes[n].first_child = (uint32_t)l->count;
+        l->child[n] = (uint32_t)l->count;
         if (layout_push(l, &left) || layout_push(l, &right))
             return ISO_E_NOMEM;
     }
@@ -376,12 +390,12 @@ static double error_by_bounds(const fit_ctx *f, size_t n)
         uint32_t q = stack[--top].node;
         if (stack[top].bound + margin <= best)
             continue;
-        if (q != n && !nodes[q].first_child) {
+        if (q != n && !f->l->child[q]) {
             scan_brick(f, frame, c, inv, &f->l->boxes[q], margin, &best);
             continue;
         }
         /* The child with the larger bound goes on top: it is the likelier to raise best. */
-        uint32_t ch[2] = {nodes[q].first_child, nodes[q].first_child + 1};
+        uint32_t ch[2] = {f->l->child[q], f->l->child[q] + 1};
         double b[2];
         for (int i = 0; i < 2; i++)
             b[i] = bound_below(f->vol, frame, c, inv, &nodes[ch[i]], &f->l->boxes[ch[i]]);
@@ -406,7 +420,7 @@ static void fit_node(fit_ctx *f, size_t n)
     layout *l = f->l;
     iso_tree_node *node = &l->nodes[n];
     double mn, mx, er;
-    if (!node->first_child) {
+    if (!l->child[n]) {
         iso_tree_scan_box(f->vol, &l->boxes[n], &mn, &mx, &er);
         node->min = mn <= mx ? iso_float_down(mn) : INFINITY; /* all-NaN box: never active */
         node->max = mn <= mx ? iso_float_up(mx) : -INFINITY;
@@ -414,7 +428,7 @@ static void fit_node(fit_ctx *f, size_t n)
         leaf_octants(f, &l->boxes[n]);
         return;
     }
-    const iso_tree_node *a = &l->nodes[node->first_child], *b = a + 1;
+    const iso_tree_node *a = &l->nodes[l->child[n]], *b = a + 1;
     node->min = a->min < b->min ? a->min : b->min;
     node->max = a->max > b->max ? a->max : b->max;
     double magnitude = fmax(fabs((double)node->min), fabs((double)node->max));
@@ -459,8 +473,8 @@ static int fit_all(const iso_volume *vol, layout *l, int threads, iso_progress_f
     }
     depth[0] = 0;
     for (size_t n = 0; n < l->count; n++)
-        if (l->nodes[n].first_child)
-            depth[l->nodes[n].first_child] = depth[l->nodes[n].first_child + 1] = (unsigned char)(depth[n] + 1);
+        if (l->child[n])
+            depth[l->child[n]] = depth[l->child[n] + 1] = (unsigned char)(depth[n] + 1);
     fit_job job = {.f = &f};
     for (size_t last = l->count; last > 0;) {
         size_t first = last;
@@ -494,7 +508,7 @@ static int bricks_from_leaves(const iso_volume *vol, const iso_tree *tree, const
     if (rc)
         return rc;
     for (size_t n = 0; n < tree->node_count; n++) {
-        if (tree->nodes[n].first_child)
+        if (l->child[n])
             continue;
         size_t at = brick_of(b.count, &l->boxes[n]);
         b.min[at] = tree->nodes[n].min;
@@ -534,18 +548,16 @@ int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress,
     iso_tree_scale_make((double)tree->nodes[0].max - (double)tree->nodes[0].min, &tree->scale);
     if (!rc)
         rc = iso_levels_build(vol, &tree->bricks, &tree->scale, threads, &tree->level_code, err);
+    layout_free(&l);
     if (rc) {
         iso_tree_destroy(tree);
-        free(l.boxes);
         return rc;
     }
     tree->build_ms = iso_clock_ms() - start;
-    free(l.boxes);
     *out = tree;
     return 0;
 nomem:
-    free(l.nodes);
-    free(l.boxes);
+    layout_free(&l);
     return iso_error_set(err, ISO_E_NOMEM, "out of memory building the hierarchy");
 }
 
@@ -594,9 +606,10 @@ uint32_t iso_tree_volume_crc(const iso_volume *vol)
 /* 2: splits above brick size aligned to the brick grid; 3: the bricks' fan floors after
  * the nodes; 4: the bricks' level errors instead (tree.h), so that loading need not
  * compute them again; 5: those errors in 2 bytes each; 6: one-byte codes, per block at
- * levels 1 and 2 and per brick at level 3. An older file is refused as stale, and the
+ * levels 1 and 2 and per brick at level 3; 7: nodes of 12 bytes (no child index: the
+ * layout follows from the dims). An older file is refused as stale, and the
  * caller rebuilds it. */
-#define TREE_VERSION 6
+#define TREE_VERSION 7
 
 typedef struct tree_header {
     char magic[8];          /* "ISOTREE\0" */
@@ -641,15 +654,14 @@ int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err)
     return iso_file_replace(path, parts, sizeof parts / sizeof *parts, err);
 }
 
-/* The nodes must be exactly what lay_out gives for these dims, with sane values: a file
+/* The nodes must be as many as lay_out gives for these dims, with sane values: a file
  * that passes its checksums but was written by a different rule is still refused. */
 static int check_structure(const iso_volume *vol, const iso_tree_node *nodes, size_t count,
                            const char *path, iso_error *err)
 {
     layout l = {0};
     if (lay_out(vol, &l)) {
-        free(l.nodes);
-        free(l.boxes);
+        layout_free(&l);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory checking %s", path);
     }
     int rc = 0;
@@ -657,12 +669,10 @@ static int check_structure(const iso_volume *vol, const iso_tree_node *nodes, si
         rc = iso_error_set(err, ISO_E_CORRUPT, "%s: %zu nodes, the volume's hierarchy has %zu", path, count, l.count);
     for (size_t n = 0; rc == 0 && n < count; n++) {
         const iso_tree_node *node = &nodes[n];
-        if (node->first_child != l.nodes[n].first_child || !(node->err >= 0) ||
-            (node->min > node->max && !(node->min == INFINITY && node->max == -INFINITY)))
+        if (!(node->err >= 0) || (node->min > node->max && !(node->min == INFINITY && node->max == -INFINITY)))
             rc = iso_error_set(err, ISO_E_CORRUPT, "%s: node %zu is inconsistent", path, n);
     }
-    free(l.nodes);
-    free(l.boxes);
+    layout_free(&l);
     return rc;
 }
 

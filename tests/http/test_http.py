@@ -207,11 +207,11 @@ def main_tests(s, tmp, blob):
         assert r.status == 200 and len(h["counts"]) == 256 and sum(h["counts"]) == blob.size
         top = int(np.floor((blob.max() - h["min"]) / (h["max"] - h["min"]) * 256))
         assert h["counts"][255] >= 1 and top >= 255
-        # 16 bytes per kd-tree node plus, per brick of 8^3 cells, its float min and max and
+        # 12 bytes per kd-tree node plus, per brick of 8^3 cells, its float min and max and
         # its 17 one-byte level codes, and the codes' 256-value scale (core/hierarchy/tree.h).
         bricks = int(np.prod([-(-(d - 1) // 8) for d in v["dims"]]))
         assert v["hierarchy"]["nodes"] >= 1 and \
-            v["hierarchy"]["bytes"] == 16 * v["hierarchy"]["nodes"] + 25 * bricks + 256 * 8, \
+            v["hierarchy"]["bytes"] == 12 * v["hierarchy"]["nodes"] + 25 * bricks + 256 * 8, \
             (v["hierarchy"], bricks)
         assert v["hierarchy"]["share_of_volume"] < 0.1, v["hierarchy"]
         assert v["preview_tolerance"] == (v["value_range"][1] - v["value_range"][0]) / 2, v["preview_tolerance"]

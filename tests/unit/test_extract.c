@@ -379,7 +379,7 @@ static void test_tree_file_round_trip_and_refusals(void)
         {"flipped node byte", 64 + 5, 1, 0, ISO_E_CORRUPT},
         {"flipped header byte", 20, 1, 0, ISO_E_CORRUPT},
         {"bad magic", 0, 1, 0, ISO_E_FORMAT},
-        {"truncated nodes", 0, 0, 64 + 16 * 3, ISO_E_CORRUPT},
+        {"truncated nodes", 0, 0, 64 + (long)sizeof(iso_tree_node) * 3, ISO_E_CORRUPT},
         {"truncated header", 0, 0, 40, ISO_E_FORMAT},
     };
     char bad[560];

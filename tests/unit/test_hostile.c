@@ -335,7 +335,7 @@ static void test_tree_file_damage_exact(void)
     long size = file_size(good);
     size_t bricks = iso_bricks_total(&tree->bricks);
     long levels = ISO_TREE_CODES * (long)bricks; /* one-byte level codes per brick and block */
-    CHECK_EQ(size, 64 + 16 * (long)tree->node_count + levels); /* nodes, then level errors */
+    CHECK_EQ(size, 64 + 12 * (long)tree->node_count + levels); /* nodes, then level errors */
     char format[256];
     const char *bad = temp_path("bad.isotree");
 

@@ -11,7 +11,8 @@
 #include "check.h"
 #include "surface.h"
 
-/* Every node against a scan of its box. */
+/* Every node against a scan of its box. The boxes in breadth-first order (tree.h): a
+ * node that is not a brick appends its two children. */
 static void check_nodes_match_scans(const iso_volume *vol, const iso_tree *tree)
 {
     iso_box *boxes = malloc(tree->node_count * sizeof *boxes);
@@ -19,11 +20,16 @@ static void check_nodes_match_scans(const iso_volume *vol, const iso_tree *tree)
     if (!boxes)
         return;
     boxes[0] = iso_box_root(vol);
-    size_t wrong = 0;
+    size_t wrong = 0, laid = 1;
     for (size_t n = 0; n < tree->node_count; n++) {
         const iso_tree_node *node = &tree->nodes[n];
-        if (node->first_child)
-            iso_box_split(&boxes[n], &boxes[node->first_child], &boxes[node->first_child + 1]);
+        if (!iso_box_is_brick(&boxes[n])) {
+            CHECK(laid + 2 <= tree->node_count);
+            if (laid + 2 > tree->node_count)
+                break;
+            iso_box_split(&boxes[n], &boxes[laid], &boxes[laid + 1]);
+            laid += 2;
+        }
         double mn, mx, er;
         iso_tree_scan_box(vol, &boxes[n], &mn, &mx, &er);
         float want_min = mn <= mx ? iso_float_down(mn) : INFINITY, want_max = mn <= mx ? iso_float_up(mx) : -INFINITY;
@@ -36,6 +42,7 @@ static void check_nodes_match_scans(const iso_volume *vol, const iso_tree *tree)
         }
     }
     CHECKF(wrong == 0, "%zu of %zu nodes differ from their scans", wrong, tree->node_count);
+    CHECK_EQ(laid, tree->node_count);
     free(boxes);
 }
 
