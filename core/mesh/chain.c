@@ -248,12 +248,13 @@ static int measure_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid,
 {
     const iso_mesh_chain_level *prev = &chain->level[k - 1];
     iso_mesh_chain_level *lv = &chain->level[k];
-    iso_mesh_distance_reuse reuse = {0};
+    iso_mesh_distance_reuse reuse = {.without_mean = 1};
     double *next = lv->offset == 0 ? malloc((lv->triangle_count + 1) * sizeof *next) : NULL;
     if (next && (k == 1 || *bound))
         reuse = (iso_mesh_distance_reuse){.prior_indices = prev->indices,
                                           .prior_triangles = prev->triangle_count,
-                                          .prior_bound = k == 1 ? NULL : *bound};
+                                          .prior_bound = k == 1 ? NULL : *bound,
+                                          .without_mean = 1};
     reuse.bound = next;
     iso_mesh exact = view_of(chain, 0);
     int rc = iso_mesh_distance_between(&exact, exact_grid, level, NULL,

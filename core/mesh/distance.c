@@ -19,7 +19,10 @@
  *      sample's cell until no farther ring can hold anything nearer, or until one holds a
  *      triangle at distance d, then the cells of the box p +- d not scanned yet; when that
  *      box reaches past three rings, the coarse grid's likewise; the largest of these
- *      distances starts the maximum M;
+ *      distances starts the maximum M. When the caller wants no mean and the points were
+ *      drawn, each drawn point first gets a cheap bound (its hint's triangle, the nearest
+ *      of its own cell), and only those that may lie in the top 1% are searched in full,
+ *      largest bound first (select_top): the p99 and M come out the same bit for bit;
  *   5. maximum: every sample of pass 2 not measured in pass 4, searched only until some
  *      triangle lies within M (the nearest triangle of the previous sample is tried first):
  *      such a sample cannot raise the maximum; any other gets its exact distance and
@@ -508,9 +511,12 @@ static int subdivisions(const double c[3][3], double spacing)
         double d[3];
         for (int k = 0; k < 3; k++)
             d[k] = c[(e + 1) % 3][k] - c[e][k];
-        longest = fmax(longest, sqrt(dot(d, d)));
+        double l = dot(d, d);
+        longest = l > longest ? l : longest;
     }
-    double n = spacing > 0 ? ceil(longest / spacing) : 1;
+    if (longest <= spacing * spacing * (1 - 1e-9)) /* uncut, whatever the rounding below */
+        return 1;
+    double n = spacing > 0 ? ceil(sqrt(longest) / spacing) : 1;
     return n < 1 ? 1 : n > 256 ? 256 : (int)n;
 }
 
@@ -538,6 +544,7 @@ typedef struct direction {
     float *dist, *weight;     /* per percentile sample */
     double start_max;         /* the largest percentile sample's distance (PASS 5) */
     int exhaustive;           /* PASS 5 without block tests (for checks) */
+    int select;               /* PASS 4 by select_top (drawn points, no mean wanted) */
     double part_max[ISO_PARALLEL_MAX_THREADS];
     int part_failed[ISO_PARALLEL_MAX_THREADS]; /* a share had no memory for its points */
 } direction;
@@ -597,6 +604,89 @@ static void draw(const direction *d, size_t i, double p[3])
         p[k] = (1 - s) * c[0][k] + s * (1 - t) * c[1][k] + s * t * c[2][k];
 }
 
+/* PASS 4's cheap bound when selecting (direction.select): the distance to the hint's
+ * triangle or to the nearest of p's own fine cell, whichever is less; the hint becomes
+ * that triangle. */
+static void bound_nearby(const iso_mesh_grid *ix, const double p[3], uint32_t *hint, search *s)
+{
+    const grid *g = &ix->fine;
+    if (*hint != NO_TRIANGLE) {
+        double tc[3][3];
+        corners_of(ix->corners + 9 * (size_t)*hint, tc);
+        s->best = point_triangle_sq(p, tc), s->triangle = *hint;
+    }
+    search_cell(g, ix, cell_index(g, cell_of(g, p[0], 0), cell_of(g, p[1], 1), cell_of(g, p[2], 2)), p, s);
+    *hint = s->triangle;
+}
+
+static int by_bound_down(const void *pa, const void *pb)
+{
+    float a = ((const float *)pa)[0], b = ((const float *)pb)[0];
+    return (a < b) - (a > b);
+}
+
+/* A min-heap of n floats: v pushed, the least dropped past `cap` of them. */
+static void heap_push(float *h, size_t *n, size_t cap, float v)
+{
+    size_t i = *n;
+    if (i == cap) {
+        if (v <= h[0])
+            return;
+        i = 0; /* v replaces the least and sinks */
+        for (size_t c = 1; c < cap; i = c, c = 2 * c + 1) {
+            c += c + 1 < cap && h[c + 1] < h[c];
+            if (h[c] >= v)
+                break;
+            h[i] = h[c];
+        }
+        h[i] = v;
+        return;
+    }
+    for (++*n; i > 0 && h[(i - 1) / 2] > v; i = (i - 1) / 2)
+        h[i] = h[(i - 1) / 2];
+    h[i] = v;
+}
+
+/* PASS 4's selection, after the cheap bounds (d->dist holds them): the drawn points weigh
+ * 1 each, so the 99th percentile is the K-th largest distance, K = drawn - ceil(0.99
+ * drawn) + 1. Points are measured exactly in order of their bounds, largest first, until
+ * the next bound lies below the K-th largest exact distance so far (theta, with a margin
+ * for rounding): no point left can be farther than theta, so theta is the K-th largest of
+ * all, and each point left keeps its bound, which is below it. The percentile and the
+ * largest distance of pass 6 are then what measuring every point gives, bit for bit;
+ * the mean is not (the caller did not ask for it). Returns 0 or ISO_E_NOMEM. */
+static int select_top(direction *d)
+{
+    size_t n = d->drawn, K = n - (size_t)ceil(0.99 * (double)n) + 1, count = 0;
+    float *pairs = malloc(2 * n * sizeof *pairs), *heap = malloc(K * sizeof *heap);
+    if (!pairs || !heap) {
+        free(pairs);
+        free(heap);
+        return ISO_E_NOMEM;
+    }
+    for (size_t i = 0; i < n; i++) {
+        uint32_t at = (uint32_t)i;
+        pairs[2 * i] = d->dist[i];
+        memcpy(&pairs[2 * i + 1], &at, sizeof at);
+    }
+    qsort(pairs, n, 2 * sizeof *pairs, by_bound_down);
+    for (size_t i = 0; i < n; i++) {
+        if (count == K && (double)pairs[2 * i] * (1 + 1e-6) < heap[0])
+            break;
+        uint32_t at;
+        memcpy(&at, &pairs[2 * i + 1], sizeof at);
+        double p[3];
+        draw(d, at, p);
+        search s = {INFINITY, NO_TRIANGLE, 0};
+        nearest(d->dst, p, 0, &s);
+        d->dist[at] = (float)sqrt(s.best);
+        heap_push(heap, &count, K, d->dist[at]);
+    }
+    free(pairs);
+    free(heap);
+    return 0;
+}
+
 /* PASS 4 on one thread's share of the percentile samples. */
 static void measure_percentile(void *context, int part, int parts)
 {
@@ -604,11 +694,15 @@ static void measure_percentile(void *context, int part, int parts)
     const iso_mesh *m = d->src;
     if (d->drawn) {
         size_t i0 = d->drawn * (size_t)part / (size_t)parts, i1 = d->drawn * (size_t)(part + 1) / (size_t)parts;
+        uint32_t hint = NO_TRIANGLE;
         for (size_t i = i0; i < i1; i++) {
             double p[3];
             draw(d, i, p);
             search s = {INFINITY, NO_TRIANGLE, 0};
-            nearest(d->dst, p, 0, &s);
+            if (d->select)
+                bound_nearby(d->dst, p, &hint, &s);
+            else
+                nearest(d->dst, p, 0, &s);
             d->dist[i] = (float)sqrt(s.best);
             d->weight[i] = 1;
         }
@@ -629,7 +723,7 @@ static void measure_percentile(void *context, int part, int parts)
             nearest(d->dst, pts[k], 0, &s);
             d->dist[d->first[t] + (size_t)k] = (float)sqrt(s.best);
             d->weight[d->first[t] + (size_t)k] = (float)w;
-            bound = fmax(bound, s.best);
+            bound = s.best > bound ? s.best : bound;
         }
         if (d->bound)
             d->bound[t] = bound;
@@ -711,9 +805,12 @@ static void box_add(float lo[3], float hi[3], const float *p)
 /* The box of source triangles t0..t1 - 1's corners. */
 static void triangles_box(const iso_mesh *m, size_t t0, size_t t1, float lo[3], float hi[3])
 {
-    box_open(lo, hi);
+    float l[3], h[3]; /* not lo and hi: the positions may not alias them */
+    box_open(l, h);
     for (size_t i = 3 * t0; i < 3 * t1; i++)
-        box_add(lo, hi, m->positions + 3 * (size_t)m->indices[i]);
+        box_add(l, h, m->positions + 3 * (size_t)m->indices[i]);
+    memcpy(lo, l, sizeof l);
+    memcpy(hi, h, sizeof h);
 }
 
 /* PASS 5 for source triangle t's centroids (pts: room for them). A triangle whose known
@@ -735,11 +832,17 @@ static double raise_max_triangle(const direction *d, size_t t, double (*pts)[3],
             return bound;
     }
     triangle_corners(d->src, t, c);
-    int count = centroids(c, n, pts);
-    for (int k = 0; k < count; k++) {
-        double own = known == KNOWN_OWN ? point_triangle_sq(pts[k], c) : INFINITY;
-        bound = fmax(bound, own <= *max ? own : raise_max(d->dst, pts[k], hint, max));
-    }
+    centroids(c, n, pts);
+    /* In an order where each sample lies next to the one before, so that its nearest
+     * triangle is the likelier hint: row by row (rows start at `up` and `down` in pts),
+     * each row's upward and downward sub-triangles alternating, every other row backwards. */
+    for (int i = 0, up = 0, down = n * (n + 1) / 2; i < n; up += n - i, down += n - 1 - i, i++)
+        for (int q = 0, m = 2 * (n - i) - 1; q < m; q++) {
+            int r = i % 2 ? m - 1 - q : q, k = r % 2 ? down + r / 2 : up + r / 2;
+            double own = known == KNOWN_OWN ? point_triangle_sq(pts[k], c) : INFINITY;
+            double u = own <= *max ? own : raise_max(d->dst, pts[k], hint, max);
+            bound = u > bound ? u : bound;
+        }
     return bound;
 }
 
@@ -987,12 +1090,15 @@ static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh
     direction d = {.src = src, .dst = dst, .first = first, .area = area, .vertices = vertices,
                    .vertex_count = vertex_count, .drawn = drawn, .dist = dist, .weight = weight,
                    .known = known, .bound = reuse ? reuse->bound : NULL,
-                   .exhaustive = reuse && reuse->exhaustive};
+                   .exhaustive = reuse && reuse->exhaustive,
+                   .select = drawn && reuse && reuse->without_mean && !reuse->exhaustive};
     int workers = iso_parallel_threads(threads);
     iso_parallel_run(workers, measure_percentile, &d); /* PASS 3, 4 */
     for (int w = 0; w < workers; w++)
         if (d.part_failed[w])
             goto done;
+    if (d.select && select_top(&d))
+        goto done;
     for (size_t i = 0; i < n; i++)
         d.start_max = d.start_max > dist[i] ? d.start_max : dist[i];
     iso_parallel_run(workers, measure_max, &d); /* PASS 5 */
@@ -1004,6 +1110,8 @@ static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh
     }
     if ((rc = percentile(dist, weight, n, &out->p99, &out->mean))) /* PASS 6 */
         goto done;
+    if (d.select)
+        out->mean = NAN;
     out->area = area[src->triangle_count];
     out->samples = centroids_n + used_count;
     out->drawn = drawn;
@@ -1045,7 +1153,9 @@ int iso_mesh_distance_between(const iso_mesh *a, const iso_mesh_grid *ga, const 
         (!gb && (rc = iso_mesh_grid_build(b, lo, hi, &own_b))))
         goto done;
     one_way_result ab, ba;
-    if ((rc = one_way(a, b, gb ? gb : own_b, spacing, cap, threads, NULL, &ab)) ||
+    iso_mesh_distance_reuse plain = {.exhaustive = reuse && reuse->exhaustive,
+                                     .without_mean = reuse && reuse->without_mean};
+    if ((rc = one_way(a, b, gb ? gb : own_b, spacing, cap, threads, &plain, &ab)) ||
         (rc = one_way(b, a, ga ? ga : own_a, spacing, cap, threads, reuse, &ba)))
         goto done;
     out->p99_ab = ab.p99, out->max_ab = ab.max, out->samples_a = ab.samples, out->drawn_a = ab.drawn;
@@ -1055,7 +1165,8 @@ int iso_mesh_distance_between(const iso_mesh *a, const iso_mesh_grid *ga, const 
     out->mean_ab = ab.mean, out->mean_ba = ba.mean;
     /* Pooled by area, so the mean is over both surfaces alike; an empty side is INFINITY
      * away from the other (above), and so is the mean. */
-    out->mean = ab.area + ba.area > 0 && isfinite(ab.mean) && isfinite(ba.mean)
+    out->mean = isnan(ab.mean) || isnan(ba.mean) ? NAN
+                : ab.area + ba.area > 0 && isfinite(ab.mean) && isfinite(ba.mean)
                     ? (ab.mean * ab.area + ba.mean * ba.area) / (ab.area + ba.area)
                     : fmax(ab.mean, ba.mean);
 done:

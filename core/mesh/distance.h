@@ -33,6 +33,10 @@ typedef struct iso_mesh_distance_reuse {
                                     * this measure, for the next one's prior_bound */
     int exhaustive;                /* nonzero: every sample searched on its own, no block of
                                     * them skipped by a bound (for checks: same results) */
+    int without_mean;              /* nonzero: the mean is not wanted (it comes out NAN), so
+                                    * that of the points drawn for the percentile only those
+                                    * that may lie in its top 1% are measured exactly (the
+                                    * p99 and max are the same bit for bit) */
 } iso_mesh_distance_reuse;
 
 /* iso_mesh_distance_compute with a's grid ga and b's grid gb given (either may be NULL:

@@ -339,7 +339,8 @@ double iso_mesh_value_error(const iso_volume *vol, const iso_mesh *mesh, iso_spa
 typedef struct iso_mesh_chain_level {
     uint32_t *indices;            /* 3 * triangle_count, into the chain's positions */
     size_t triangle_count, vertex_count;
-    iso_mesh_distance distance;   /* from level 0; all zero for level 0 */
+    iso_mesh_distance distance;   /* from level 0; all zero for level 0; means NAN (the
+                                   * chain measures p99 and max only) */
     double estimate;              /* meshoptimizer's error for the step, position units */
     size_t nonmanifold_edges, folds_dropped;
     size_t pinch_vertices, edges; /* pinches left (iso_simplify_manifold), all edges */

@@ -748,6 +748,41 @@ static void test_block_bounds_change_nothing(void)
     iso_vol_destroy(vol);
 }
 
+/* The percentile by selection (distance.h, without_mean): on the small sphere's chain
+ * levels against the exact sphere, at caps of 256 and 2,048 drawn points (so that the
+ * top 1% is 3 and 21 points), every p99 and maximum is what measuring every point gives,
+ * bit for bit, on one thread and two, and the mean is NAN. */
+static void test_selected_percentile_is_exact(void)
+{
+    iso_mesh_distance_reuse select = {.without_mean = 1};
+    iso_mesh_chain *chain = NULL;
+    iso_mesh exact;
+    iso_volume *vol = small_sphere_chain(&exact, &chain);
+    if (!vol)
+        return;
+    iso_error err;
+    for (int k = 1; k < chain->levels && !check_failed(); k++)
+        for (size_t drawn = 256; drawn <= 2048; drawn *= 8) {
+            iso_mesh b = level_view(chain, k);
+            iso_mesh_distance all, one, two;
+            CHECK_OK(iso_mesh_distance_between(&exact, NULL, &b, NULL, 0.5, drawn, 1, NULL, &all, &err), &err);
+            CHECK_OK(iso_mesh_distance_between(&exact, NULL, &b, NULL, 0.5, drawn, 1, &select, &one, &err), &err);
+            CHECK_OK(iso_mesh_distance_between(&exact, NULL, &b, NULL, 0.5, drawn, 2, &select, &two, &err), &err);
+            CHECKF(all.drawn_a == drawn && all.drawn_b == drawn, "level %d: drawn %zu, %zu", k, all.drawn_a,
+                   all.drawn_b);
+            CHECKF(all.p99_ab > 0 && all.p99_ba > 0 && isfinite(all.mean), "level %d: p99 %g, %g", k,
+                   all.p99_ab, all.p99_ba);
+            CHECKF(all.p99_ab == one.p99_ab && all.p99_ba == one.p99_ba && all.max_ab == one.max_ab &&
+                   all.max_ba == one.max_ba, "level %d, %zu drawn: p99 %.9g %.9g, selected %.9g %.9g", k,
+                   drawn, all.p99_ab, all.p99_ba, one.p99_ab, one.p99_ba);
+            CHECK(two.p99_ab == one.p99_ab && two.p99_ba == one.p99_ba && two.max == one.max);
+            CHECK(isnan(one.mean) && isnan(one.mean_ab) && isnan(two.mean_ba));
+        }
+    iso_mesh_chain_destroy(chain);
+    iso_mesh_free(&exact);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_parallel_squares_are_a_quarter_apart);
@@ -759,5 +794,6 @@ int main(void)
     CHECK_RUN(test_chain_in_slabs_stays_closed);
     CHECK_RUN(test_reuse_between_levels_changes_nothing);
     CHECK_RUN(test_block_bounds_change_nothing);
+    CHECK_RUN(test_selected_percentile_is_exact);
     return check_finish();
 }
