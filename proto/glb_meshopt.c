@@ -42,10 +42,6 @@
  * (waiting for it on a busy machine) would cost more than it saves. */
 #define MESHOPT_TRIANGLES_PER_THREAD 100000
 
-/* An index stream this long is gzipped as two pieces (on two threads, proto_gzip_pieces);
- * a shorter one as one, whose matches reach across all of it. */
-#define MESHOPT_GZIP_INDEX_SPLIT (256u << 10)
-
 /* The position bits the uint16 components hold; more bits keep float positions. */
 #define MESHOPT_POSITION_BITS_MAX 16
 
@@ -465,17 +461,28 @@ int proto_glb_meshopt_gzip_pieces(const unsigned char *glb, size_t size,
     size_t start = 20 + json_length + 8 + offset;
     if (start >= size)
         return 1;
-    pieces[0] = (proto_gzip_piece){.end = start, .huffman = 1};
-    if (size - start < MESHOPT_GZIP_INDEX_SPLIT) {
-        pieces[1] = (proto_gzip_piece){.end = size};
-        return 2;
-    }
-    /* Two threads take pieces 0 and 2, and 1 (proto_gzip_pieces deals them in turn): the
-     * Huffman coding runs about 3.5 times as fast a byte as matching (1.6 and 5.5 ns
-     * here), so the index stream is cut where the two shares come out even. */
-    size_t index = size - start, huffman_share = start * 2 / 7;
-    size_t first = huffman_share < index ? (index + huffman_share) / 2 : index;
-    pieces[1] = (proto_gzip_piece){.end = start + first};
-    pieces[2] = (proto_gzip_piece){.end = size};
-    return 3;
+    /* The index stream (glb_meshopt_index.c): a header byte, a code byte per triangle,
+     * then the data (varints of the vertices the FIFOs miss) and a 16-byte table. Matches
+     * take 40% off the codes, against 10% more off the data than Huffman codes alone,
+     * which per byte saved costs about 10 times what the other streams' coding does. */
+    static const char count_key[] = ",\"count\":";
+    const char *count_at = mode + sizeof triangles - 1, *json_end = json + json_length;
+    if ((size_t)(json_end - count_at) <= sizeof count_key - 1 || memcmp(count_at, count_key, sizeof count_key - 1))
+        return 1;
+    size_t corners = 0;
+    for (const char *d = count_at + sizeof count_key - 1; d < json_end && *d >= '0' && *d <= '9'; d++)
+        corners = corners * 10 + (size_t)(*d - '0');
+    size_t codes = start + 1 + corners / 3;
+    if (codes > size)
+        return 1;
+    /* Two threads take pieces 0 and 2, and 1 and 3 (proto_gzip_pieces deals them in
+     * turn): the vertex streams are cut where the shares come out even, a byte matched
+     * costing about what 3 coded alone do (4.1 and 1.4 ns here). */
+    size_t matched = 3 * (codes - start), rest = start + (size - codes);
+    size_t cut = rest > matched ? (rest - matched) / 2 : 0;
+    pieces[0] = (proto_gzip_piece){.end = cut < start ? cut : start, .huffman = 1};
+    pieces[1] = (proto_gzip_piece){.end = start, .huffman = 1};
+    pieces[2] = (proto_gzip_piece){.end = codes};
+    pieces[3] = (proto_gzip_piece){.end = size, .huffman = 1};
+    return 4;
 }

@@ -1236,8 +1236,8 @@ static void first_use_numbering(const iso_mesh *m, uint32_t *number, uint32_t *o
  * through that numbering; each decoded vertex's position within half a quantization step
  * of its m vertex's (exactly above 16 bits) and its normal within their quantization, so
  * that every corner gets its own vertex's attributes. One thread gives the same bytes as two.
- * Its gzip in pieces (the container and vertex streams Huffman-coded, the indices from the
- * index view's first byte on) inflates back to it. */
+ * Its gzip in pieces (the container and vertex streams Huffman-coded, the index view's
+ * header and codes matched, its data Huffman-coded) inflates back to it. */
 static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
 {
     iso_error err;
@@ -1256,9 +1256,15 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
     free(one);
     proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
     int count = proto_glb_meshopt_gzip_pieces(buf, size, pieces);
-    /* An index stream of 256 KB or more is cut in two, inside it. */
-    CHECK_EQ(count, !m->triangle_count ? 1 : size - pieces[0].end >= (256u << 10) ? 3 : 2);
-    CHECK(count < 3 || (pieces[0].end < pieces[1].end && pieces[1].end < size));
+    /* The vertex streams in two, the index stream's header and a code per triangle, its
+     * data (its first byte the index codec's header, 0xe0 | version). */
+    CHECK_EQ(count, !m->triangle_count ? 1 : 4);
+    if (count == 4) {
+        CHECK(pieces[0].end <= pieces[1].end && pieces[1].end < size && (buf[pieces[1].end] & 0xf0) == 0xe0);
+        CHECK_EQ(pieces[2].end - pieces[1].end, 1 + m->triangle_count);
+        CHECK(pieces[2].end < size && pieces[3].end == size);
+        CHECK(pieces[0].huffman && pieces[1].huffman && !pieces[2].huffman && pieces[3].huffman);
+    }
     unsigned char *gz;
     size_t gz_size;
     CHECK_OK(proto_gzip_pieces(buf, size, pieces, count, 2, &gz, &gz_size, &err), &err);
@@ -1437,7 +1443,7 @@ static void test_glb_meshopt_round_trip(void)
     CHECK_OK(proto_encode_glb_meshopt(&m, NULL, &glb, &size, &err), &err);
     proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
     if (glb)
-        CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 3);
+        CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 4);
     free(glb);
     iso_mesh_free(&m);
 }
@@ -1515,12 +1521,11 @@ static void test_gzip_pieces(void)
     unsigned char *glb;
     CHECK_OK(proto_encode_glb_meshopt(&m, NULL, &glb, &size, &err), &err);
     if (glb) {
-        CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 2);
-        CHECK(pieces[0].huffman && !pieces[1].huffman && pieces[0].end < size);
-        CHECKF((glb[pieces[0].end] & 0xf0) == 0xe0, "index view starts with %#x", glb[pieces[0].end]);
+        CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 4);
+        CHECKF((glb[pieces[1].end] & 0xf0) == 0xe0, "index view starts with %#x", glb[pieces[1].end]);
         /* The index view is the BIN chunk's last: it runs to the end but for its padding. */
         size_t encoded = meshopt_encodeIndexBufferBound(3 * m.triangle_count, m.vertex_count);
-        CHECK(size - pieces[0].end <= encoded + 3);
+        CHECK(size - pieces[1].end <= encoded + 3);
         glb[0] = 'x';
         CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 1);
     }
