@@ -148,54 +148,90 @@ static void plan_given(lod *c, const uint8_t *given)
             }
 }
 
-/* Makes [lo, hi] (m[] blocks from block first[]) the unit at hand and the strides of the
- * lattice sets in its closed box, by where a set lies per axis (class: a block plane, or
+/* The unit at hand: the box of m[] blocks from block first[] (unit_box), and the strides of
+ * the lattice sets in its closed box (unit_around), by where a set lies per axis (class: a block plane, or
  * strictly inside a block): the finest of the blocks holding it, whose closed boxes are
  * [4i, 4i + 4] per axis. With a cap, a set on the volume's border has stride 1: the cap's
  * cells are data cells. */
-static void unit_around(lod *c, const uint32_t first[3], const uint32_t m[3])
+static void unit_box(lod *c, const uint32_t first[3], const uint32_t m[3])
 {
     for (int d = 0; d < 3; d++) {
         c->ulo[d] = first[d] * ISO_TREE_BLOCK;
         uint32_t end = (first[d] + m[d]) * ISO_TREE_BLOCK;
         c->uhi[d] = end < c->dims[d] - 1 ? end : c->dims[d] - 1;
+    }
+}
+
+/* The strides around the unit at hand (unit_box): returns 1 if every set in its closed box
+ * has stride `shift` (every cell regular). */
+static int unit_around(lod *c, const uint32_t first[3], const uint32_t m[3], unsigned shift)
+{
+    /* The blocks from first - 1 to first + m per axis, ISO_TREE_LEVELS where there is none. */
+    uint8_t near[BLOCKS_PER_BRICK + 2][BLOCKS_PER_BRICK + 2][BLOCKS_PER_BRICK + 2];
+    int same = !c->cap;
+    for (uint32_t z = 0; z < m[2] + 2; z++)
+        for (uint32_t y = 0; y < m[1] + 2; y++)
+            for (uint32_t x = 0; x < m[0] + 2; x++) {
+                /* first + x - 1 as unsigned: the block before 0 wraps past the grid */
+                uint32_t q[3] = {first[0] + x - 1, first[1] + y - 1, first[2] + z - 1};
+                int inside = q[0] < c->blocks[0] && q[1] < c->blocks[1] && q[2] < c->blocks[2];
+                near[z][y][x] = inside ? c->shift[block_index(c, q)] : ISO_TREE_LEVELS;
+                same &= near[z][y][x] == shift;
+            }
+    if (same)
+        return 1; /* every set has the unit's stride: no table below is read */
+    for (int d = 0; d < 3; d++) {
         for (uint32_t r = 0; r <= c->uhi[d] - c->ulo[d]; r++)
             c->point_class[d][r] = (uint8_t)(r == c->uhi[d] - c->ulo[d] ? 2 * m[d] : r / ISO_TREE_BLOCK * 2 + (r % ISO_TREE_BLOCK != 0));
         for (uint32_t r = 0; r < c->uhi[d] - c->ulo[d]; r++)
             c->span_class[d][r] = (uint8_t)(r / ISO_TREE_BLOCK * 2 + 1);
     }
-    /* The blocks from first - 1 to first + m per axis, ISO_TREE_LEVELS where there is none. */
-    uint8_t near[BLOCKS_PER_BRICK + 2][BLOCKS_PER_BRICK + 2][BLOCKS_PER_BRICK + 2];
+    /* Class k along an axis is held by near's entries (k + 1) / 2 to k / 2 + 1: both sides
+     * of a plane (k even), the block itself inside it (k odd, one entry). The minimum over
+     * those, one axis at a time. */
+    enum { N = BLOCKS_PER_BRICK + 2 };
+    uint8_t along_x[N][N][UNIT_CLASSES], along_y[N][UNIT_CLASSES][UNIT_CLASSES];
+    uint32_t P[3];
+    for (int d = 0; d < 3; d++)
+        P[d] = 2 * m[d] + 1;
     for (uint32_t z = 0; z < m[2] + 2; z++)
         for (uint32_t y = 0; y < m[1] + 2; y++)
-            for (uint32_t x = 0; x < m[0] + 2; x++) {
-                int64_t q[3] = {(int64_t)first[0] + x - 1, (int64_t)first[1] + y - 1, (int64_t)first[2] + z - 1};
-                int inside = 1;
-                for (int d = 0; d < 3; d++)
-                    inside &= q[d] >= 0 && q[d] < (int64_t)c->blocks[d];
-                uint32_t u[3] = {(uint32_t)q[0], (uint32_t)q[1], (uint32_t)q[2]};
-                near[z][y][x] = inside ? c->shift[block_index(c, u)] : ISO_TREE_LEVELS;
+            for (uint32_t k = 0; k < P[0]; k++) {
+                uint8_t a = near[z][y][(k + 1) / 2], b = near[z][y][k / 2 + 1];
+                along_x[z][y][k] = a < b ? a : b;
             }
-    /* Class k holds blocks k / 2 - 1 + 1 and k / 2 + 1 of near (a plane) or (k - 1) / 2 + 1
-     * (inside): the first and last of those per axis. */
-    for (uint32_t kz = 0; kz <= 2 * m[2]; kz++)
-        for (uint32_t ky = 0; ky <= 2 * m[1]; ky++)
-            for (uint32_t kx = 0; kx <= 2 * m[0]; kx++) {
-                uint32_t k[3] = {kx, ky, kz}, from[3], to[3];
-                for (int d = 0; d < 3; d++) {
-                    from[d] = k[d] % 2 ? (k[d] - 1) / 2 + 1 : k[d] / 2;
-                    to[d] = k[d] % 2 ? from[d] : k[d] / 2 + 1;
+    for (uint32_t z = 0; z < m[2] + 2; z++)
+        for (uint32_t k = 0; k < P[1]; k++)
+            for (uint32_t kx = 0; kx < P[0]; kx++) {
+                uint8_t a = along_x[z][(k + 1) / 2][kx], b = along_x[z][k / 2 + 1][kx];
+                along_y[z][k][kx] = a < b ? a : b;
+            }
+    int uniform = 1;
+    for (uint32_t kz = 0; kz < P[2]; kz++)
+        for (uint32_t ky = 0; ky < P[1]; ky++)
+            for (uint32_t kx = 0; kx < P[0]; kx++) {
+                uint8_t a = along_y[(kz + 1) / 2][ky][kx], b = along_y[kz / 2 + 1][ky][kx];
+                c->around[kz][ky][kx] = a < b ? a : b;
+                uniform &= c->around[kz][ky][kx] == shift;
+            }
+    /* With a cap, the sets on the volume's border. */
+    for (int d = 0; d < 3 && c->cap; d++) {
+        uint32_t ends[2] = {first[d] == 0 ? 0 : UINT32_MAX, first[d] + m[d] == c->blocks[d] ? P[d] - 1 : UINT32_MAX};
+        for (int e = 0; e < 2; e++) {
+            if (ends[e] == UINT32_MAX)
+                continue;
+            for (uint32_t i = 0; i < P[(d + 1) % 3]; i++)
+                for (uint32_t j = 0; j < P[(d + 2) % 3]; j++) {
+                    uint32_t k[3];
+                    k[d] = ends[e];
+                    k[(d + 1) % 3] = i;
+                    k[(d + 2) % 3] = j;
+                    uniform &= shift == 0;
+                    c->around[k[2]][k[1]][k[0]] = 0;
                 }
-                uint8_t finest = ISO_TREE_LEVELS;
-                for (uint32_t z = from[2]; z <= to[2]; z++)
-                    for (uint32_t y = from[1]; y <= to[1]; y++)
-                        for (uint32_t x = from[0]; x <= to[0]; x++)
-                            finest = near[z][y][x] < finest ? near[z][y][x] : finest;
-                int border = 0;
-                for (int d = 0; d < 3 && c->cap; d++)
-                    border |= (k[d] == 0 && first[d] == 0) || (k[d] == 2 * m[d] && first[d] + m[d] == c->blocks[d]);
-                c->around[kz][ky][kx] = border ? 0 : finest;
-            }
+        }
+    }
+    return uniform;
 }
 
 /* The stride (log2) of the lattice set with classes k[] in the unit at hand. */
@@ -828,18 +864,22 @@ static int transition_cell(lod *c, const uint32_t o[3], const uint32_t size[3], 
     return fan_loops(c, middle, err);
 }
 
-/* The cells of the unit at hand at stride 2^shift, the last per axis narrower where the
- * unit ends off the stride: marching cubes where a cell is regular, else a transition
- * cell. */
-static int march_unit(lod *c, unsigned shift, iso_error *err)
+/* The cells of the unit of m[] blocks from block first[] at stride 2^shift, the last per
+ * axis narrower where the unit ends off the stride: marching cubes where a cell is
+ * regular, else a transition cell. A unit whose samples all lie on one side of the level
+ * holds no crossing and is skipped whole (its cells still count as visited). */
+static int march_unit(lod *c, const uint32_t first[3], const uint32_t m[3], unsigned shift, iso_error *err)
 {
     uint32_t s = 1u << shift;
-    int uniform = 1; /* every set around has the unit's stride: every cell is regular */
-    for (int z = 0; z < UNIT_CLASSES; z++)
-        for (int y = 0; y < UNIT_CLASSES; y++)
-            for (int x = 0; x < UNIT_CLASSES; x++)
-                uniform &= c->around[z][y][x] == shift || z > c->point_class[2][c->uhi[2] - c->ulo[2]] ||
-                           y > c->point_class[1][c->uhi[1] - c->ulo[1]] || x > c->point_class[0][c->uhi[0] - c->ulo[0]];
+    unit_box(c, first, m);
+    if (!box_mixed(c, c->ulo, c->uhi)) {
+        size_t cells = 1;
+        for (int d = 0; d < 3; d++)
+            cells *= (c->uhi[d] - c->ulo[d] + s - 1) / s;
+        c->cells += cells;
+        return 0;
+    }
+    int uniform = unit_around(c, first, m, shift); /* every cell is regular */
     /* Whether a cell is regular depends only on which of the unit's planes it touches. */
     int8_t by_touch[64];
     memset(by_touch, -1, sizeof by_touch);
@@ -870,7 +910,7 @@ static int march_unit(lod *c, unsigned shift, iso_error *err)
 }
 
 /* Brick b, not wholly stride 1: its samples classified once, then at stride 8 whole, or
- * block after block at the block's own stride. */
+ * block after block at the block's own stride (its stride-1 blocks are PASS 2's). */
 static int march_brick(lod *c, const uint32_t b[3], iso_error *err)
 {
     size_t lo[3], hi[3];
@@ -884,41 +924,54 @@ static int march_brick(lod *c, const uint32_t b[3], iso_error *err)
     classify_whole(c);
     uint32_t first[3], m[3];
     brick_blocks(c, b, first, m);
-    if (c->shift[block_index(c, first)] == ISO_TREE_LEVELS) {
-        unit_around(c, first, m);
-        return march_unit(c, ISO_TREE_LEVELS, err);
-    }
+    if (c->shift[block_index(c, first)] == ISO_TREE_LEVELS)
+        return march_unit(c, first, m, ISO_TREE_LEVELS, err);
     static const uint32_t one[3] = {1, 1, 1};
     for (uint32_t z = 0; z < m[2]; z++)
         for (uint32_t y = 0; y < m[1]; y++)
             for (uint32_t x = 0; x < m[0]; x++) {
                 uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
-                unit_around(c, q, one);
-                int rc = march_unit(c, c->shift[block_index(c, q)], err);
+                unsigned shift = c->shift[block_index(c, q)];
+                if (!shift)
+                    continue;
+                int rc = march_unit(c, q, one, shift, err);
                 if (rc)
                     return rc;
             }
     return 0;
 }
 
-/* 1 if every block of brick b (at grid index at) has stride 1. */
-static int brick_fine(const lod *c, const uint32_t b[3])
+/* The blocks of brick b with stride 1, bit x | y << 1 | z << 2 (march.h's marks). */
+static unsigned fine_blocks(const lod *c, const uint32_t b[3])
 {
     uint32_t first[3], m[3];
     brick_blocks(c, b, first, m);
+    unsigned fine = 0;
     for (uint32_t z = 0; z < m[2]; z++)
         for (uint32_t y = 0; y < m[1]; y++)
             for (uint32_t x = 0; x < m[0]; x++) {
                 uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
-                if (c->shift[block_index(c, q)])
-                    return 0;
+                fine |= (unsigned)(c->shift[block_index(c, q)] == 0) << (x | y << 1 | z << 2);
             }
-    return 1;
+    return fine;
 }
 
-/* PASS 2: the bricks whose blocks all have stride 1, march.c's kernel on those (with no
- * min/max, on the bricks the level cannot cross too: they are read and give nothing).
- * marked is scratch, a byte per brick. */
+/* 1 if every block of brick b has stride 1. */
+static int brick_fine(const lod *c, const uint32_t b[3])
+{
+    uint32_t first[3], m[3];
+    brick_blocks(c, b, first, m);
+    unsigned have = 0;
+    for (uint32_t z = 0; z < m[2]; z++)
+        for (uint32_t y = 0; y < m[1]; y++)
+            for (uint32_t x = 0; x < m[0]; x++)
+                have |= 1u << (x | y << 1 | z << 2);
+    return fine_blocks(c, b) == have;
+}
+
+/* PASS 2: the blocks with stride 1, march.c's kernel on those (with no min/max, on the
+ * bricks the level cannot cross too: they are read and give nothing). marked is scratch,
+ * a byte per brick. */
 static int march_fine(lod *c, const iso_extract_params *params, uint8_t *marked, iso_march_part **fine,
                       iso_error *err)
 {
@@ -927,7 +980,7 @@ static int march_fine(lod *c, const iso_extract_params *params, uint8_t *marked,
         for (uint32_t j = 0; j < c->count[1]; j++)
             for (uint32_t i = 0; i < c->count[0]; i++, at++) {
                 uint32_t b[3] = {i, j, k};
-                marked[at] = brick_active(c, at) ? brick_fine(c, b) : params->no_minmax;
+                marked[at] = (uint8_t)(brick_active(c, at) ? fine_blocks(c, b) : params->no_minmax ? 0xFF : 0);
             }
     iso_march_stats ms;
     int rc = iso_march_selected(c->vol, &c->tree->bricks, c->level, marked, params->threads, c->mesh, &ms, fine, err);

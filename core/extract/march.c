@@ -7,8 +7,10 @@
  * finds a neighbour's vertex id from that neighbour's crossing rows by a popcount.
  *
  * PASS 1 (select): bricks with min <= level < max, in grid order (for iso_march_selected,
- *   the marked bricks and their ghosts: unmarked bricks the level crosses that own edges
- *   a marked brick holds; a ghost keeps only those edges' crossings and marches no cell).
+ *   the bricks with marked blocks and their ghosts: bricks the level crosses that own
+ *   edges a marked block holds; a brick not wholly marked keeps only the crossings of
+ *   edges its own or its lower neighbours' marked blocks hold, and marches the cells of
+ *   its own marked blocks only).
  * PASS 2 (classify, threads): per active brick, one 9-bit word per x-row of samples
  *   saying which are above the level; from those by shifts and xors, the owned crossing
  *   edges of every row and axis and the row's cells that are neither all inside nor all
@@ -46,7 +48,9 @@
 
 typedef struct active_brick {
     uint32_t brick[3];
-    uint8_t ghost;                       /* lower neighbours marked, bit k = offset -k (ghost_of) */
+    uint8_t partial;                     /* not wholly marked (iso_march_selected): masked */
+    uint8_t blocks;                      /* its marked blocks, bit x | y << 1 | z << 2 */
+    uint8_t lower[8];                    /* [k]: the marked blocks of the neighbour at -k */
     uint8_t n[3];                        /* samples per axis, 2..9 */
     uint8_t owned[3];                    /* corners 0..owned-1 per axis are this brick's */
     uint32_t vertices, triangles;        /* counted in PASS 2 */
@@ -409,34 +413,71 @@ static uint32_t count_triangles(const active_brick *ab)
     return triangles;
 }
 
-/* The edges of row (y, z) along axis a that a ghost (iso_march_selected) numbers: those
- * some marked lower neighbour holds too. lower: bit k for the neighbour at -(k & 1),
- * -(k >> 1 & 1), -(k >> 2 & 1); it holds the edge when the edge lies on the ghost's low
- * plane along every axis where k steps down (never the edge's own axis). */
-static unsigned ghost_edges(unsigned lower, int a, int y, int z)
+/* Sets in keep[axis][row] the edges whose closed extent lies in the box [lo, hi] (brick-
+ * local samples). */
+static void keep_box(uint16_t keep[3][ROWS], const int lo[3], const int hi[3])
 {
-    unsigned edges = 0;
-    for (int k = 1; k < 8; k++)
-        if ((lower >> k & 1) && !(k >> a & 1) && (!(k >> 1 & 1) || !y) && (!(k >> 2 & 1) || !z))
-            edges |= k & 1 ? 1u : (1u << S) - 1; /* stepping down in x: the x = 0 edge only */
-    return edges;
+    for (int a = 0; a < 3; a++) {
+        int end[3];
+        for (int d = 0; d < 3; d++)
+            end[d] = hi[d] - (d == a);
+        if (end[a] < lo[a])
+            continue;
+        unsigned bits = ((1u << (end[0] - lo[0] + 1)) - 1) << lo[0];
+        for (int z = lo[2]; z <= end[2]; z++)
+            for (int y = lo[1]; y <= end[1]; y++)
+                keep[a][z * S + y] |= (uint16_t)bits;
+    }
 }
 
-/* A ghost keeps the crossings its marked neighbours share and marches no cell. */
-static void keep_ghost_edges(active_brick *ab)
+/* A brick not wholly marked: keeps the crossings of the edges some marked block holds (its
+ * own, or a lower neighbour's whose closed box reaches its low planes) and marches the
+ * cells of its own marked blocks only. Returns the cells it marches. */
+static size_t keep_marked(active_brick *ab)
 {
+    uint16_t keep[3][ROWS], cells[ROWS];
+    memset(keep, 0, sizeof keep);
+    memset(cells, 0, sizeof cells);
+    size_t count = 0;
+    for (int k = 0; k < 8; k++) {
+        unsigned mask = k ? ab->lower[k] : ab->blocks;
+        for (int blk = 0; mask && blk < 8; blk++) {
+            if (!(mask >> blk & 1))
+                continue;
+            int lo[3], hi[3], there = 1;
+            for (int d = 0; d < 3; d++) {
+                int half = blk >> d & 1;
+                if (k >> d & 1) { /* the neighbour below along d: its upper block's box ends at 0 */
+                    there &= half;
+                    lo[d] = hi[d] = 0;
+                } else {
+                    lo[d] = half * ISO_TREE_BLOCK;
+                    hi[d] = lo[d] + ISO_TREE_BLOCK < ab->n[d] - 1 ? lo[d] + ISO_TREE_BLOCK : ab->n[d] - 1;
+                    there &= lo[d] < ab->n[d] - 1;
+                }
+            }
+            if (!there)
+                continue;
+            keep_box(keep, lo, hi);
+            if (k)
+                continue;
+            count += (size_t)(hi[0] - lo[0]) * (size_t)(hi[1] - lo[1]) * (size_t)(hi[2] - lo[2]);
+            for (int z = lo[2]; z < hi[2]; z++)
+                for (int y = lo[1]; y < hi[1]; y++)
+                    cells[z * S + y] |= (uint16_t)(((1u << (hi[0] - lo[0])) - 1) << lo[0]);
+        }
+    }
     ab->crossing_rows[0] = ab->crossing_rows[1] = 0;
     ab->marching_rows[0] = ab->marching_rows[1] = 0;
-    memset(ab->marching, 0, sizeof ab->marching);
     for (int r = 0; r < ROWS; r++) {
         unsigned any = 0;
-        for (int a = 0; a < 3; a++) {
-            if (ab->cross[a][r])
-                ab->cross[a][r] &= (uint16_t)ghost_edges(ab->ghost, a, r % S, r / S);
-            any |= ab->cross[a][r];
-        }
+        for (int a = 0; a < 3; a++)
+            any |= ab->cross[a][r] &= keep[a][r];
+        ab->marching[r] &= (uint8_t)cells[r];
         ab->crossing_rows[r / 64] |= (uint64_t)(any != 0) << (r % 64);
+        ab->marching_rows[r / 64] |= (uint64_t)(ab->marching[r] != 0) << (r % 64);
     }
+    return count;
 }
 
 /* Returns the cells of the brick marching cubes visits. */
@@ -457,11 +498,12 @@ static size_t classify(march_job *job, active_brick *ab)
     else
 #endif
         scalar_rows(ab);
-    if (ab->ghost)
-        keep_ghost_edges(ab);
+    size_t cells = (size_t)(ab->n[0] - 1) * (size_t)(ab->n[1] - 1) * (size_t)(ab->n[2] - 1);
+    if (ab->partial)
+        cells = keep_marked(ab);
     ab->vertices = number_crossings(ab);
     ab->triangles = count_triangles(ab);
-    return ab->ghost ? 0 : (size_t)(ab->n[0] - 1) * (size_t)(ab->n[1] - 1) * (size_t)(ab->n[2] - 1);
+    return cells;
 }
 
 typedef struct range {
@@ -665,6 +707,15 @@ static inline void shared_run(uint32_t *ids, unsigned m, const active_brick *own
         return; /* the neighbour may be inactive then */
     assert(owner);
     uint32_t id = (uint32_t)(owner->first_vertex + owner->before[axis][owner_row]);
+    if (owner->partial) {
+        /* It kept only some of the row's crossings, ours among them: counted below each. */
+        unsigned kept = owner->cross[axis][owner_row];
+        for (; m; m &= m - 1) {
+            int x = __builtin_ctz(m);
+            ids[x] = id + bit_count[kept & ((1u << x) - 1)];
+        }
+        return;
+    }
     for (; m; m &= m - 1)
         ids[__builtin_ctz(m)] = id++;
 }
@@ -706,6 +757,56 @@ static void column_ids(const active_brick *ab, const active_brick *owner, id_tab
 }
 #endif
 
+/* 1 and *id the vertex of the crossing on the data edge from sample p along axis, if some
+ * selected brick numbered it (its owner); else 0. */
+static int vertex_of(const march_job *job, const uint32_t p[3], int axis, uint32_t *id)
+{
+    const iso_bricks *g = job->bricks;
+    uint32_t b[3], local[3];
+    for (int d = 0; d < 3; d++) {
+        b[d] = p[d] / ISO_BRICK_CELLS;
+        if (b[d] >= g->count[d])
+            b[d] = g->count[d] - 1; /* the last brick owns the volume's last sample plane */
+        local[d] = p[d] - b[d] * ISO_BRICK_CELLS;
+    }
+    int32_t slot = job->slot[((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0]];
+    if (slot < 0)
+        return 0;
+    const active_brick *ab = &job->active[slot];
+    unsigned r = local[2] * S + local[1], row = ab->cross[axis][r];
+    if (!(ab->crossing_rows[r / 64] >> (r % 64) & 1) || !(row >> local[0] & 1))
+        return 0;
+    *id = (uint32_t)(ab->first_vertex + ab->before[axis][r] + bit_count[row & ((1u << local[0]) - 1)]);
+    return 1;
+}
+
+/* fill_shared_ids for a brick not wholly marked: edge by edge, each crossing edge of its
+ * box that a neighbour owns, from the owner (which kept it if a marked block of this
+ * brick holds it, the only ones its cells use). */
+static void fill_shared_ids_partial(const march_job *job, const active_brick *ab, id_table *table)
+{
+    size_t lo[3];
+    brick_origin(ab, lo);
+    for (int z = 0; z < ab->n[2]; z++)
+        for (int y = 0; y < ab->n[1]; y++) {
+            int r = z * S + y;
+            unsigned row = ab->inside[r];
+            unsigned along[3] = {(row ^ (row >> 1)) & ((1u << (ab->n[0] - 1)) - 1),
+                                 y + 1 < ab->n[1] ? row ^ ab->inside[r + 1] : 0,
+                                 z + 1 < ab->n[2] ? row ^ ab->inside[r + S] : 0};
+            for (int a = 0; a < 3; a++)
+                for (unsigned m = along[a]; m; m &= m - 1) {
+                    int x = __builtin_ctz(m);
+                    if (x < ab->owned[0] && y < ab->owned[1] && z < ab->owned[2])
+                        continue; /* its own */
+                    uint32_t p[3] = {(uint32_t)(lo[0] + (size_t)x), (uint32_t)(lo[1] + (size_t)y),
+                                     (uint32_t)(lo[2] + (size_t)z)}, id;
+                    if (vertex_of(job, p, a, &id))
+                        table->at[a][r][x] = id;
+                }
+        }
+}
+
 /* The ids of the crossings on the brick's upper faces, which its neighbours own (none
  * on a face that is the volume's last sample plane: the brick owns those). An edge's
  * samples belong to its owner too, so the owner's min/max hold the level: it is active.
@@ -717,6 +818,10 @@ static void column_ids(const active_brick *ab, const active_brick *owner, id_tab
  * the same row in the same order, so their ids are consecutive from the row's first. */
 static void fill_shared_ids(const march_job *job, const active_brick *ab, id_table *table)
 {
+    if (ab->partial) {
+        fill_shared_ids_partial(job, ab, table);
+        return;
+    }
     const active_brick *near[8];
     neighbours_of(job, ab, near);
     const uint16_t *inside = ab->inside;
@@ -895,41 +1000,65 @@ static size_t number_selected(const march_job *job, int prune, int32_t *slot, ui
     return n;
 }
 
-/* The marked lower neighbours of brick b (bit k: the one at -(k & 1), -(k >> 1 & 1),
- * -(k >> 2 & 1)) if b is an unmarked brick the level crosses: it owns edges they hold. */
-static unsigned ghost_of(const march_job *job, const uint32_t b[3], float level)
+/* The blocks brick b has, bit x | y << 1 | z << 2: two per axis, one where the border
+ * clips it to at most ISO_TREE_BLOCK cells. */
+static unsigned blocks_of(const march_job *job, const uint32_t b[3])
 {
+    static const unsigned low_half[3] = {0x55, 0x33, 0x0F};
+    unsigned have = 0xFF;
+    for (int d = 0; d < 3; d++)
+        if (job->vol->dims[d] - 1 - (size_t)b[d] * ISO_BRICK_CELLS <= ISO_TREE_BLOCK)
+            have &= low_half[d];
+    return have;
+}
+
+/* How brick b takes part in iso_march_selected: 0 not at all, 1 wholly marked, 2 partly:
+ * it has marked blocks, or it is a ghost (the level crosses it and it owns edges that a
+ * lower neighbour's marked blocks hold). lower[0]: its own marked blocks; lower[k]: those
+ * of the neighbour at -(k & 1), -(k >> 1 & 1), -(k >> 2 & 1) whose closed boxes reach its
+ * low planes (the upper blocks along every axis where k steps down). */
+static int marks_of(const march_job *job, const uint32_t b[3], float level, uint8_t lower[8])
+{
+    static const unsigned upper_half[3] = {0xAA, 0xCC, 0xF0};
     const iso_bricks *g = job->bricks;
     size_t at = ((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0];
-    if (job->marked[at] || !(g->min[at] <= level && g->max[at] > level))
+    unsigned have = blocks_of(job, b), own = job->marked[at] & have, reach = 0;
+    int active = g->min[at] <= level && g->max[at] > level;
+    lower[0] = (uint8_t)own;
+    if (own == have)
+        return 1;
+    if (!own && !active)
         return 0;
-    unsigned lower = 0;
     for (int k = 1; k < 8; k++) {
         uint32_t o[3] = {k & 1, k >> 1 & 1, k >> 2 & 1};
+        lower[k] = 0;
         if ((o[0] && !b[0]) || (o[1] && !b[1]) || (o[2] && !b[2]))
             continue;
         size_t n = ((size_t)(b[2] - o[2]) * g->count[1] + (b[1] - o[1])) * g->count[0] + (b[0] - o[0]);
-        lower |= (unsigned)(job->marked[n] != 0) << k;
+        unsigned m = job->marked[n];
+        for (int d = 0; d < 3; d++)
+            if (o[d])
+                m &= upper_half[d];
+        lower[k] = (uint8_t)m;
+        reach |= m;
     }
-    return lower;
+    return own || reach ? 2 : 0;
 }
 
-/* number_selected for iso_march_selected: the marked bricks and their ghosts. */
-static size_t number_marked(const march_job *job, int32_t *slot, uint32_t *order, uint8_t *ghost)
+/* number_selected for iso_march_selected: the bricks with marked blocks and their ghosts. */
+static size_t number_marked(const march_job *job, int32_t *slot, uint32_t *order)
 {
     const iso_bricks *g = job->bricks;
     float level = float_at_or_below(job->level);
     size_t n = 0, at = 0;
+    uint8_t lower[8];
     for (uint32_t k = 0; k < g->count[2]; k++)
         for (uint32_t j = 0; j < g->count[1]; j++)
             for (uint32_t i = 0; i < g->count[0]; i++, at++) {
                 uint32_t b[3] = {i, j, k};
-                unsigned lower = ghost_of(job, b, level);
-                slot[at] = job->marked[at] || lower ? (int32_t)n : -1;
-                if (slot[at] < 0)
-                    continue;
-                order[n] = (uint32_t)at;
-                ghost[n++] = (uint8_t)lower;
+                slot[at] = marks_of(job, b, level, lower) ? (int32_t)n : -1;
+                if (slot[at] >= 0)
+                    order[n++] = (uint32_t)at;
             }
     return n;
 }
@@ -940,29 +1069,27 @@ static int select_bricks(march_job *job, int prune)
     size_t total = iso_bricks_total(g);
     job->slot = malloc(total * sizeof *job->slot);
     uint32_t *order = malloc(total * sizeof *order);
-    uint8_t *ghost = job->marked ? malloc(total ? total : 1) : NULL;
-    if (!job->slot || !order || (job->marked && !ghost)) {
+    if (!job->slot || !order) {
         free(order);
-        free(ghost);
         return ISO_E_NOMEM;
     }
-    size_t n = job->marked ? number_marked(job, job->slot, order, ghost) : number_selected(job, prune, job->slot, order);
+    size_t n = job->marked ? number_marked(job, job->slot, order) : number_selected(job, prune, job->slot, order);
     job->active = malloc((n ? n : 1) * sizeof *job->active);
     if (!job->active) {
         free(order);
-        free(ghost);
         return ISO_E_NOMEM;
     }
+    float level = float_at_or_below(job->level);
     for (size_t i = 0; i < n; i++) {
         active_brick *ab = &job->active[i];
         uint32_t at = order[i];
-        ab->ghost = ghost ? ghost[i] : 0;
         ab->brick[0] = at % g->count[0];
         ab->brick[1] = at / g->count[0] % g->count[1];
         ab->brick[2] = at / g->count[0] / g->count[1];
+        ab->partial = job->marked && marks_of(job, ab->brick, level, ab->lower) == 2;
+        ab->blocks = ab->lower[0];
     }
     free(order);
-    free(ghost);
     job->active_count = n;
     return 0;
 }
@@ -1077,23 +1204,7 @@ int iso_march_selected(const iso_volume *vol, const iso_bricks *bricks, double l
 
 int iso_march_part_vertex(const iso_march_part *job, const uint32_t p[3], int axis, uint32_t *id)
 {
-    const iso_bricks *g = job->bricks;
-    uint32_t b[3], local[3];
-    for (int d = 0; d < 3; d++) {
-        b[d] = p[d] / ISO_BRICK_CELLS;
-        if (b[d] >= g->count[d])
-            b[d] = g->count[d] - 1; /* the last brick owns the volume's last sample plane */
-        local[d] = p[d] - b[d] * ISO_BRICK_CELLS;
-    }
-    int32_t slot = job->slot[((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0]];
-    if (slot < 0)
-        return 0;
-    const active_brick *ab = &job->active[slot];
-    unsigned r = local[2] * S + local[1], row = ab->cross[axis][r];
-    if (!(ab->crossing_rows[r / 64] >> (r % 64) & 1) || !(row >> local[0] & 1))
-        return 0;
-    *id = (uint32_t)(ab->first_vertex + ab->before[axis][r] + bit_count[row & ((1u << local[0]) - 1)]);
-    return 1;
+    return vertex_of(job, p, axis, id);
 }
 
 void iso_march_part_free(iso_march_part *part)

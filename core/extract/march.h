@@ -29,12 +29,14 @@ typedef struct iso_march_stats {
 int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double level, int prune,
                      int world, int threads, iso_mesh *mesh, iso_march_stats *stats, iso_error *err);
 
-/* The surface of the bricks marked (nonzero per brick of the grid, x fastest) in index
- * space, for the tolerance path (lod.h): marching cubes as above on those bricks, none
- * other. An unmarked brick the level crosses that owns an edge a marked brick holds (it
- * holds the edge's low corner) gives the vertices of those edges only, no triangle, so
- * that every crossing on a marked brick's box is in the mesh. *part keeps the numbering
- * for iso_march_part_vertex until iso_march_part_free (NULL after an error). */
+/* The surface of the blocks marked in index space, for the tolerance path (lod.h):
+ * marked[b] per brick of the grid (x fastest), bit x | y << 1 | z << 2 for its block of
+ * ISO_TREE_BLOCK cells per axis at (x, y, z) (0xFF: the whole brick); marching cubes as
+ * above on those blocks' cells, none other. A brick that owns an edge a marked block
+ * holds (it holds the edge's low corner) gives that edge's vertex even where it marches
+ * no cell there, so that every crossing on a marked block's closed box is in the mesh, and
+ * no other. *part keeps the numbering for iso_march_part_vertex until iso_march_part_free
+ * (NULL after an error). */
 typedef struct march_job iso_march_part;
 int iso_march_selected(const iso_volume *vol, const iso_bricks *bricks, double level, const uint8_t *marked,
                        int threads, iso_mesh *mesh, iso_march_stats *stats, iso_march_part **part,

@@ -268,13 +268,14 @@ static void test_cthead_matches_full_scan(void)
     iso_vol_destroy(vol);
 }
 
-/* iso_march_selected on random fields and random marks: the triangles are exactly those
- * marching cubes gives the marked bricks' cells, every vertex is some triangle's, and
- * iso_march_part_vertex finds each crossing of a marked brick's cells at its position
- * (the ghosts' vertices included: a cell's crossing on an edge a ghost owns). */
+/* iso_march_selected on random fields and random marks (whole bricks, and blocks of 4^3
+ * cells in any pattern): the triangles are exactly those marching cubes gives the marked
+ * blocks' cells, every vertex is some triangle's, and iso_march_part_vertex finds each
+ * crossing of a marked block's cells at its position (the ghosts' vertices included: a
+ * cell's crossing on an edge another brick owns). */
 static void test_selected_bricks(void)
 {
-    for (int trial = 0; trial < 40 && !check_failed(); trial++) {
+    for (int trial = 0; trial < 120 && !check_failed(); trial++) {
         size_t n[3];
         for (int d = 0; d < 3; d++)
             n[d] = 2 + (size_t)(surface_uniform() * 30);
@@ -285,8 +286,10 @@ static void test_selected_bricks(void)
         CHECK_OK(iso_bricks_build(vol, 1, &bricks, &err), &err);
         size_t total = iso_bricks_total(&bricks);
         uint8_t *marked = malloc(total);
-        for (size_t b = 0; b < total; b++)
-            marked[b] = trial % 5 == 0 || surface_uniform() < 0.4;
+        for (size_t b = 0; b < total; b++) {
+            double u = surface_uniform();
+            marked[b] = trial % 5 == 0 || u < 0.3 ? 0xFF : u < 0.6 ? (uint8_t)(surface_uniform() * 256) : 0;
+        }
         iso_mesh m, soup;
         iso_mesh_init(&m);
         iso_mesh_init(&soup);
@@ -299,7 +302,7 @@ static void test_selected_bricks(void)
             for (size_t y = 0; y + 1 < n[1]; y++)
                 for (size_t x = 0; x + 1 < n[0]; x++) {
                     size_t b = ((z / 8) * bricks.count[1] + y / 8) * bricks.count[0] + x / 8;
-                    if (!marked[b])
+                    if (!(marked[b] >> (x / 4 % 2 | (y / 4 % 2) << 1 | (z / 4 % 2) << 2) & 1))
                         continue;
                     double v[8], origin[3] = {(double)x, (double)y, (double)z};
                     for (int c = 0; c < 8; c++)
