@@ -243,18 +243,19 @@ static int keep_volume(iso_mesh_chain *chain, int k, iso_mesh *level, iso_error 
  * per triangle of level k - 1 (NULL: nothing known; level 1's prior is level 0 itself)
  * and leaves per triangle of level k (NULL when it was moved, so that its samples are not
  * level k + 1's): what the measure of the next level reuses (distance.h). */
-static int measure_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int k,
-                         const iso_mesh *level, int threads, double **bound, iso_error *err)
+static int measure_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid,
+                         const iso_mesh_samples *exact_samples, int k, const iso_mesh *level, int threads,
+                         double **bound, iso_error *err)
 {
     const iso_mesh_chain_level *prev = &chain->level[k - 1];
     iso_mesh_chain_level *lv = &chain->level[k];
-    iso_mesh_distance_reuse reuse = {.without_mean = 1};
+    iso_mesh_distance_reuse reuse = {.a_samples = exact_samples, .without_mean = 1};
     double *next = lv->offset == 0 ? malloc((lv->triangle_count + 1) * sizeof *next) : NULL;
     if (next && (k == 1 || *bound))
         reuse = (iso_mesh_distance_reuse){.prior_indices = prev->indices,
                                           .prior_triangles = prev->triangle_count,
                                           .prior_bound = k == 1 ? NULL : *bound,
-                                          .without_mean = 1};
+                                          .a_samples = exact_samples, .without_mean = 1};
     reuse.bound = next;
     iso_mesh exact = view_of(chain, 0);
     int rc = iso_mesh_distance_between(&exact, exact_grid, level, NULL,
@@ -307,15 +308,16 @@ static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *s
 }
 
 /* PASS 2c and 3 for level k (*bound: measure_level's). */
-static int measure_step(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid, int k, int threads,
-                        double **bound, iso_error *err)
+static int measure_step(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid,
+                        const iso_mesh_samples *exact_samples, int k, int threads, double **bound,
+                        iso_error *err)
 {
     iso_mesh_chain_level *lv = &chain->level[k];
     iso_mesh level = view_of(chain, k);
     double start = iso_clock_ms();
     int rc = keep_volume(chain, k, &level, err);
     if (!rc)
-        rc = measure_level(chain, exact_grid, k, &level, threads, bound, err);
+        rc = measure_level(chain, exact_grid, exact_samples, k, &level, threads, bound, err);
     if (lv->offset != 0)
         iso_mesh_free(&level);
     lv->measure_ms = iso_clock_ms() - start;
@@ -368,6 +370,14 @@ static void simplify_all(pipeline *p)
 static void measure_all(pipeline *p)
 {
     double *bound = NULL;
+    /* Level 0's samples, counted once for all levels (NULL without memory: each counts),
+     * in level 1's measure time. */
+    iso_mesh exact = view_of(p->chain, 0);
+    iso_mesh_samples *samples = NULL;
+    double start = iso_clock_ms();
+    if (p->levels > 0)
+        iso_mesh_samples_build(&exact, ISO_CHAIN_SPACING_VOXELS * p->chain->voxel_size, &samples);
+    double samples_ms = iso_clock_ms() - start;
     for (int k = 1; k <= p->levels; k++) {
         pthread_mutex_lock(&p->lock);
         while (p->made < k && !p->over)
@@ -377,14 +387,17 @@ static void measure_all(pipeline *p)
         if (!ready)
             break;
         int threads = all || p->threads < 2 ? p->threads : p->threads - 1;
-        if ((p->rc_measure = measure_step(p->chain, p->grid, k, threads, &bound, &p->err_measure))) {
+        if ((p->rc_measure = measure_step(p->chain, p->grid, samples, k, threads, &bound, &p->err_measure))) {
             pthread_mutex_lock(&p->lock);
             p->stop = 1;
             pthread_mutex_unlock(&p->lock);
             break;
         }
+        if (k == 1)
+            p->chain->level[1].measure_ms += samples_ms;
     }
     free(bound);
+    iso_mesh_samples_destroy(samples);
 }
 
 static void pipeline_stage(void *context, int t, int threads)

@@ -619,10 +619,22 @@ static void bound_nearby(const iso_mesh_grid *ix, const double p[3], uint32_t *h
     *hint = s->triangle;
 }
 
-static int by_bound_down(const void *pa, const void *pb)
+/* A drawn point and its bound, in a max-heap by bound for select_top. */
+typedef struct ranked {
+    float bound;
+    uint32_t at;
+} ranked;
+
+static void sift_down(ranked *h, size_t n, size_t i)
 {
-    float a = ((const float *)pa)[0], b = ((const float *)pb)[0];
-    return (a < b) - (a > b);
+    ranked v = h[i];
+    for (size_t c = 2 * i + 1; c < n; i = c, c = 2 * c + 1) {
+        c += c + 1 < n && h[c + 1].bound > h[c].bound;
+        if (h[c].bound <= v.bound)
+            break;
+        h[i] = h[c];
+    }
+    h[i] = v;
 }
 
 /* A min-heap of n floats: v pushed, the least dropped past `cap` of them. */
@@ -658,23 +670,23 @@ static void heap_push(float *h, size_t *n, size_t cap, float v)
 static int select_top(direction *d)
 {
     size_t n = d->drawn, K = n - (size_t)ceil(0.99 * (double)n) + 1, count = 0;
-    float *pairs = malloc(2 * n * sizeof *pairs), *heap = malloc(K * sizeof *heap);
-    if (!pairs || !heap) {
-        free(pairs);
+    ranked *order = malloc(n * sizeof *order);
+    float *heap = malloc(K * sizeof *heap);
+    if (!order || !heap) {
+        free(order);
         free(heap);
         return ISO_E_NOMEM;
     }
-    for (size_t i = 0; i < n; i++) {
-        uint32_t at = (uint32_t)i;
-        pairs[2 * i] = d->dist[i];
-        memcpy(&pairs[2 * i + 1], &at, sizeof at);
-    }
-    qsort(pairs, n, 2 * sizeof *pairs, by_bound_down);
-    for (size_t i = 0; i < n; i++) {
-        if (count == K && (double)pairs[2 * i] * (1 + 1e-6) < heap[0])
+    for (size_t i = 0; i < n; i++)
+        order[i] = (ranked){d->dist[i], (uint32_t)i};
+    for (size_t i = n / 2; i-- > 0;)
+        sift_down(order, n, i);
+    for (size_t left = n; left > 0; left--) {
+        if (count == K && (double)order[0].bound * (1 + 1e-6) < heap[0])
             break;
-        uint32_t at;
-        memcpy(&at, &pairs[2 * i + 1], sizeof at);
+        uint32_t at = order[0].at;
+        order[0] = order[left - 1];
+        sift_down(order, left - 1, 0);
         double p[3];
         draw(d, at, p);
         search s = {INFINITY, NO_TRIANGLE, 0};
@@ -682,7 +694,7 @@ static int select_top(direction *d)
         d->dist[at] = (float)sqrt(s.best);
         heap_push(heap, &count, K, d->dist[at]);
     }
-    free(pairs);
+    free(order);
     free(heap);
     return 0;
 }
@@ -790,27 +802,24 @@ static int block_within(const iso_mesh_grid *dst, const float lo[3], const float
     return 1;
 }
 
-static void box_open(float lo[3], float hi[3])
+/* The box of the n points positions[3 v[i]] (lo, hi), i < n: in six scalars, so that the
+ * compiler keeps them in registers (the points could alias arrays). */
+static void points_box(const float *positions, const uint32_t *v, size_t n, float lo[3], float hi[3])
 {
-    for (int a = 0; a < 3; a++)
-        lo[a] = INFINITY, hi[a] = -INFINITY;
-}
-
-static void box_add(float lo[3], float hi[3], const float *p)
-{
-    for (int a = 0; a < 3; a++)
-        lo[a] = p[a] < lo[a] ? p[a] : lo[a], hi[a] = p[a] > hi[a] ? p[a] : hi[a];
+    float x0 = INFINITY, y0 = INFINITY, z0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY, z1 = -INFINITY;
+    for (size_t i = 0; i < n; i++) {
+        const float *p = positions + 3 * (size_t)v[i];
+        float x = p[0], y = p[1], z = p[2];
+        x0 = x < x0 ? x : x0, y0 = y < y0 ? y : y0, z0 = z < z0 ? z : z0;
+        x1 = x > x1 ? x : x1, y1 = y > y1 ? y : y1, z1 = z > z1 ? z : z1;
+    }
+    lo[0] = x0, lo[1] = y0, lo[2] = z0, hi[0] = x1, hi[1] = y1, hi[2] = z1;
 }
 
 /* The box of source triangles t0..t1 - 1's corners. */
 static void triangles_box(const iso_mesh *m, size_t t0, size_t t1, float lo[3], float hi[3])
 {
-    float l[3], h[3]; /* not lo and hi: the positions may not alias them */
-    box_open(l, h);
-    for (size_t i = 3 * t0; i < 3 * t1; i++)
-        box_add(l, h, m->positions + 3 * (size_t)m->indices[i]);
-    memcpy(lo, l, sizeof l);
-    memcpy(hi, h, sizeof h);
+    points_box(m->positions, m->indices + 3 * t0, 3 * (t1 - t0), lo, hi);
 }
 
 /* PASS 5 for source triangle t's centroids (pts: room for them). A triangle whose known
@@ -875,9 +884,7 @@ static void raise_max_vertices(const direction *d, size_t i0, size_t i1, uint32_
     const float *positions = d->src->positions;
     float lo[3], hi[3];
     double u;
-    box_open(lo, hi);
-    for (size_t i = i0; i < i1; i++)
-        box_add(lo, hi, positions + 3 * (size_t)d->vertices[i]);
+    points_box(positions, d->vertices + i0, i1 - i0, lo, hi);
     if (!d->exhaustive && block_within(d->dst, lo, hi, *max, hint, &u))
         return;
     for (size_t i = i0; i < i1; i++) {
@@ -974,12 +981,59 @@ typedef struct one_way_result {
     size_t samples, drawn;
 } one_way_result;
 
-/* PASS 2: per source triangle its first centroid sample and the area before it; the used
- * vertices (*used_count) and of them those to measure: when the target shares the
- * source's positions array, a vertex both use lies on the target, at distance 0. Returns
- * 0 or ISO_E_NOMEM. */
-static int enumerate(const iso_mesh *src, const iso_mesh *dst, double spacing, size_t *first,
-                     double *area, uint32_t **vertices, size_t *vertex_count, size_t *used_count)
+/* PASS 2: per source triangle its first centroid sample and the area before it (first and
+ * area: triangle_count + 1 entries). */
+static void count_samples(const iso_mesh *src, double spacing, size_t *first, double *area)
+{
+    first[0] = 0, area[0] = 0;
+    for (size_t t = 0; t < src->triangle_count; t++) {
+        double c[3][3];
+        triangle_corners(src, t, c);
+        size_t n = (size_t)subdivisions(c, spacing);
+        first[t + 1] = first[t] + n * n;
+        area[t + 1] = area[t] + triangle_area(c);
+    }
+}
+
+struct iso_mesh_samples {
+    double spacing;
+    size_t triangle_count;
+    size_t *first;
+    double *area;
+    float lo[3], hi[3];
+};
+
+int iso_mesh_samples_build(const iso_mesh *mesh, double spacing, iso_mesh_samples **out)
+{
+    iso_mesh_samples *s = calloc(1, sizeof *s);
+    *out = NULL;
+    if (!s || !(s->first = malloc((mesh->triangle_count + 1) * sizeof *s->first)) ||
+        !(s->area = malloc((mesh->triangle_count + 1) * sizeof *s->area))) {
+        iso_mesh_samples_destroy(s);
+        return ISO_E_NOMEM;
+    }
+    s->spacing = spacing;
+    s->triangle_count = mesh->triangle_count;
+    count_samples(mesh, spacing, s->first, s->area);
+    iso_mesh_bounds(mesh, s->lo, s->hi);
+    *out = s;
+    return 0;
+}
+
+void iso_mesh_samples_destroy(iso_mesh_samples *s)
+{
+    if (!s)
+        return;
+    free(s->first);
+    free(s->area);
+    free(s);
+}
+
+/* PASS 2: the vertices src uses (*used_count) and of them those to measure: when the
+ * target shares the source's positions array, a vertex both use lies on the target, at
+ * distance 0. Returns 0 or ISO_E_NOMEM. */
+static int enumerate(const iso_mesh *src, const iso_mesh *dst, uint32_t **vertices, size_t *vertex_count,
+                     size_t *used_count)
 {
     unsigned char *used = calloc(src->vertex_count ? src->vertex_count : 1, 1);
     if (!used)
@@ -988,19 +1042,11 @@ static int enumerate(const iso_mesh *src, const iso_mesh *dst, double spacing, s
         for (size_t i = 0; i < 3 * dst->triangle_count; i++)
             if (dst->indices[i] < src->vertex_count)
                 used[dst->indices[i]] = 2;
-    first[0] = 0, area[0] = 0;
     size_t count = 0, all = 0;
-    for (size_t t = 0; t < src->triangle_count; t++) {
-        double c[3][3];
-        triangle_corners(src, t, c);
-        size_t n = (size_t)subdivisions(c, spacing);
-        first[t + 1] = first[t] + n * n;
-        area[t + 1] = area[t] + triangle_area(c);
-        for (int k = 0; k < 3; k++) {
-            unsigned char *u = &used[src->indices[3 * t + k]];
-            if (!(*u & 1))
-                count += !*u, all++, *u |= 1;
-        }
+    for (size_t i = 0; i < 3 * src->triangle_count; i++) {
+        unsigned char *u = &used[src->indices[i]];
+        if (!(*u & 1))
+            count += !*u, all++, *u |= 1;
     }
     if (!(*vertices = malloc((count ? count : 1) * sizeof **vertices))) {
         free(used);
@@ -1054,10 +1100,11 @@ static int match_prior(const iso_mesh *src, const iso_mesh *dst, const iso_mesh_
 }
 
 /* One direction: from src's surface to dst's (its grid given), with what an earlier
- * measure knows of src's triangles (reuse, or NULL). */
+ * measure knows of src's triangles (reuse, or NULL) and src's samples (cached, or NULL:
+ * counted here). */
 static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh_grid *dst,
                    double spacing, size_t cap, int threads, const iso_mesh_distance_reuse *reuse,
-                   one_way_result *out)
+                   const iso_mesh_samples *cached, one_way_result *out)
 {
     *out = (one_way_result){0};
     if (!src->triangle_count)
@@ -1066,16 +1113,21 @@ static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh
         out->p99 = out->max = out->mean = INFINITY;
         return 0;
     }
-    size_t *first = malloc((src->triangle_count + 1) * sizeof *first);
-    double *area = malloc((src->triangle_count + 1) * sizeof *area);
+    if (cached && (cached->spacing != spacing || cached->triangle_count != src->triangle_count))
+        cached = NULL;
+    size_t *own_first = cached ? NULL : malloc((src->triangle_count + 1) * sizeof *own_first);
+    double *own_area = cached ? NULL : malloc((src->triangle_count + 1) * sizeof *own_area);
+    const size_t *first = cached ? cached->first : own_first;
+    const double *area = cached ? cached->area : own_area;
     uint32_t *vertices = NULL;
     float *dist = NULL, *weight = NULL;
     double *known = NULL;
     size_t vertex_count = 0, used_count = 0;
     int rc = ISO_E_NOMEM;
-    if (!first || !area ||
-        enumerate(src, dst_mesh, spacing, first, area, &vertices, &vertex_count, &used_count))
+    if (!first || !area || enumerate(src, dst_mesh, &vertices, &vertex_count, &used_count))
         goto done;
+    if (!cached)
+        count_samples(src, spacing, own_first, own_area);
     if (reuse && reuse->prior_indices &&
         (!(known = malloc(src->triangle_count * sizeof *known)) || match_prior(src, dst_mesh, reuse, known)))
         goto done;
@@ -1116,8 +1168,8 @@ static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh
     out->samples = centroids_n + used_count;
     out->drawn = drawn;
 done:
-    free(first);
-    free(area);
+    free(own_first);
+    free(own_area);
     free(known);
     free(vertices);
     free(dist);
@@ -1125,10 +1177,17 @@ done:
     return rc;
 }
 
-static void union_bounds(const iso_mesh *a, const iso_mesh *b, float lo[3], float hi[3])
+/* The box of a and b (a's from its samples when they are given). */
+static void union_bounds(const iso_mesh *a, const iso_mesh_samples *sa, const iso_mesh *b, float lo[3],
+                         float hi[3])
 {
     float l2[3], h2[3];
-    iso_mesh_bounds(a, lo, hi);
+    if (sa && sa->triangle_count == a->triangle_count) {
+        memcpy(lo, sa->lo, sizeof sa->lo);
+        memcpy(hi, sa->hi, sizeof sa->hi);
+    } else {
+        iso_mesh_bounds(a, lo, hi);
+    }
     iso_mesh_bounds(b, l2, h2);
     for (int k = 0; k < 3; k++)
         lo[k] = lo[k] < l2[k] ? lo[k] : l2[k], hi[k] = hi[k] > h2[k] ? hi[k] : h2[k];
@@ -1145,8 +1204,9 @@ int iso_mesh_distance_between(const iso_mesh *a, const iso_mesh_grid *ga, const 
         return iso_error_set(err, ISO_E_ARGUMENT, "distance: sample spacing %g must be > 0", spacing);
     if (cap < 1)
         return iso_error_set(err, ISO_E_ARGUMENT, "distance: the sample cap must be at least 1");
+    const iso_mesh_samples *sa = reuse ? reuse->a_samples : NULL;
     float lo[3], hi[3];
-    union_bounds(a, b, lo, hi);
+    union_bounds(a, sa, b, lo, hi);
     iso_mesh_grid *own_a = NULL, *own_b = NULL;
     int rc = 0;
     if ((!ga && (rc = iso_mesh_grid_build(a, lo, hi, &own_a))) ||
@@ -1155,8 +1215,8 @@ int iso_mesh_distance_between(const iso_mesh *a, const iso_mesh_grid *ga, const 
     one_way_result ab, ba;
     iso_mesh_distance_reuse plain = {.exhaustive = reuse && reuse->exhaustive,
                                      .without_mean = reuse && reuse->without_mean};
-    if ((rc = one_way(a, b, gb ? gb : own_b, spacing, cap, threads, &plain, &ab)) ||
-        (rc = one_way(b, a, ga ? ga : own_a, spacing, cap, threads, reuse, &ba)))
+    if ((rc = one_way(a, b, gb ? gb : own_b, spacing, cap, threads, &plain, sa, &ab)) ||
+        (rc = one_way(b, a, ga ? ga : own_a, spacing, cap, threads, reuse, NULL, &ba)))
         goto done;
     out->p99_ab = ab.p99, out->max_ab = ab.max, out->samples_a = ab.samples, out->drawn_a = ab.drawn;
     out->p99_ba = ba.p99, out->max_ba = ba.max, out->samples_b = ba.samples, out->drawn_b = ba.drawn;

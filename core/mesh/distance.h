@@ -16,6 +16,13 @@ int iso_mesh_grid_build(const iso_mesh *mesh, const float lo[3], const float hi[
 void iso_mesh_grid_destroy(iso_mesh_grid *g);
 size_t iso_mesh_grid_bytes(const iso_mesh_grid *g); /* what it holds in memory */
 
+/* A mesh's samples at one spacing (how many each triangle holds, the area before it) and
+ * its bounds, for callers that measure that mesh as a against many (the chain's level 0
+ * against each level). The mesh is not copied: it must outlive them unchanged. */
+typedef struct iso_mesh_samples iso_mesh_samples;
+int iso_mesh_samples_build(const iso_mesh *mesh, double spacing, iso_mesh_samples **out);
+void iso_mesh_samples_destroy(iso_mesh_samples *s);
+
 /* What a measure of b against a can take from an earlier measure against the same a, at
  * the same spacing, of a mesh `prior` over the same positions as b (a chain's previous
  * level), and leave for the next one. A triangle of b with the same three indices in the
@@ -33,6 +40,7 @@ typedef struct iso_mesh_distance_reuse {
                                     * this measure, for the next one's prior_bound */
     int exhaustive;                /* nonzero: every sample searched on its own, no block of
                                     * them skipped by a bound (for checks: same results) */
+    const iso_mesh_samples *a_samples; /* a's at this spacing (NULL: counted for the call) */
     int without_mean;              /* nonzero: the mean is not wanted (it comes out NAN), so
                                     * that of the points drawn for the percentile only those
                                     * that may lie in its top 1% are measured exactly (the
