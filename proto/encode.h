@@ -142,16 +142,17 @@ typedef struct proto_gzip_piece {
 #define PROTO_GZIP_PIECES_MAX 4
 
 /* proto_gzip with the buffer cut into `count` (1..PROTO_GZIP_PIECES_MAX) consecutive
- * pieces deflated independently, on up to `threads` threads (0: all cores), joined into
- * one gzip member. Same errors. */
+ * pieces deflated independently (a Huffman-only one in parts of 256 KB or more), on up
+ * to `threads` threads (0: all cores) taking the parts as they come free, joined into one
+ * gzip member. Same errors. */
 int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_piece *pieces, int count,
                       int threads, unsigned char **out, size_t *out_size, iso_error *err);
 
 /* The pieces in which to gzip a glb made by proto_encode_glb_meshopt: the container and
- * the vertex streams in two (Huffman only), the index stream's header and codes (matches,
- * which find the index codec's repeats), then its data (Huffman only: matches would save
- * 10% more of it for 3 times the time); cut so that two threads share the work evenly.
- * Fills pieces[0..3] and returns 4; 1 (the whole) if the bytes are not such a glb. */
+ * the vertex streams (Huffman only), the index stream's header and codes (matches, which
+ * find the index codec's repeats), then its data (Huffman only: matches would save 10%
+ * more of it for 3 times the time). Fills pieces[0..2] and returns 3; 1 (the whole) if
+ * the bytes are not such a glb. */
 int proto_glb_meshopt_gzip_pieces(const unsigned char *glb, size_t size,
                                   proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX]);
 

@@ -1,10 +1,11 @@
 /* gzip.c: a gzip member (RFC 1952) of a whole buffer, for HTTP's Content-Encoding: gzip
  * (see encode.h).
  *
- * The buffer may be cut into pieces, each deflated on its own (raw deflate, the pieces
+ * The buffer may be cut into pieces, each with its own strategy, and a Huffman-only piece
+ * into parts of whole blocks; each part is deflated on its own (raw deflate, the parts
  * but the last ending in a sync flush, so that they join byte-aligned into one stream, as
- * pigz does) with its own strategy and on up to two threads; then the header, the joined
- * stream, and the trailer (the CRC-32 and length of the whole input).
+ * pigz does), the threads taking the costliest left first; then the header, the joined
+ * stream, and the trailer (the CRC-32 and length of the whole input, combined).
  *
  * Both strategies are coded here as RFC 1951 dynamic blocks, one per BLOCK_BYTES of input
  * (a table per 64 KB follows the vertex streams' changes, positions then normals, for
@@ -28,6 +29,7 @@
 #include "encode.h"
 
 #include <assert.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -518,7 +520,9 @@ static uLong crc_of(const unsigned char *p, size_t n)
 }
 #endif
 
-/* One piece's deflate stream, written at `out` (piece_bound(size) bytes). */
+/* A part of a piece deflated on its own (a Huffman-only piece is cut into parts of whole
+ * blocks, each ended by a sync flush, so that threads share it; a matching piece stays
+ * whole, its matches reaching back across it), written at `out` (piece_bound(size)). */
 typedef struct deflated {
     const unsigned char *in;
     size_t size;
@@ -529,7 +533,12 @@ typedef struct deflated {
     int rc; /* 0 or ISO_E_NOMEM */
 } deflated;
 
-static void deflate_piece(deflated *d)
+/* At most this many parts (the Huffman-only ones of at least PART_BYTES, more for a
+ * large buffer, see proto_gzip_pieces). */
+#define PARTS_MAX (32 + 2 * PROTO_GZIP_PIECES_MAX)
+#define PART_BYTES (256u << 10)
+
+static void deflate_part(deflated *d)
 {
     matcher *m = d->huffman ? NULL : malloc(sizeof *m);
     if (!d->huffman && !m) {
@@ -541,16 +550,28 @@ static void deflate_piece(deflated *d)
     d->crc = crc_of(d->in, d->size);
 }
 
+/* The parts, taken by the threads in order of cost, each the next one left: a thread
+ * that starts late (a busy machine) takes what remains, and none waits on a share that
+ * another has not begun. */
 typedef struct gzip_job {
-    deflated *pieces;
+    deflated *parts;
+    int order[PARTS_MAX];
     int count;
+    atomic_int next;
 } gzip_job;
 
 static void gzip_share(void *context, int t, int threads)
 {
+    (void)t, (void)threads;
     gzip_job *job = context;
-    for (int i = t; i < job->count; i += threads)
-        deflate_piece(&job->pieces[i]);
+    for (int k; (k = atomic_fetch_add(&job->next, 1)) < job->count;)
+        deflate_part(&job->parts[job->order[k]]);
+}
+
+/* A part's cost, in Huffman-coded bytes: matching costs about 3 times as much a byte. */
+static size_t part_cost(const deflated *d)
+{
+    return d->huffman ? d->size : 3 * d->size;
 }
 
 int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_piece *pieces, int count,
@@ -561,29 +582,43 @@ int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_pie
     *out_size = 0;
     if (size > UINT32_MAX)
         return iso_error_set(err, ISO_E_LIMIT, "gzip: cannot compress %zu bytes", size);
-    /* One buffer: the header, each piece's room (its bound), the trailer; the pieces are
+    /* One buffer: the header, each part's room (its bound), the trailer; the parts are
      * moved down against each other when done. */
     enum { HEADER = 10, TRAILER = 8 };
-    deflated d[PROTO_GZIP_PIECES_MAX];
+    size_t part_bytes = (size / 32 + BLOCK_BYTES - 1) / BLOCK_BYTES * BLOCK_BYTES;
+    part_bytes = part_bytes > PART_BYTES ? part_bytes : PART_BYTES;
+    deflated d[PARTS_MAX];
+    gzip_job job = {.parts = d};
     size_t from = 0, room = HEADER;
     for (int i = 0; i < count; i++) {
         size_t end = i == count - 1 ? size : pieces[i].end;
         assert(end >= from && end <= size);
-        d[i] = (deflated){.in = in + from, .size = end - from, .huffman = pieces[i].huffman, .last = i == count - 1};
-        room += piece_bound(end - from);
-        from = end;
+        do { /* at least one part, if empty */
+            size_t n = pieces[i].huffman && end - from > part_bytes ? part_bytes : end - from;
+            assert(job.count < PARTS_MAX);
+            d[job.count++] = (deflated){.in = in + from, .size = n, .huffman = pieces[i].huffman,
+                                        .last = i == count - 1 && from + n == end};
+            room += piece_bound(n);
+            from += n;
+        } while (from < end);
     }
     unsigned char *buf = malloc(room + TRAILER);
     if (!buf)
         return iso_error_set(err, ISO_E_NOMEM, "gzip: no memory to compress %zu bytes", size);
     d[0].out = buf + HEADER;
-    for (int i = 1; i < count; i++)
+    for (int i = 1; i < job.count; i++)
         d[i].out = d[i - 1].out + piece_bound(d[i - 1].size);
-    gzip_job job = {.pieces = d, .count = count};
+    for (int i = 0; i < job.count; i++) { /* costliest first: insertion, a few dozen */
+        int k = i;
+        for (; k > 0 && part_cost(&d[job.order[k - 1]]) < part_cost(&d[i]); k--)
+            job.order[k] = job.order[k - 1];
+        job.order[k] = i;
+    }
+    atomic_init(&job.next, 0);
     threads = size < GZIP_BYTES_PER_THREAD ? 1 : iso_parallel_threads(threads);
-    iso_parallel_run(threads < count ? threads : count, gzip_share, &job);
+    iso_parallel_run(threads < job.count ? threads : job.count, gzip_share, &job);
     int rc = 0;
-    for (int i = 0; i < count; i++)
+    for (int i = 0; i < job.count; i++)
         rc = rc ? rc : d[i].rc;
     if (rc) {
         free(buf);
@@ -594,7 +629,7 @@ int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_pie
     memcpy(buf, header, sizeof header);
     size_t at = sizeof header;
     uLong crc = 0;
-    for (int i = 0; i < count; i++) {
+    for (int i = 0; i < job.count; i++) {
         memmove(buf + at, d[i].out, d[i].out_size);
         at += d[i].out_size;
         crc = crc32_combine(crc, d[i].crc, (z_off_t)d[i].size);

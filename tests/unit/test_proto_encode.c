@@ -1256,14 +1256,14 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
     free(one);
     proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
     int count = proto_glb_meshopt_gzip_pieces(buf, size, pieces);
-    /* The vertex streams in two, the index stream's header and a code per triangle, its
-     * data (its first byte the index codec's header, 0xe0 | version). */
-    CHECK_EQ(count, !m->triangle_count ? 1 : 4);
-    if (count == 4) {
-        CHECK(pieces[0].end <= pieces[1].end && pieces[1].end < size && (buf[pieces[1].end] & 0xf0) == 0xe0);
-        CHECK_EQ(pieces[2].end - pieces[1].end, 1 + m->triangle_count);
-        CHECK(pieces[2].end < size && pieces[3].end == size);
-        CHECK(pieces[0].huffman && pieces[1].huffman && !pieces[2].huffman && pieces[3].huffman);
+    /* The vertex streams, the index stream's header (its first byte, 0xe0 | version) and
+     * a code per triangle, its data. */
+    CHECK_EQ(count, !m->triangle_count ? 1 : 3);
+    if (count == 3) {
+        CHECK(pieces[0].end < size && (buf[pieces[0].end] & 0xf0) == 0xe0);
+        CHECK_EQ(pieces[1].end - pieces[0].end, 1 + m->triangle_count);
+        CHECK(pieces[1].end < size && pieces[2].end == size);
+        CHECK(pieces[0].huffman && !pieces[1].huffman && pieces[2].huffman);
     }
     unsigned char *gz;
     size_t gz_size;
@@ -1443,7 +1443,7 @@ static void test_glb_meshopt_round_trip(void)
     CHECK_OK(proto_encode_glb_meshopt(&m, NULL, &glb, &size, &err), &err);
     proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
     if (glb)
-        CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 4);
+        CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 3);
     free(glb);
     iso_mesh_free(&m);
 }
@@ -1521,11 +1521,11 @@ static void test_gzip_pieces(void)
     unsigned char *glb;
     CHECK_OK(proto_encode_glb_meshopt(&m, NULL, &glb, &size, &err), &err);
     if (glb) {
-        CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 4);
-        CHECKF((glb[pieces[1].end] & 0xf0) == 0xe0, "index view starts with %#x", glb[pieces[1].end]);
+        CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 3);
+        CHECKF((glb[pieces[0].end] & 0xf0) == 0xe0, "index view starts with %#x", glb[pieces[0].end]);
         /* The index view is the BIN chunk's last: it runs to the end but for its padding. */
         size_t encoded = meshopt_encodeIndexBufferBound(3 * m.triangle_count, m.vertex_count);
-        CHECK(size - pieces[1].end <= encoded + 3);
+        CHECK(size - pieces[0].end <= encoded + 3);
         glb[0] = 'x';
         CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 1);
     }
