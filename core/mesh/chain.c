@@ -61,6 +61,13 @@ static size_t used_vertices(const iso_mesh *m, unsigned char *seen)
 
 #define CHAIN_SLAB_MIN 20000 /* triangles per slab, at least, else one part */
 #define CHAIN_STEP 1.25      /* each step's error limit over the one before (PASS 2b) */
+/* Levels 1 and 2, three quarters of the chain's collapses, make those costing less than
+ * half the level's expected last one in memory order (iso_collapser_coarse): on CThead
+ * skin their collapse runs take a fifth less time, their p99 within 0.5%. Later levels
+ * go in cost order: there, with a few tens of thousands of triangles, the order of the
+ * cheap collapses moved CThead bone's 6% level's p99 by 7%. */
+#define CHAIN_COARSE 0.5
+#define CHAIN_COARSE_LEVELS 2
 
 /* One slab of a level: its triangles over its own vertices, and their collapser. */
 typedef struct slab {
@@ -77,6 +84,7 @@ typedef struct slab_job {
     slab *slabs;
     int count;
     double limit;            /* this step's error limit */
+    int coarse;              /* the cheap collapses in memory order (CHAIN_COARSE) */
 } slab_job;
 
 /* PASS 2a for the slabs of thread t: each gathered over compact vertices (so that its cost
@@ -116,6 +124,8 @@ static void gather_slab(void *context, int t, int threads)
         sl->mesh.triangle_count = n;
         int pinch_free;
         sl->rc = iso_collapser_create(&sl->mesh, &sl->collapser, &pinch_free);
+        if (!sl->rc && job->coarse)
+            iso_collapser_coarse(sl->collapser, CHAIN_COARSE);
     }
 }
 
@@ -170,7 +180,8 @@ static int simplify_level(iso_mesh *m, int k, size_t target, int threads, iso_si
         memset(slab_of, 0, T);
         slabs[0].alive = T, slabs[1].alive = 0;
     }
-    slab_job job = {.source = m, .slab_of = slab_of, .slabs = slabs, .count = count};
+    slab_job job = {.source = m, .slab_of = slab_of, .slabs = slabs, .count = count,
+                    .coarse = k <= CHAIN_COARSE_LEVELS};
     iso_parallel_run(count, gather_slab, &job); /* PASS 2a */
     int rc = slabs[0].rc ? slabs[0].rc : slabs[1].rc;
     if (count == 1 && !rc) {

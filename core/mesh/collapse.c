@@ -12,6 +12,8 @@
  *   4. order: each free vertex's cheapest collapse onto a neighbour goes into a heap, its
  *      cost the vertex's quadric at the neighbour per unit of area (meshoptimizer's
  *      measure, so the errors compare with iso_simplify's);
+ *      (ranked by cost, ties by vertex number; with iso_collapser_coarse, the cheap ones
+ *      by classes of a factor of 2 and vertex number: rank_of);
  *   5. collapse: the cheapest is checked (its edge has two triangles, its ends share no
  *      neighbour but their two opposite corners, no triangle turns over) and made: the
  *      removed vertex's quadric joins the kept one's and the kept vertex and its neighbours
@@ -37,11 +39,6 @@ typedef struct quadric {
     double a00, a01, a02, a11, a12, a22, b0, b1, b2, c, w;
 } quadric;
 
-typedef struct heap_entry {
-    double key;              /* the vertex's key, as in key[] */
-    uint32_t v;
-} heap_entry;
-
 struct iso_collapser {
     const float *pos;
     uint32_t *tri;           /* the triangles' corners, relabelled as vertices collapse */
@@ -49,7 +46,7 @@ struct iso_collapser {
     uint32_t *head, *next;   /* per vertex its first corner, per corner the next (NONE ends) */
     unsigned char *flags;    /* per vertex: LOCKED, REMOVED */
     quadric *q;
-    heap_entry *heap;        /* a binary min-heap of vertices */
+    uint64_t *heap;          /* a binary min-heap of the vertices' ranks (rank_of) */
     uint32_t *slot;          /* each vertex's place in it */
     double *key;             /* per vertex: its cheapest collapse's cost */
     uint32_t *to;            /* per vertex: that collapse's target */
@@ -58,6 +55,9 @@ struct iso_collapser {
     size_t alive;
     size_t triangle_count, vertex_count;
     double worst;            /* the largest cost collapsed */
+    double fine_from;        /* keys below rank in coarse classes (rank_of) */
+    double coarse;           /* iso_collapser_coarse's share */
+    double *sample;          /* RANK_SAMPLE keys: where a run will stop (ranks_for) */
 };
 typedef struct iso_collapser collapser;
 
@@ -72,6 +72,7 @@ void iso_collapser_destroy(collapser *c)
     free(c->flags);
     free(c->q);
     free(c->heap);
+    free(c->sample);
     free(c->slot);
     free(c->key);
     free(c->to);
@@ -81,57 +82,76 @@ void iso_collapser_destroy(collapser *c)
 
 /* ---- the heap ---- */
 
-/* Each entry carries its key, so that a sift compares children without a load from the
- * per-vertex keys (a cache miss each, visited in cost order). */
-static void heap_place(collapser *c, size_t i, heap_entry e)
+/* A vertex's rank in the heap: its key's class, then its number. A key at or above
+ * fine_from has a fine class (the double's exponent and top 20 bits of mantissa: cost
+ * order), one below it a coarse class (its exponent: a factor of 2). Within a class,
+ * collapses go in vertex order, which is memory order (neighbours in space are near in
+ * number), so that consecutive collapses reuse each other's cache lines instead of each
+ * starting cold. The coarse classes cover only the costs well below where the run will
+ * stop (iso_collapser_run), whose collapses are all made whatever their order; the last
+ * ones, which decide the level's error, go in cost order. A key >= 0 has monotone bits;
+ * the rank carries the vertex (its low 32 bits). */
+#define RANK_SAMPLE 1024   /* keys sampled to find where a run will stop */
+#define FINE_BITS 0xffffffff00000000u
+#define COARSE_BITS 0xfff0000000000000u
+
+static uint64_t rank_of(const collapser *c, double key, uint32_t v)
 {
-    c->heap[i] = e;
-    c->slot[e.v] = (uint32_t)i;
+    uint64_t bits;
+    memcpy(&bits, &key, sizeof bits);
+    return (bits & (key < c->fine_from ? COARSE_BITS : FINE_BITS)) | v;
+}
+
+static void heap_place(collapser *c, size_t i, uint64_t rank)
+{
+    c->heap[i] = rank;
+    c->slot[(uint32_t)rank] = (uint32_t)i;
 }
 
 static void heap_up(collapser *c, size_t i)
 {
-    heap_entry e = c->heap[i];
+    uint64_t rank = c->heap[i];
     while (i > 0) {
         size_t parent = (i - 1) / 2;
-        if (!(c->heap[parent].key > e.key))
+        if (c->heap[parent] < rank)
             break;
         heap_place(c, i, c->heap[parent]);
         i = parent;
     }
-    heap_place(c, i, e);
+    heap_place(c, i, rank);
 }
 
 static void heap_down(collapser *c, size_t i)
 {
-    heap_entry e = c->heap[i];
+    uint64_t rank = c->heap[i];
     for (;;) {
         size_t child = 2 * i + 1;
         if (child >= c->heap_count)
             break;
-        if (child + 1 < c->heap_count && c->heap[child + 1].key < c->heap[child].key)
+        if (child + 1 < c->heap_count && c->heap[child + 1] < c->heap[child])
             child++;
-        if (!(c->heap[child].key < e.key))
+        if (rank < c->heap[child])
             break;
         heap_place(c, i, c->heap[child]);
         i = child;
     }
-    heap_place(c, i, e);
+    heap_place(c, i, rank);
 }
 
 /* v enters the heap, or moves in it, with cost key. */
 static void heap_set(collapser *c, uint32_t v, double key)
 {
     c->key[v] = key;
+    uint64_t rank = rank_of(c, key, v);
     if (c->slot[v] == NONE) {
-        heap_place(c, c->heap_count++, (heap_entry){key, v});
+        heap_place(c, c->heap_count++, rank);
         heap_up(c, c->heap_count - 1);
         return;
     }
     size_t i = c->slot[v];
-    double old = c->heap[i].key;
-    c->heap[i].key = key;
-    if (key < old)
+    uint64_t old = c->heap[i];
+    c->heap[i] = rank;
+    if (rank < old)
         heap_up(c, i);
     else
         heap_down(c, i);
@@ -143,12 +163,12 @@ static void heap_remove(collapser *c, uint32_t v)
     if (i == NONE)
         return;
     c->slot[v] = NONE;
-    heap_entry last = c->heap[--c->heap_count];
+    uint64_t last = c->heap[--c->heap_count];
     if (i == c->heap_count)
         return;
     heap_place(c, i, last);
     heap_up(c, i);
-    heap_down(c, c->slot[last.v]);
+    heap_down(c, c->slot[(uint32_t)last]);
 }
 
 /* ---- quadrics ---- */
@@ -460,11 +480,12 @@ int iso_collapser_create(const iso_mesh *mesh, collapser **out, int *pinch_free)
     c->flags = calloc(nv, 1);
     c->q = calloc(nv, sizeof *c->q);
     c->heap = malloc(nv * sizeof *c->heap);
+    c->sample = malloc(RANK_SAMPLE * sizeof *c->sample);
     c->slot = malloc(nv * sizeof *c->slot);
     c->key = malloc(nv * sizeof *c->key);
     c->to = malloc(nv * sizeof *c->to);
     c->refused = calloc(nv, 1);
-    if (!c->tri || !c->dead || !c->next || !c->head || !c->flags || !c->q || !c->heap || !c->slot ||
+    if (!c->tri || !c->dead || !c->next || !c->head || !c->flags || !c->q || !c->heap || !c->sample || !c->slot ||
         !c->key || !c->to || !c->refused) {
         iso_collapser_destroy(c);
         *out = NULL;
@@ -530,13 +551,47 @@ int iso_collapser_create(const iso_mesh *mesh, collapser **out, int *pinch_free)
     return 0;
 }
 
+static int by_value(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* PASS 5's ranks for a run to target triangles and cost limit: fine_from becomes
+ * c->coarse times the cost where the run is expected to stop (the limit, or the
+ * sampled key that many collapses in would reach the target: low, since costs grow as
+ * quadrics join, so the last collapses stay in cost order), and the heap is ranked again
+ * when that moved by more than a factor of 2. */
+static void ranks_for(collapser *c, size_t target, double limit)
+{
+    size_t n = c->heap_count, m = n < RANK_SAMPLE ? n : RANK_SAMPLE;
+    if (!n || !(c->coarse > 0))
+        return;
+    for (size_t i = 0; i < m; i++)
+        c->sample[i] = c->key[(uint32_t)c->heap[i * n / m]];
+    qsort(c->sample, m, sizeof *c->sample, by_value);
+    size_t collapses = c->alive > target ? (c->alive - target + 1) / 2 : 0;
+    double stop = fmin(limit, c->sample[collapses >= n ? m - 1 : collapses * m / n]);
+    double fine_from = c->coarse * stop;
+    if (c->fine_from > 0 && fine_from <= 2 * c->fine_from && 2 * fine_from >= c->fine_from)
+        return;
+    c->fine_from = fine_from;
+    for (size_t i = 0; i < n; i++) {
+        uint32_t v = (uint32_t)c->heap[i];
+        c->heap[i] = rank_of(c, c->key[v], v);
+    }
+    for (size_t i = n / 2; i-- > 0;) /* a heap again, bottom up */
+        heap_down(c, i);
+}
+
 size_t iso_collapser_run(collapser *c, size_t target_triangles, double target_error)
 {
     /* PASS 5 */
     double limit = target_error * target_error;
+    ranks_for(c, target_triangles, limit);
     while (c->alive > target_triangles && c->heap_count) {
-        uint32_t u = c->heap[0].v, a, b;
-        if (c->heap[0].key > limit)
+        uint32_t u = (uint32_t)c->heap[0], a, b;
+        if (c->key[u] > limit)
             break;
         int ok = allowed(c, u, c->to[u], &a, &b);
         if (!ok) {
@@ -561,9 +616,14 @@ void iso_collapser_triangles(const collapser *c, uint32_t *out)
             memcpy(out + 3 * kept++, c->tri + 3 * t, 3 * sizeof *out);
 }
 
+void iso_collapser_coarse(collapser *c, double share)
+{
+    c->coarse = share;
+}
+
 double iso_collapser_next(const collapser *c)
 {
-    return c->heap_count ? sqrt(c->heap[0].key) : INFINITY;
+    return c->heap_count ? sqrt(c->key[(uint32_t)c->heap[0]]) : INFINITY;
 }
 
 double iso_collapser_error(const collapser *c)

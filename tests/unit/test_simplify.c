@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "mesh/mesh.h"
+#include "mesh/collapse.h"
 #include "check.h"
 #include "extract/extract.h"
 #include "io/io.h"
@@ -280,6 +281,74 @@ static void test_normals_follow_vertices(void)
     iso_mesh_free(&m);
 }
 
+/* ---- the collapser's order ---- */
+
+/* A regular octahedron of radius r at x = cx, vertices base.. (+x, -x, +y, -y, +z, -z),
+ * wound outward. Each vertex's cheapest collapse costs 2 r^2 / 3: its quadric's four
+ * planes, two of which pass through any neighbour and two lie 2 r / sqrt(3) from it. */
+static void add_octahedron(iso_mesh *m, double cx, double r)
+{
+    uint32_t base = (uint32_t)m->vertex_count;
+    for (int axis = 0; axis < 3; axis++)
+        for (int sign = 1; sign >= -1; sign -= 2) {
+            float *p = m->positions + 3 * m->vertex_count++;
+            p[0] = (float)cx, p[1] = 0, p[2] = 0;
+            p[axis] += (float)(sign * r);
+        }
+    for (int sx = 0; sx < 2; sx++)
+        for (int sy = 0; sy < 2; sy++)
+            for (int sz = 0; sz < 2; sz++) {
+                uint32_t *t = m->indices + 3 * m->triangle_count++;
+                uint32_t x = base + (uint32_t)sx, y = base + 2 + (uint32_t)sy, z = base + 4 + (uint32_t)sz;
+                int outward = (sx + sy + sz) % 2 == 0; /* an even count of minus signs */
+                t[0] = x, t[1] = outward ? y : z, t[2] = outward ? z : y;
+            }
+}
+
+/* Triangles of the output (iso_collapser_triangles) all of whose corners are below n. */
+static size_t triangles_below(const uint32_t *t, size_t count, uint32_t n)
+{
+    size_t k = 0;
+    for (size_t i = 0; i < count; i++)
+        k += t[3 * i] < n && t[3 * i + 1] < n && t[3 * i + 2] < n;
+    return k;
+}
+
+/* Two octahedra whose collapses cost 1.5 (A, vertices 0..5) and 1.2 (B, 6..11): one
+ * factor-of-2 class. One collapse is asked for. In cost order (the default, and with a
+ * coarse share of 0.5: the run's expected last cost is B's, so both keys rank fine) B's
+ * goes; with share 2 both rank in the coarse class, where vertex order puts A first.
+ * Each way the collapse leaves its octahedron 6 triangles, the other 8, and the
+ * collapser's error is that collapse's cost, to float rounding. */
+static void test_coarse_classes_go_in_vertex_order(void)
+{
+    const double share[3] = {0, 0.5, 2};
+    const size_t a_left[3] = {8, 8, 6};
+    for (int i = 0; i < 3; i++) {
+        iso_mesh m;
+        iso_mesh_init(&m);
+        CHECK(iso_mesh_reserve(&m, 12, 16) == 0);
+        add_octahedron(&m, 0, sqrt(2.25));
+        add_octahedron(&m, 10, sqrt(1.8));
+        iso_collapser *c;
+        int pinch_free;
+        CHECK(iso_collapser_create(&m, &c, &pinch_free) == 0);
+        CHECK_EQ(pinch_free, 1);
+        CHECK(fabs(iso_collapser_next(c) - sqrt(1.2)) < 1e-6);
+        iso_collapser_coarse(c, share[i]);
+        CHECK_EQ(iso_collapser_run(c, 14, INFINITY), 14);
+        uint32_t out[3 * 14];
+        iso_collapser_triangles(c, out);
+        CHECKF(triangles_below(out, 14, 6) == a_left[i], "share %g: A has %zu triangles", share[i],
+               triangles_below(out, 14, 6));
+        double cost = a_left[i] == 6 ? 1.5 : 1.2;
+        CHECKF(fabs(iso_collapser_error(c) - sqrt(cost)) < 1e-6, "share %g: error %g", share[i],
+               iso_collapser_error(c));
+        iso_collapser_destroy(c);
+        iso_mesh_free(&m);
+    }
+}
+
 /* ---- analytic fields ---- */
 
 static iso_tree *field_tree(const char *path, iso_volume **vol)
@@ -440,6 +509,7 @@ int main(void)
     CHECK_RUN(test_within_target_is_untouched);
     CHECK_RUN(test_bad_parameters);
     CHECK_RUN(test_normals_follow_vertices);
+    CHECK_RUN(test_coarse_classes_go_in_vertex_order);
     CHECK_RUN(test_analytic_fields_stay_within_reported_error);
     CHECK_RUN(test_budget_policy);
     CHECK_RUN(test_cthead_skin);
