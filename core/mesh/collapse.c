@@ -108,11 +108,14 @@ static void heap_place(collapser *c, size_t i, uint64_t rank)
     c->slot[(uint32_t)rank] = (uint32_t)i;
 }
 
+/* The heap is 4-ary: half the depth of a binary one, and a node's four children share a
+ * cache line. Ranks are distinct (they carry the vertex), so the collapses come out in
+ * the same order from any heap. */
 static void heap_up(collapser *c, size_t i)
 {
     uint64_t rank = c->heap[i];
     while (i > 0) {
-        size_t parent = (i - 1) / 2;
+        size_t parent = (i - 1) / 4;
         if (c->heap[parent] < rank)
             break;
         heap_place(c, i, c->heap[parent]);
@@ -125,17 +128,24 @@ static void heap_down(collapser *c, size_t i)
 {
     uint64_t rank = c->heap[i];
     for (;;) {
-        size_t child = 2 * i + 1;
-        if (child >= c->heap_count)
+        size_t first = 4 * i + 1, child = first;
+        if (first >= c->heap_count)
             break;
-        if (child + 1 < c->heap_count && c->heap[child + 1] < c->heap[child])
-            child++;
+        for (size_t j = first + 1; j < first + 4 && j < c->heap_count; j++)
+            child = c->heap[j] < c->heap[child] ? j : child;
         if (rank < c->heap[child])
             break;
         heap_place(c, i, c->heap[child]);
         i = child;
     }
     heap_place(c, i, rank);
+}
+
+/* The heap's entries made a heap, bottom up (Floyd). */
+static void heapify(collapser *c)
+{
+    for (size_t i = c->heap_count / 4 + 1; i-- > 0;)
+        heap_down(c, i);
 }
 
 /* v enters the heap, or moves in it, with cost key. */
@@ -547,7 +557,8 @@ int iso_collapser_create(const iso_mesh *mesh, collapser **out, int *pinch_free)
     }
     for (uint32_t v = 0; v < mesh->vertex_count; v++)
         if (c->to[v] != NONE)
-            heap_set(c, v, c->key[v]);
+            heap_place(c, c->heap_count++, rank_of(c, c->key[v], v));
+    heapify(c);
     return 0;
 }
 
@@ -564,11 +575,16 @@ static int by_value(const void *a, const void *b)
  * when that moved by more than a factor of 2. */
 static void ranks_for(collapser *c, size_t target, double limit)
 {
-    size_t n = c->heap_count, m = n < RANK_SAMPLE ? n : RANK_SAMPLE;
+    size_t n = c->heap_count, m = 0;
     if (!n || !(c->coarse > 0))
         return;
-    for (size_t i = 0; i < m; i++)
-        c->sample[i] = c->key[(uint32_t)c->heap[i * n / m]];
+    for (size_t i = 0; i < RANK_SAMPLE; i++) { /* by vertex: the same from any heap */
+        size_t v = i * c->vertex_count / RANK_SAMPLE;
+        if (c->slot[v] != NONE)
+            c->sample[m++] = c->key[v];
+    }
+    if (!m)
+        c->sample[m++] = c->key[(uint32_t)c->heap[0]];
     qsort(c->sample, m, sizeof *c->sample, by_value);
     size_t collapses = c->alive > target ? (c->alive - target + 1) / 2 : 0;
     double stop = fmin(limit, c->sample[collapses >= n ? m - 1 : collapses * m / n]);
@@ -580,8 +596,7 @@ static void ranks_for(collapser *c, size_t target, double limit)
         uint32_t v = (uint32_t)c->heap[i];
         c->heap[i] = rank_of(c, c->key[v], v);
     }
-    for (size_t i = n / 2; i-- > 0;) /* a heap again, bottom up */
-        heap_down(c, i);
+    heapify(c);
 }
 
 size_t iso_collapser_run(collapser *c, size_t target_triangles, double target_error)
