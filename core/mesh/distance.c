@@ -163,35 +163,42 @@ static int grid_shape(grid *g, size_t triangles, const float lo[3], const float 
     return (g->start = calloc(*total + 1, sizeof *g->start)) ? 0 : ISO_E_NOMEM;
 }
 
-/* PASS 1: the triangles (their boxes, 6 floats each) binned into g's cells. */
+/* PASS 1: the triangles (their boxes, 6 floats each) binned into g's cells; each one's cell
+ * range found once (a side holds at most GRID_SIDE_MAX cells). */
 static int grid_fill(grid *g, const float *boxes, size_t triangles, size_t total)
 {
     size_t items = 0;
+    uint16_t *range = malloc((6 * triangles + 1) * sizeof *range);
+    if (!range)
+        return ISO_E_NOMEM;
     for (size_t t = 0; t < triangles; t++) {
         int a[3], b[3];
         box_cells(g, boxes + 6 * t, a, b);
+        for (int k = 0; k < 3; k++)
+            range[6 * t + (size_t)k] = (uint16_t)a[k], range[6 * t + 3 + (size_t)k] = (uint16_t)b[k];
         for (int k = a[2]; k <= b[2]; k++)
             for (int j = a[1]; j <= b[1]; j++)
                 for (int i = a[0]; i <= b[0]; i++)
                     g->start[cell_index(g, i, j, k) + 1]++;
         items += (size_t)(b[0] - a[0] + 1) * (size_t)(b[1] - a[1] + 1) * (size_t)(b[2] - a[2] + 1);
     }
-    if (items >= UINT32_MAX || !(g->items = malloc((items ? items : 1) * sizeof *g->items)))
+    uint32_t *fill = malloc(total * sizeof *fill);
+    if (items >= UINT32_MAX || !fill || !(g->items = malloc((items ? items : 1) * sizeof *g->items))) {
+        free(range);
+        free(fill);
         return ISO_E_NOMEM;
+    }
     for (size_t c = 0; c < total; c++)
         g->start[c + 1] += g->start[c];
-    uint32_t *fill = malloc(total * sizeof *fill);
-    if (!fill)
-        return ISO_E_NOMEM;
     memcpy(fill, g->start, total * sizeof *fill);
     for (size_t t = 0; t < triangles; t++) {
-        int a[3], b[3];
-        box_cells(g, boxes + 6 * t, a, b);
-        for (int k = a[2]; k <= b[2]; k++)
-            for (int j = a[1]; j <= b[1]; j++)
-                for (int i = a[0]; i <= b[0]; i++)
+        const uint16_t *r = range + 6 * t;
+        for (int k = r[2]; k <= r[5]; k++)
+            for (int j = r[1]; j <= r[4]; j++)
+                for (int i = r[0]; i <= r[3]; i++)
                     g->items[fill[cell_index(g, i, j, k)]++] = (uint32_t)t;
     }
+    free(range);
     free(fill);
     return 0;
 }
@@ -545,6 +552,7 @@ typedef struct direction {
     double start_max;         /* the largest percentile sample's distance (PASS 5) */
     int exhaustive;           /* PASS 5 without block tests (for checks) */
     int select;               /* PASS 4 by select_top (drawn points, no mean wanted) */
+    const float *block_boxes; /* PASS 5's boxes of whole blocks (iso_mesh_samples), or NULL */
     double part_max[ISO_PARALLEL_MAX_THREADS];
     int part_failed[ISO_PARALLEL_MAX_THREADS]; /* a share had no memory for its points */
 } direction;
@@ -749,8 +757,15 @@ static double raise_max(const iso_mesh_grid *dst, const double p[3], uint32_t *h
 {
     search s = {INFINITY, NO_TRIANGLE, 0};
     if (*hint != NO_TRIANGLE) {
-        double tc[3][3];
+        double tc[3][3], corner = INFINITY;
         corners_of(dst->corners + 9 * (size_t)*hint, tc);
+        for (int k = 0; k < 3; k++) { /* a corner within the maximum settles it cheaper */
+            double x = p[0] - tc[k][0], y = p[1] - tc[k][1], z = p[2] - tc[k][2];
+            double e = x * x + y * y + z * z;
+            corner = e < corner ? e : corner;
+        }
+        if (corner <= *max)
+            return corner;
         s.best = point_triangle_sq(p, tc), s.triangle = *hint;
         if (s.best <= *max)
             return s.best;
@@ -863,7 +878,12 @@ static void raise_max_block(const direction *d, size_t t0, size_t t1, double (*p
 {
     float lo[3], hi[3];
     double u;
-    triangles_box(d->src, t0, t1, lo, hi);
+    if (d->block_boxes && t0 % BLOCK == 0 && t1 - t0 == BLOCK) {
+        memcpy(lo, d->block_boxes + 6 * (t0 / BLOCK), sizeof lo);
+        memcpy(hi, d->block_boxes + 6 * (t0 / BLOCK) + 3, sizeof hi);
+    } else {
+        triangles_box(d->src, t0, t1, lo, hi);
+    }
     if (!d->exhaustive && block_within(d->dst, lo, hi, *max, hint, &u)) {
         for (size_t t = t0; d->bound && t < t1; t++) {
             double known = d->known ? d->known[t] : KNOWN_NONE;
@@ -905,8 +925,10 @@ static void measure_max(void *context, int part, int parts)
     double (*pts)[3] = d->drawn ? malloc(256 * 256 * sizeof *pts) : NULL;
     size_t t0 = m->triangle_count * (size_t)part / (size_t)parts;
     size_t t1 = m->triangle_count * (size_t)(part + 1) / (size_t)parts;
-    for (size_t t = t0; pts && t < t1; t += BLOCK)
-        raise_max_block(d, t, t + BLOCK < t1 ? t + BLOCK : t1, pts, &hint, &max);
+    for (size_t t = t0, e; pts && t < t1; t = e) { /* blocks from 0, as the cached boxes */
+        e = (t / BLOCK + 1) * BLOCK;
+        raise_max_block(d, t, e < t1 ? e : t1, pts, &hint, &max);
+    }
     size_t v0 = d->vertex_count * (size_t)part / (size_t)parts;
     size_t v1 = d->vertex_count * (size_t)(part + 1) / (size_t)parts;
     for (size_t i = v0; i < v1; i += BLOCK)
@@ -1001,20 +1023,25 @@ struct iso_mesh_samples {
     size_t *first;
     double *area;
     float lo[3], hi[3];
+    float *boxes; /* 6 per whole BLOCK of triangles from 0 (PASS 5's blocks) */
 };
 
 int iso_mesh_samples_build(const iso_mesh *mesh, double spacing, iso_mesh_samples **out)
 {
     iso_mesh_samples *s = calloc(1, sizeof *s);
     *out = NULL;
+    size_t blocks = mesh->triangle_count / BLOCK;
     if (!s || !(s->first = malloc((mesh->triangle_count + 1) * sizeof *s->first)) ||
-        !(s->area = malloc((mesh->triangle_count + 1) * sizeof *s->area))) {
+        !(s->area = malloc((mesh->triangle_count + 1) * sizeof *s->area)) ||
+        !(s->boxes = malloc((6 * blocks + 1) * sizeof *s->boxes))) {
         iso_mesh_samples_destroy(s);
         return ISO_E_NOMEM;
     }
     s->spacing = spacing;
     s->triangle_count = mesh->triangle_count;
     count_samples(mesh, spacing, s->first, s->area);
+    for (size_t b = 0; b < blocks; b++)
+        triangles_box(mesh, b * BLOCK, (b + 1) * BLOCK, s->boxes + 6 * b, s->boxes + 6 * b + 3);
     iso_mesh_bounds(mesh, s->lo, s->hi);
     *out = s;
     return 0;
@@ -1026,6 +1053,7 @@ void iso_mesh_samples_destroy(iso_mesh_samples *s)
         return;
     free(s->first);
     free(s->area);
+    free(s->boxes);
     free(s);
 }
 
@@ -1143,7 +1171,8 @@ static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh
                    .vertex_count = vertex_count, .drawn = drawn, .dist = dist, .weight = weight,
                    .known = known, .bound = reuse ? reuse->bound : NULL,
                    .exhaustive = reuse && reuse->exhaustive,
-                   .select = drawn && reuse && reuse->without_mean && !reuse->exhaustive};
+                   .select = drawn && reuse && reuse->without_mean && !reuse->exhaustive,
+                   .block_boxes = cached ? cached->boxes : NULL};
     int workers = iso_parallel_threads(threads);
     iso_parallel_run(workers, measure_percentile, &d); /* PASS 3, 4 */
     for (int w = 0; w < workers; w++)
