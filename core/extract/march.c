@@ -707,15 +707,6 @@ static inline void shared_run(uint32_t *ids, unsigned m, const active_brick *own
         return; /* the neighbour may be inactive then */
     assert(owner);
     uint32_t id = (uint32_t)(owner->first_vertex + owner->before[axis][owner_row]);
-    if (owner->partial) {
-        /* It kept only some of the row's crossings, ours among them: counted below each. */
-        unsigned kept = owner->cross[axis][owner_row];
-        for (; m; m &= m - 1) {
-            int x = __builtin_ctz(m);
-            ids[x] = id + bit_count[kept & ((1u << x) - 1)];
-        }
-        return;
-    }
     for (; m; m &= m - 1)
         ids[__builtin_ctz(m)] = id++;
 }
@@ -780,9 +771,9 @@ static int vertex_of(const march_job *job, const uint32_t p[3], int axis, uint32
     return 1;
 }
 
-/* fill_shared_ids for a brick not wholly marked: edge by edge, each crossing edge of its
- * box that a neighbour owns, from the owner (which kept it if a marked block of this
- * brick holds it, the only ones its cells use). */
+/* fill_shared_ids where the brick or a neighbour is not wholly marked: edge by edge, each
+ * crossing edge of its box that a neighbour owns, from the owner (which kept it if a
+ * marked block of this brick holds it, the only ones its cells use). */
 static void fill_shared_ids_partial(const march_job *job, const active_brick *ab, id_table *table)
 {
     size_t lo[3];
@@ -818,12 +809,16 @@ static void fill_shared_ids_partial(const march_job *job, const active_brick *ab
  * the same row in the same order, so their ids are consecutive from the row's first. */
 static void fill_shared_ids(const march_job *job, const active_brick *ab, id_table *table)
 {
-    if (ab->partial) {
+    const active_brick *near[8];
+    neighbours_of(job, ab, near);
+    /* Where a neighbour kept only some crossings, a row's are not consecutive there. */
+    int masked = ab->partial;
+    for (int k = 1; k < 8 && job->marked; k++)
+        masked |= near[k] && near[k]->partial;
+    if (masked) {
         fill_shared_ids_partial(job, ab, table);
         return;
     }
-    const active_brick *near[8];
-    neighbours_of(job, ab, near);
     const uint16_t *inside = ab->inside;
     int upper[3];
     for (int d = 0; d < 3; d++)
