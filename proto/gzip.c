@@ -55,9 +55,10 @@
 #define LZ_MIN 4
 #define LZ_WINDOW 32768u
 #define LZ_MAX 258u
-/* Past 2^LZ_SKIP_AFTER misses in a row the probes thin out (as LZ4's do): the index
- * codec's data bytes have stretches without repeats, where a probe per byte costs about
- * 30% of the matcher's time for 1.6% of the bytes it saves. */
+/* Past 2^LZ_SKIP_AFTER misses in a row the probes thin out (as LZ4's do): on bytes with
+ * long stretches without repeats (the meshopt index codec's data bytes, measured) a probe
+ * per byte cost 19% more time for 2.3% fewer bytes; on the index codes it changes
+ * neither. */
 #define LZ_SKIP_AFTER 3
 
 enum { LITERALS = 257, END = 256, LENGTH_CODES = 29, LITLEN = LITERALS + LENGTH_CODES, DISTANCES = 30,
