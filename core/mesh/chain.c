@@ -85,6 +85,7 @@ typedef struct slab_job {
     int count;
     double limit;            /* this step's error limit */
     int coarse;              /* the cheap collapses in memory order (CHAIN_COARSE) */
+    double keep;             /* the level's target over its source's triangles */
 } slab_job;
 
 /* PASS 2a for the slabs of thread t: each gathered over compact vertices (so that its cost
@@ -124,8 +125,8 @@ static void gather_slab(void *context, int t, int threads)
         sl->mesh.triangle_count = n;
         int pinch_free;
         sl->rc = iso_collapser_create(&sl->mesh, &sl->collapser, &pinch_free);
-        if (!sl->rc && job->coarse)
-            iso_collapser_coarse(sl->collapser, CHAIN_COARSE);
+        if (!sl->rc && job->coarse) /* the slab's share of the level's target */
+            iso_collapser_coarse(sl->collapser, CHAIN_COARSE, (size_t)((double)n * job->keep));
     }
 }
 
@@ -181,7 +182,7 @@ static int simplify_level(iso_mesh *m, int k, size_t target, int threads, iso_si
         slabs[0].alive = T, slabs[1].alive = 0;
     }
     slab_job job = {.source = m, .slab_of = slab_of, .slabs = slabs, .count = count,
-                    .coarse = k <= CHAIN_COARSE_LEVELS};
+                    .coarse = k <= CHAIN_COARSE_LEVELS, .keep = T ? (double)target / (double)T : 0};
     iso_parallel_run(count, gather_slab, &job); /* PASS 2a */
     int rc = slabs[0].rc ? slabs[0].rc : slabs[1].rc;
     if (count == 1 && !rc) {

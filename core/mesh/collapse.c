@@ -56,7 +56,8 @@ struct iso_collapser {
     size_t triangle_count, vertex_count;
     double worst;            /* the largest cost collapsed */
     double fine_from;        /* keys below rank in coarse classes (rank_of) */
-    double coarse;           /* iso_collapser_coarse's share */
+    double coarse;           /* iso_collapser_coarse's share and target */
+    size_t coarse_target;
     double *sample;          /* RANK_SAMPLE keys: where a run will stop (ranks_for) */
 };
 typedef struct iso_collapser collapser;
@@ -568,13 +569,15 @@ static int by_value(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-/* PASS 5's ranks for a run to target triangles and cost limit: fine_from becomes
- * c->coarse times the cost where the run is expected to stop (the limit, or the
- * sampled key that many collapses in would reach the target: low, since costs grow as
- * quadrics join, so the last collapses stay in cost order), and the heap is ranked again
- * when that moved by more than a factor of 2. */
-static void ranks_for(collapser *c, size_t target, double limit)
+/* PASS 5's ranks: fine_from becomes c->coarse times the cost where simplifying to
+ * c->coarse_target triangles is expected to stop (the sampled key that many collapses in
+ * would reach it: low, since costs grow as quadrics join, so the last collapses stay in
+ * cost order; the target of the whole simplification, not of one step of it, so that
+ * steps of error, as the chain's slabs run, get memory order too), and the heap is
+ * ranked again when that moved by more than a factor of 2. */
+static void ranks_for(collapser *c)
 {
+    size_t target = c->coarse_target;
     size_t n = c->heap_count, m = 0;
     if (!n || !(c->coarse > 0))
         return;
@@ -587,7 +590,7 @@ static void ranks_for(collapser *c, size_t target, double limit)
         c->sample[m++] = c->key[(uint32_t)c->heap[0]];
     qsort(c->sample, m, sizeof *c->sample, by_value);
     size_t collapses = c->alive > target ? (c->alive - target + 1) / 2 : 0;
-    double stop = fmin(limit, c->sample[collapses >= n ? m - 1 : collapses * m / n]);
+    double stop = c->sample[collapses >= n ? m - 1 : collapses * m / n];
     double fine_from = c->coarse * stop;
     if (c->fine_from > 0 && fine_from <= 2 * c->fine_from && 2 * fine_from >= c->fine_from)
         return;
@@ -603,7 +606,7 @@ size_t iso_collapser_run(collapser *c, size_t target_triangles, double target_er
 {
     /* PASS 5 */
     double limit = target_error * target_error;
-    ranks_for(c, target_triangles, limit);
+    ranks_for(c);
     while (c->alive > target_triangles && c->heap_count) {
         uint32_t u = (uint32_t)c->heap[0], a, b;
         if (c->key[u] > limit)
@@ -631,9 +634,10 @@ void iso_collapser_triangles(const collapser *c, uint32_t *out)
             memcpy(out + 3 * kept++, c->tri + 3 * t, 3 * sizeof *out);
 }
 
-void iso_collapser_coarse(collapser *c, double share)
+void iso_collapser_coarse(collapser *c, double share, size_t target_triangles)
 {
     c->coarse = share;
+    c->coarse_target = target_triangles;
 }
 
 double iso_collapser_next(const collapser *c)

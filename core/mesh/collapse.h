@@ -16,12 +16,13 @@ int iso_collapser_create(const iso_mesh *mesh, iso_collapser **out, int *pinch_f
  * would cost more than target_error (position units), or none is allowed. Returns the
  * triangles left. May be called again with other targets. */
 size_t iso_collapser_run(iso_collapser *c, size_t target_triangles, double target_error);
-/* From now on, collapses costing less than share (>= 0) times the cost where a run is
- * expected to stop go cheapest first only by classes of a factor of 2, in vertex order
- * within a class: memory order, much cheaper than cost order on a large mesh. Those
- * collapses are all made whatever their order; the last ones of a run, which decide its
- * error, still go in cost order. 0 (the default): all in cost order. */
-void iso_collapser_coarse(iso_collapser *c, double share);
+/* From now on, collapses costing less than share (>= 0) times the cost where simplifying
+ * to target_triangles (over all runs to come) is expected to stop go cheapest first only
+ * by classes of a factor of 2, in vertex order within a class: memory order, much cheaper
+ * than cost order on a large mesh. Those collapses are all made whatever their order; the
+ * last ones, which decide the error, still go in cost order. Share 0 (the default): all
+ * in cost order. */
+void iso_collapser_coarse(iso_collapser *c, double share, size_t target_triangles);
 /* The cost of the cheapest collapse waiting (a lower bound: it may be refused), INFINITY
  * when none waits. */
 double iso_collapser_next(const iso_collapser *c);

@@ -335,7 +335,7 @@ static void test_coarse_classes_go_in_vertex_order(void)
         CHECK(iso_collapser_create(&m, &c, &pinch_free) == 0);
         CHECK_EQ(pinch_free, 1);
         CHECK(fabs(iso_collapser_next(c) - sqrt(1.2)) < 1e-6);
-        iso_collapser_coarse(c, share[i]);
+        iso_collapser_coarse(c, share[i], 14);
         CHECK_EQ(iso_collapser_run(c, 14, INFINITY), 14);
         uint32_t out[3 * 14];
         iso_collapser_triangles(c, out);
