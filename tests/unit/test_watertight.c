@@ -357,6 +357,36 @@ static void test_random_plans(void)
     iso_vol_destroy(vol);
 }
 
+/* Random plans on random shapes: dims 2 to 27 per axis, so bricks clipped to one block,
+ * blocks of one to three cells and one-cell bricks at the far ends, random fields (noisy
+ * on every other trial), uncapped and capped. */
+static void test_random_plans_on_random_shapes(void)
+{
+    size_t triangles = 0;
+    uint8_t plan[7 * 7 * 7];
+    for (int trial = 0; trial < 200 && !check_failed(); trial++) {
+        size_t n[3];
+        for (int d = 0; d < 3; d++)
+            n[d] = 2 + (size_t)(surface_uniform() * 26);
+        iso_volume *vol = surface_make_volume(n[0], n[1], n[2], ISO_F32);
+        double w[3] = {0.2 + surface_uniform(), 0.2 + surface_uniform(), 0.2 + surface_uniform()};
+        for (size_t k = 0; k < n[2]; k++)
+            for (size_t j = 0; j < n[1]; j++)
+                for (size_t i = 0; i < n[0]; i++) {
+                    double v = sin(w[0] * (double)i) + cos(w[1] * (double)j) + sin(w[2] * (double)k + 1);
+                    iso_vol_set(vol, i, j, k, v + (trial % 2 ? surface_uniform() - 0.5 : 0) + 0.01234);
+                }
+        iso_vol_update_stats(vol);
+        random_block_plan(vol, plan);
+        char what[64];
+        snprintf(what, sizeof what, "random shape %zux%zux%zu, plan %d", n[0], n[1], n[2], trial);
+        check_plan(vol, plan, trial % 3 == 0, what, &triangles);
+        iso_vol_destroy(vol);
+    }
+    printf("  info: 200 random plans on random shapes, %zu triangles\n", triangles);
+    CHECK(triangles > 200);
+}
+
 /* A trilinear field, f = (x - 7.3)(y - 5.6)(z - 4.1) + 0.37 x, under random plans: every
  * coarse grid reproduces it exactly (level errors 0), so the data's interpolant is f
  * itself. The loop centres (the vertices off every lattice line: two or more coordinates
@@ -640,6 +670,7 @@ int main(void)
     CHECK_RUN(test_rough_block_keeps_only_itself_fine);
     CHECK_RUN(test_transition_cell_every_pattern);
     CHECK_RUN(test_random_plans);
+    CHECK_RUN(test_random_plans_on_random_shapes);
     CHECK_RUN(test_centres_on_a_trilinear_field);
     CHECK_RUN(test_random_fields_property);
     CHECK_RUN(test_analytic_fields_property);
