@@ -783,7 +783,11 @@ static int region_segments(lod *c, int a, int side, uint32_t plane, const uint32
             int m = 0;
             for (int k = 0; k < 4; k++) {
                 memcpy(points[m++], corner[k], sizeof points[0]);
-                m = split_side(c, corner[k], corner[(k + 1) % 4], points, m);
+                /* A side inside the region has the region's stride, no longer than the
+                 * side: only the region's own border may be split. */
+                int across = k % 2 ? b : d2, at = k % 2 ? 0 : 1;
+                if (corner[k][across] == from[at] || corner[k][across] == to[at])
+                    m = split_side(c, corner[k], corner[(k + 1) % 4], points, m);
             }
             if (m == 4) {
                 unsigned alike = 0;
