@@ -16,7 +16,7 @@
  * ISO_E_LIMIT (more than 2^32 - 1 vertices), ISO_E_NOMEM (the mesh is then empty).
  * Thread-safety: any number of extractions may share one tree, each with its own mesh.
  * Cost: at tolerance 0, the bricks whose [min, max] holds the level plus the output; above
- * it, the same bricks' cells at each brick's own coarse level (lod.h) plus the output;
+ * it, the same bricks' cells at each block's own coarse level (lod.h) plus the output;
  * under a budget, a few extractions. */
 #ifndef ISO_EXTRACT_H
 #define ISO_EXTRACT_H
@@ -43,13 +43,14 @@ typedef struct iso_extract_stats {
     size_t nodes_visited;   /* the root, plus the bricks classified */
     size_t cells_visited;   /* cells classified (the paper's column): at tolerance 0 the
                              * data cells of the bricks the kernel reads (8 at a time, whole
-                             * bricks); above it, each brick's cells at its own level */
-    size_t nodes_polygonized;/* bricks marched on a coarse level (cells of 2, 4 or 8) */
+                             * bricks); above it, each block's cells at its own level
+                             * (a stride-8 brick's one cell) */
+    size_t nodes_polygonized;/* bricks with a block (or the whole) on a coarse level */
     double extract_ms;
     double error_bound;     /* max |f(v) - level| over the vertices on the level (all but
                              * a cap's): measured at every vertex above tolerance 0; at 0,
                              * crossings moved off a tie by ISO_MC_END_GAP, 0 otherwise */
-    double fit_error;       /* max level error (tree.h) of the bricks marched coarse: how
+    double fit_error;       /* max level error (tree.h) of the units marched coarse: how
                              * far the data strays from the grids the surface came from */
 } iso_extract_stats;
 
@@ -72,7 +73,7 @@ int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,
  * again and again (range / 2^20 .. range). The guarantee of extract.h holds for the
  * tolerance chosen.
  *
- * The ladder has a limit on CT: a brick's coarse levels fit only once the tolerance passes
+ * The ladder has a limit on CT: a block's coarse levels fit only once the tolerance passes
  * its sharpest cell's error, so faithful tolerances keep most of the triangles (half the
  * range keeps under 12%, but not faithfully; docs/performance.md). So iso_extract_budget_faithful, the
  * policy the server uses, climbs the ladder only as far as a faithful tolerance and, when
@@ -106,8 +107,8 @@ int iso_extract_budget(const iso_tree *tree, const iso_extract_params *params,
 
 /* The preview tolerance: value range / 2^ISO_PREVIEW_SHIFT, half the range. A client that
  * shows a coarse mesh while the full one comes (or while a level slider drags) asks for
- * this: most bricks then take their coarsest level, and the mesh keeps 8-9% of the exact
- * triangles on CThead's skin and bone (docs/performance.md), every vertex still within it
+ * this: most blocks then take their coarsest level, and the mesh keeps 6.5-7.3% of the
+ * exact triangles on CThead's skin and bone (docs/performance.md), every vertex still within it
  * of the level. */
 #define ISO_PREVIEW_SHIFT 1
 double iso_preview_tolerance(const iso_volume *vol);

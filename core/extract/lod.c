@@ -1,5 +1,5 @@
-/* lod.c: extraction within a tolerance, bricks on their own coarse grids joined by
- * transition cells (lod.h says how and why). */
+/* lod.c: extraction within a tolerance, blocks and bricks on their own coarse grids joined
+ * by transition cells (lod.h says how and why). */
 #include "lod.h"
 
 #include <math.h>
@@ -44,7 +44,7 @@ typedef struct lod {
     int cap;
     uint32_t dims[3], count[3], blocks[3];
     uint8_t *shift;               /* per block: log2 of its stride (PASS 1) */
-    const iso_march_part *fine;   /* PASS 2's stride-1 bricks, marched by march.c */
+    const iso_march_part *fine;   /* PASS 2's stride-1 blocks, marched by march.c */
     iso_mesh *mesh;
     vertex_map map;
     double error;                 /* largest |f(v) - level| measured */
@@ -240,7 +240,7 @@ static inline unsigned set_shift(const lod *c, const uint8_t k[3])
     return c->around[k[2]][k[1]][k[0]];
 }
 
-/* ---- PASS 3: the coarse bricks (PASS 2, march_fine, is below) ---- */
+/* ---- PASS 3: the coarse units (PASS 2, march_fine, is below) ---- */
 
 /* Sample p of the brick at hand's box, read from the volume on first use: a coarse brick
  * costs the samples its grid and its transition cells touch, each once. */

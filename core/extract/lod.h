@@ -8,12 +8,14 @@
  *   strides 4 and 2 whose stored error is within it, or stride 1. The other bricks take
  *   stride 8, which touches nothing (their samples all lie on one side of the level). No
  *   sample is read.
- * PASS 2 (fine): the bricks whose blocks all have stride 1, marched by the exact kernel
- *   (march.h, iso_march_selected) on the request's threads; its ghosts give the crossings
- *   of the edges such a brick shares with a brick that owns them.
- * PASS 3 (coarse): the other bricks in grid order, each classified once, then unit after
- *   unit (the brick at stride 8, or block after block at the block's stride), cell after
- *   cell of the unit's grid. Every lattice set (a face, edge or line of a block's closed
+ * PASS 2 (fine): the stride-1 blocks, marched by the exact kernel (march.h,
+ *   iso_march_selected, given per brick the mask of its stride-1 blocks) on the request's
+ *   threads; it also numbers the crossings of the edges such a block shares with a brick
+ *   that owns them (the brick's own coarse blocks, or a ghost).
+ * PASS 3 (coarse): the bricks with a coarse block in grid order, each classified once,
+ *   then unit after unit (the brick at stride 8, or its coarse blocks at their strides;
+ *   a unit whose samples all lie on one side is skipped), cell after cell of the unit's
+ *   grid. Every lattice set (a face, edge or line of a block's closed
  *   box, or the open part of one inside a block) has a stride of its own, the finest of
  *   the blocks that hold it (with a cap, the volume's border counts as stride 1). A cell
  *   whose faces, and the edges and lines in them, all have its stride is a regular cell:
