@@ -62,10 +62,9 @@ static size_t used_vertices(const iso_mesh *m, unsigned char *seen)
 #define CHAIN_SLAB_MIN 20000 /* triangles per slab, at least, else one part */
 #define CHAIN_STEP 1.25      /* each step's error limit over the one before (PASS 2b) */
 /* Levels 1 and 2, three quarters of the chain's collapses, make those costing less than
- * half the level's expected last one in memory order (iso_collapser_coarse): on CThead
- * skin their collapse runs take a fifth less time, their p99 within 0.5%. Later levels
- * go in cost order: there, with a few tens of thousands of triangles, the order of the
- * cheap collapses moved CThead bone's 6% level's p99 by 7%. */
+ * half the level's expected last one in memory order (iso_collapser_coarse), which is
+ * cheaper; later levels, small and decided by fewer collapses, keep cost order, which
+ * their p99 depends on more (docs/performance.md, "The collapser's cost"). */
 #define CHAIN_COARSE 0.5
 #define CHAIN_COARSE_LEVELS 2
 
