@@ -12,8 +12,11 @@ For each case, in one run on the same exact surface (world mm):
            its share of the exact triangles and its measured distance;
   pinch    the chain's worst level: its pinches (edges of 3+ triangles and vertices of
            2+ fans) per 10,000 edges (the target is under 1).
-Ratios are chain time / single time, measured in the same run. Prints a table, writes
-bench/results/chain.json. Needs ../shared/volumes (prints SKIP otherwise)."""
+Ratios are chain time / single time, measured in the same run. Under each row, the
+chain's levels: p99 and max (mm) and simplification ms. With ISOSERVE_BIN_BASE set, each
+case runs with that build first, then with ISOSERVE_BIN, side by side, and a line gives
+each level's p99 and max of the second over the first's, minus 1, in per cent. Prints a
+table, writes bench/results/chain.json. Needs ../shared/volumes (prints SKIP otherwise)."""
 
 import json
 import os
@@ -22,6 +25,7 @@ import sys
 import time
 
 BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", "build/isoserve"))
+BASE = os.environ.get("ISOSERVE_BIN_BASE")  # a second build to compare with, run first
 SHARED = os.environ.get("ISO_SHARED_VOLUMES", "../shared/volumes")
 CASES = [  # file, level, label, smallest spacing (mm)
     ("CThead_256x256x113_u16be.nhdr", 700.5, "CThead skin", 1.0),
@@ -32,10 +36,27 @@ CASES = [  # file, level, label, smallest spacing (mm)
 ]
 
 
+USE = {"bin": BIN}  # the build extract() runs (main sets it per pass)
+
+
 def extract(path, level, *args):
-    p = subprocess.run([BIN, "extract", path, "--level", str(level), "--normals", "none", "--json", *args],
+    p = subprocess.run([USE["bin"], "extract", path, "--level", str(level), "--normals", "none", "--json", *args],
                        check=True, capture_output=True, text=True)
     return json.loads(p.stdout)
+
+
+def print_levels(row, tag):
+    levels = row["chain_levels"][1:]
+    print(f"  {tag or 'levels':<6} p99 " + " ".join(f"{b['p99']:.4f}" for b in levels) +
+          " | max " + " ".join(f"{b['max']:.3f}" for b in levels) +
+          " | simplify ms " + " ".join(f"{b['simplify_ms']:.0f}" for b in levels), flush=True)
+
+
+def print_change(base, new):
+    def change(key):
+        return " ".join(f"{100 * (n[key] / b[key] - 1):+.1f}" if b[key] else "0"
+                        for b, n in zip(base["chain_levels"][1:], new["chain_levels"][1:]))
+    print(f"  new/base-1 % p99 {change('p99')} | max {change('max')}", flush=True)
 
 
 def main():
@@ -51,43 +72,51 @@ def main():
     for name, level, label, spacing in CASES:
         if only and label not in only.split(","):
             continue
-        path = os.path.join(SHARED, name)
-        exact = extract(path, level, "--threads", "1")
-        quarter = max(1, exact["triangles"] // 4)
-        single = extract(path, level, "--threads", "1", "--simplify", str(quarter))
-        s = single["simplify"]
-        single_ms = s["ms"] - s["distance"]["ms"]
-        chain = extract(path, level, "--distance", "0")["chain"]
-        built = chain["built"]
-        simplify_ms = sum(b["simplify_ms"] for b in built)
-        measure_ms = sum(b["measure_ms"] for b in built)
-        d = 0.5 * spacing
-        answer = extract(path, level, "--distance", str(d), "--cap")
-        k = answer["chain"]["level"]
-        vol = None
-        capped_exact = extract(path, level, "--cap")
-        if answer["closed"] and capped_exact["closed"]:
-            vol = 100 * (answer["enclosed_volume_mm3"] - capped_exact["enclosed_volume_mm3"]) / capped_exact["enclosed_volume_mm3"]
-        row = {"case": label, "level": level, "exact_triangles": exact["triangles"],
-               "single_ms": single_ms, "single_p99_mm": s["distance"]["p99"], "single_max_mm": s["distance"]["max"],
-               "single_triangles": single["triangles"], "chain_ms": chain["build_ms"],
-               "chain_simplify_ms": simplify_ms, "chain_measure_ms": measure_ms,
-               "ratio": chain["build_ms"] / single_ms, "simplify_ratio": simplify_ms / single_ms,
-               "chain_levels": built, "quarter_p99_mm": built[2]["p99"], "quarter_triangles": built[2]["triangles"],
-               "distance_mm": d, "answer_level": k, "answer_triangles": answer["triangles"],
-               "answer_share": answer["triangles"] / answer["chain"]["exact_triangles"], "answer_p99_mm": answer["distance"]["p99"],
-               "answer_max_mm": answer["distance"]["max"], "answer_nonmanifold_edges": answer["nonmanifold_edges"],
-               "answer_edges_closed": answer["closed"], "answer_volume_change_percent": vol}
-        row["pinches_per_10k_edges"] = max(1e4 * (b["nonmanifold_edges"] + b["pinch_vertices"]) / b["edges"]
-                                           for b in built if b["edges"])
-        row["folds_dropped"] = sum(b["folds_dropped"] for b in built)
-        row["measure_share"] = measure_ms / chain["build_ms"]
-        rows.append(row)
-        print(f"{label:<20} {exact['triangles']:>8} {single_ms:>9.0f} {s['distance']['p99']:>7.3f} "
-              f"{chain['build_ms']:>9.0f} {simplify_ms:>7.0f} {measure_ms:>7.0f} {row['ratio']:>6.2f} "
-              f"{row['simplify_ratio']:>7.2f} {built[2]['triangles']:>8} {built[2]['p99']:>7.3f} {d:>5.2f} {k:>5} "
-              f"{100 * row['answer_share']:>5.1f}% {answer['distance']['p99']:>6.3f} {answer['distance']['max']:>6.2f} "
-              f"{'' if vol is None else f'{vol:+.2f}':>6} {row['pinches_per_10k_edges']:>6.2f}", flush=True)
+        pair = []
+        for binary, tag in ([(os.path.abspath(BASE), "base"), (BIN, "new")] if BASE else [(BIN, "")]):
+            USE["bin"] = binary
+            path = os.path.join(SHARED, name)
+            exact = extract(path, level, "--threads", "1")
+            quarter = max(1, exact["triangles"] // 4)
+            single = extract(path, level, "--threads", "1", "--simplify", str(quarter))
+            s = single["simplify"]
+            single_ms = s["ms"] - s["distance"]["ms"]
+            chain = extract(path, level, "--distance", "0")["chain"]
+            built = chain["built"]
+            simplify_ms = sum(b["simplify_ms"] for b in built)
+            measure_ms = sum(b["measure_ms"] for b in built)
+            d = 0.5 * spacing
+            answer = extract(path, level, "--distance", str(d), "--cap")
+            k = answer["chain"]["level"]
+            vol = None
+            capped_exact = extract(path, level, "--cap")
+            if answer["closed"] and capped_exact["closed"]:
+                vol = 100 * (answer["enclosed_volume_mm3"] - capped_exact["enclosed_volume_mm3"]) / capped_exact["enclosed_volume_mm3"]
+            row = {"case": label, "level": level, "exact_triangles": exact["triangles"],
+                   "single_ms": single_ms, "single_p99_mm": s["distance"]["p99"], "single_max_mm": s["distance"]["max"],
+                   "single_triangles": single["triangles"], "chain_ms": chain["build_ms"],
+                   "chain_simplify_ms": simplify_ms, "chain_measure_ms": measure_ms,
+                   "ratio": chain["build_ms"] / single_ms, "simplify_ratio": simplify_ms / single_ms,
+                   "chain_levels": built, "quarter_p99_mm": built[2]["p99"], "quarter_triangles": built[2]["triangles"],
+                   "distance_mm": d, "answer_level": k, "answer_triangles": answer["triangles"],
+                   "answer_share": answer["triangles"] / answer["chain"]["exact_triangles"], "answer_p99_mm": answer["distance"]["p99"],
+                   "answer_max_mm": answer["distance"]["max"], "answer_nonmanifold_edges": answer["nonmanifold_edges"],
+                   "answer_edges_closed": answer["closed"], "answer_volume_change_percent": vol}
+            row["pinches_per_10k_edges"] = max(1e4 * (b["nonmanifold_edges"] + b["pinch_vertices"]) / b["edges"]
+                                               for b in built if b["edges"])
+            row["folds_dropped"] = sum(b["folds_dropped"] for b in built)
+            row["measure_share"] = measure_ms / chain["build_ms"]
+            row["build"] = tag
+            rows.append(row)
+            pair.append(row)
+            print(f"{(label + ' ' + tag).strip():<20} {exact['triangles']:>8} {single_ms:>9.0f} {s['distance']['p99']:>7.3f} "
+                  f"{chain['build_ms']:>9.0f} {simplify_ms:>7.0f} {measure_ms:>7.0f} {row['ratio']:>6.2f} "
+                  f"{row['simplify_ratio']:>7.2f} {built[2]['triangles']:>8} {built[2]['p99']:>7.3f} {d:>5.2f} {k:>5} "
+                  f"{100 * row['answer_share']:>5.1f}% {answer['distance']['p99']:>6.3f} {answer['distance']['max']:>6.2f} "
+                  f"{'' if vol is None else f'{vol:+.2f}':>6} {row['pinches_per_10k_edges']:>6.2f}", flush=True)
+            print_levels(row, tag)
+        if len(pair) == 2:
+            print_change(pair[0], pair[1])
     os.makedirs("bench/results", exist_ok=True)
     with open("bench/results/chain.json", "w") as f:
         json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "rows": rows}, f, indent=1)
