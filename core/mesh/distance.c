@@ -8,7 +8,8 @@
  *   2. samples: every triangle of the source is cut into n x n similar sub-triangles, n the
  *      smallest whole number that makes their longest side at most `spacing`; each
  *      sub-triangle's centroid is a sample weighing its area, and every vertex the source
- *      uses is a sample of weight 0 (it counts for the maximum, not the percentile);
+ *      uses is a sample of weight 0 (it counts for the maximum, not the percentile); a
+ *      caller measuring one mesh against many counts its samples once (iso_mesh_samples);
  *   3. percentile samples: those centroids when there are at most `cap` of them; else
  *      `cap` points drawn by area, stratified: the source's area, triangle after triangle,
  *      cut into `cap` strata of equal area, and in each one a point uniformly random over
@@ -30,9 +31,11 @@
  *      source triangles (or vertices) at a time: when a target triangle lies within
  *      sqrt(M) - r of the centre of the block's box, r its half diagonal, no sample of the
  *      block can be farther than sqrt(M) (distance moves by at most the distance moved),
- *      and the block is skipped whole; so is a triangle of several samples by its own box.
- *      Where M is large (specks of CT noise that vanish from a level keep it at tens of
- *      voxels), most blocks go so. With an earlier
+ *      and the block is skipped whole; so is a triangle of several samples by its own box,
+ *      and a sample by its hint's nearest corner. Where M is large (specks of CT noise
+ *      that vanish from a level keep it at tens of voxels), most blocks go so. A
+ *      triangle's samples are visited each next to the one before (the hint is likelier
+ *      to settle them). With an earlier
  *      measure to reuse (iso_mesh_distance_reuse: a chain's previous level), a source
  *      triangle identical to one of the earlier mesh's (same indices, same order, same
  *      positions, so the same samples) whose samples were all found within some distance
