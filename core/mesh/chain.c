@@ -522,9 +522,10 @@ int iso_mesh_chain_distance(const iso_mesh_chain *chain, const iso_mesh *mesh, i
                             iso_mesh_distance *out, iso_error *err)
 {
     iso_mesh exact = view_of(chain, 0);
+    iso_mesh_distance_reuse quick = {.without_mean = 1}; /* as the levels: p99 and max */
     return iso_mesh_distance_between(&exact, chain->grid, mesh, NULL,
                                      ISO_CHAIN_SPACING_VOXELS * chain->voxel_size,
-                                     ISO_DISTANCE_SAMPLES, threads, NULL, out, err);
+                                     ISO_DISTANCE_SAMPLES, threads, &quick, out, err);
 }
 
 int iso_mesh_chain_pick_distance(const iso_mesh_chain *chain, double distance)

@@ -392,7 +392,8 @@ int iso_mesh_chain_pick_budget(const iso_mesh_chain *chain, size_t triangles);
 int iso_mesh_chain_mesh(const iso_mesh_chain *chain, int k, iso_mesh *mesh, iso_error *err);
 /* mesh's distance from the chain's level 0, measured as the levels are (samples
  * ISO_CHAIN_SPACING_VOXELS apart, the chain's grid of level 0 reused): what a mesh made
- * from the chain, or beside it, reports. Returns as iso_mesh_distance_compute. */
+ * from the chain, or beside it, reports (p99 and max; means NAN). Returns as
+ * iso_mesh_distance_compute. */
 int iso_mesh_chain_distance(const iso_mesh_chain *chain, const iso_mesh *mesh, int threads,
                             iso_mesh_distance *out, iso_error *err);
 
