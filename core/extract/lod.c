@@ -996,7 +996,64 @@ static int march_fine(lod *c, const iso_extract_params *params, uint8_t *marked,
     return 0;
 }
 
-/* 1 if no block of a brick the level crosses is coarse. */
+/* 1 if the level crosses no cell of the box lo..hi (inclusive samples) at `stride`, whose
+ * fit error there is `error`: the stride grid's samples (the last per axis at hi, as the
+ * levels are built) all lie farther than the error from the level, on one side. The fit
+ * through them stays within their range and f within the error of the fit over the whole
+ * box (Lemma 1, tree.h), so every fine sample of it is on that side too, none of them read. */
+static int box_clear_of_level(const lod *c, const uint32_t lo[3], const uint32_t hi[3], uint32_t stride, double error)
+{
+    double low = INFINITY, high = -INFINITY;
+    for (uint32_t z = lo[2];; z = z + stride < hi[2] ? z + stride : hi[2]) {
+        for (uint32_t y = lo[1];; y = y + stride < hi[1] ? y + stride : hi[1]) {
+            for (uint32_t x = lo[0];; x = x + stride < hi[0] ? x + stride : hi[0]) {
+                double v = iso_vol_sample(c->vol, ((size_t)z * c->dims[1] + y) * c->dims[0] + x);
+                if (v != v)
+                    return 0;
+                low = v < low ? v : low;
+                high = v > high ? v : high;
+                if (x == hi[0])
+                    break;
+            }
+            if (y == hi[1])
+                break;
+        }
+        if (z == hi[2])
+            break;
+    }
+    return low - error > c->level || high + error < c->level;
+}
+
+/* 1 if the level crosses none of brick b's coarse blocks (box_clear_of_level): marched at
+ * stride 1 they would hold no crossing either. A brick at stride 8 whole is never clear:
+ * it is only planned so when its min and max hold the level. */
+static int coarse_blocks_clear(const lod *c, size_t at, const uint32_t b[3])
+{
+    uint32_t first[3], m[3];
+    brick_blocks(c, b, first, m);
+    if (c->shift[block_index(c, first)] == ISO_TREE_LEVELS)
+        return 0;
+    for (uint32_t z = 0; z < m[2]; z++)
+        for (uint32_t y = 0; y < m[1]; y++)
+            for (uint32_t x = 0; x < m[0]; x++) {
+                uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z}, lo[3], hi[3];
+                unsigned l = c->shift[block_index(c, q)];
+                if (!l)
+                    continue;
+                for (int d = 0; d < 3; d++) {
+                    lo[d] = q[d] * ISO_TREE_BLOCK;
+                    hi[d] = lo[d] + ISO_TREE_BLOCK < c->dims[d] - 1 ? lo[d] + ISO_TREE_BLOCK : c->dims[d] - 1;
+                }
+                double error = iso_tree_block_error(c->tree, at, (int)(x | y << 1 | z << 2), (int)l);
+                if (!box_clear_of_level(c, lo, hi, 1u << l, error))
+                    return 0;
+            }
+    return 1;
+}
+
+/* 1 if no block the level crosses is coarse: every brick the level crosses is stride 1,
+ * or its coarse blocks are provably clear of the level (smooth regions beside the surface,
+ * which a plan coarsens however small the tolerance). */
 static int all_fine(const lod *c)
 {
     size_t at = 0;
@@ -1004,7 +1061,7 @@ static int all_fine(const lod *c)
         for (uint32_t j = 0; j < c->count[1]; j++)
             for (uint32_t i = 0; i < c->count[0]; i++, at++) {
                 uint32_t b[3] = {i, j, k};
-                if (brick_active(c, at) && !brick_fine(c, b))
+                if (brick_active(c, at) && !brick_fine(c, b) && !coarse_blocks_clear(c, at, b))
                     return 0;
             }
     return 1;

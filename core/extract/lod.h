@@ -43,8 +43,10 @@
 /* Replaces mesh with the surface at params->level within params->tolerance (> 0), in index
  * space, fills stats' counts and error_bound (not triangles, vertices or time). With
  * params->cap the border is joined at stride 1, so the cap (extract.c) seals it. If PASS 1
- * leaves no brick the level crosses coarse, sets *exact and touches nothing else: the
- * exact path is then the same surface without this path's index-space detour. Returns 0,
+ * leaves no block the level crosses coarse (a coarse block counts as uncrossed when its
+ * stride grid's samples lie farther than its fit error from the level, on one side), sets
+ * *exact and touches nothing else: the exact path is then the same surface without this
+ * path's index-space detour. Returns 0,
  * ISO_E_NOMEM, ISO_E_LIMIT (more than 2^32 - 1 vertices) or ISO_E_INTERNAL (a loop that
  * does not close: a bug); the mesh is then empty. */
 int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, int *exact, iso_mesh *mesh,

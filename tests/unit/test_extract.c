@@ -185,9 +185,11 @@ static void test_d2_spike_takes_log_steps(void)
         iso_extract_stats st;
         extract(tree, 0.5, 0.01, &m, &st);
         CHECK_EQ(st.triangles, 1);
-        /* The one active brick, block by block: the spike's block at stride 1 (4^3 cells);
-         * the other seven are constant, one stride-4 cell each. Nothing else. */
-        CHECK_EQ(st.cells_visited, 64 + 7);
+        /* The one active brick: the other seven blocks are constant (error 0, so the plan
+         * coarsens them) but provably clear of the level, so no block the level crosses is
+         * coarse and the exact kernel marches the brick whole. Nothing else. */
+        CHECK_EQ(st.cells_visited, 512);
+        CHECK_EQ(st.nodes_polygonized, 0);
         /* Each stored level visits the active child and its inactive sibling: 2 per
          * halving; then the brick itself and the 6 sub-boxes of >= 8 cells around the
          * spike that the walk below it tries. */
@@ -747,13 +749,15 @@ static void test_tolerance_that_coarsens_nothing_is_exact(void)
         CHECK(memcmp(tol.positions, exact.positions, 3 * sizeof(float) * exact.vertex_count) == 0);
         CHECK(memcmp(tol.indices, exact.indices, 3 * sizeof(uint32_t) * exact.triangle_count) == 0);
         CHECK(st.error_bound == se.error_bound);
-        /* At the finest error one block coarsens, and the answer is the other path's: its
-         * brick marched block by block. (The block here holds no crossing, so the surface
-         * itself is the exact one.) */
+        /* At the finest error one block coarsens; it holds no crossing and its stride-2
+         * samples lie farther than its error from the level, so the plan still has no
+         * coarse block the level crosses: the exact path again, byte for byte. */
         p.tolerance = finest;
         CHECK(iso_extract(tree, &p, &tol, &st, &err) == 0);
-        CHECK_EQ(st.nodes_polygonized, 1);
+        CHECK_EQ(st.nodes_polygonized, 0);
         CHECK_EQ(tol.triangle_count, exact.triangle_count);
+        CHECK(memcmp(tol.indices, exact.indices, 3 * sizeof(uint32_t) * exact.triangle_count) == 0);
+        CHECK(memcmp(tol.positions, exact.positions, 3 * sizeof(float) * exact.vertex_count) == 0);
         iso_mesh_free(&exact);
         iso_mesh_free(&tol);
     }
