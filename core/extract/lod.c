@@ -965,11 +965,10 @@ static int brick_fine(const lod *c, const uint32_t b[3])
 {
     uint32_t first[3], m[3];
     brick_blocks(c, b, first, m);
-    unsigned have = 0;
-    for (uint32_t z = 0; z < m[2]; z++)
-        for (uint32_t y = 0; y < m[1]; y++)
-            for (uint32_t x = 0; x < m[0]; x++)
-                have |= 1u << (x | y << 1 | z << 2);
+    unsigned have = 0; /* the blocks the brick has (march.h's bits) */
+    for (unsigned k = 0; k < 8; k++)
+        if ((k & 1) < m[0] && (k >> 1 & 1) < m[1] && (k >> 2 & 1) < m[2])
+            have |= 1u << k;
     return fine_blocks(c, b) == have;
 }
 
