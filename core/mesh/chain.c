@@ -386,8 +386,10 @@ static void measure_all(pipeline *p)
     iso_mesh exact = view_of(p->chain, 0);
     iso_mesh_samples *samples = NULL;
     double start = iso_clock_ms();
-    if (p->levels > 0)
-        iso_mesh_samples_build(&exact, ISO_CHAIN_SPACING_VOXELS * p->chain->voxel_size, &samples);
+    /* Out of memory here leaves samples NULL: each measure then counts level 0's samples
+     * itself, and reports its own lack of memory if that fails too. */
+    if (p->levels > 0 && iso_mesh_samples_build(&exact, ISO_CHAIN_SPACING_VOXELS * p->chain->voxel_size, &samples))
+        samples = NULL;
     double samples_ms = iso_clock_ms() - start;
     for (int k = 1; k <= p->levels; k++) {
         pthread_mutex_lock(&p->lock);
