@@ -9,6 +9,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 void proto_encode_options_init(proto_encode_options *opt)
 {
@@ -19,12 +22,29 @@ void proto_encode_options_init(proto_encode_options *opt)
     opt->threads = 0;
 }
 
+/* Every value finite: its exponent bits not all ones. Four values at a time, without a
+ * branch per value (the loop that stopped at the first non-finite value took 1.5 ms for
+ * CThead skin's 1.5 M values, and the compiler does not vectorize either form). */
 static int all_finite(const float *v, size_t n)
 {
-    for (size_t i = 0; i < n; i++)
-        if (!isfinite(v[i]))
-            return 0;
-    return 1;
+    const uint32_t exponent = 0x7f800000u;
+    uint32_t bad = 0;
+    size_t i = 0;
+#if defined(__SSE2__)
+    const __m128i e = _mm_set1_epi32((int)exponent);
+    __m128i any = _mm_setzero_si128();
+    for (; i + 4 <= n; i += 4) {
+        __m128i x = _mm_and_si128(_mm_loadu_si128((const __m128i *)(const void *)(v + i)), e);
+        any = _mm_or_si128(any, _mm_cmpeq_epi32(x, e));
+    }
+    bad = (uint32_t)_mm_movemask_epi8(any);
+#endif
+    for (; i < n; i++) {
+        uint32_t bits;
+        memcpy(&bits, v + i, sizeof bits);
+        bad |= (bits & exponent) == exponent;
+    }
+    return !bad;
 }
 
 int proto_mesh_check_counts(const iso_mesh *mesh, iso_error *err)
