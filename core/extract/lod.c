@@ -54,10 +54,13 @@ typedef struct lod {
      * is the brick's. */
     uint32_t lo[3], hi[3], n[3];
     uint32_t stamp;
-    /* The unit at hand (a block, or a brick marched at stride 8 whole): its box, and the
-     * strides of the lattice sets in its closed box by class (unit_around). */
-    uint32_t ulo[3], uhi[3];
+    uint32_t brick_first[3], brick_m[3]; /* its blocks (brick_blocks) */
+    /* The strides of the lattice sets in the brick's closed box by class (brick_around),
+     * valid where around_stamp is the brick's. */
     uint8_t around[UNIT_CLASSES][UNIT_CLASSES][UNIT_CLASSES]; /* [z][y][x] */
+    uint32_t around_stamp;
+    /* The unit at hand (a block, or a brick marched at stride 8 whole): its box. */
+    uint32_t ulo[3], uhi[3];
     uint8_t point_class[3][ISO_BRICK_SAMPLES], span_class[3][ISO_BRICK_CELLS];
     double value[BRICK_SAMPLES];
     uint32_t value_stamp[BRICK_SAMPLES];
@@ -148,11 +151,7 @@ static void plan_given(lod *c, const uint8_t *given)
             }
 }
 
-/* The unit at hand: the box of m[] blocks from block first[] (unit_box), and the strides of
- * the lattice sets in its closed box (unit_around), by where a set lies per axis (class: a block plane, or
- * strictly inside a block): the finest of the blocks holding it, whose closed boxes are
- * [4i, 4i + 4] per axis. With a cap, a set on the volume's border has stride 1: the cap's
- * cells are data cells. */
+/* The unit at hand: the box of m[] blocks from block first[] (unit_box). */
 static void unit_box(lod *c, const uint32_t first[3], const uint32_t m[3])
 {
     for (int d = 0; d < 3; d++) {
@@ -162,13 +161,17 @@ static void unit_box(lod *c, const uint32_t first[3], const uint32_t m[3])
     }
 }
 
-/* The strides around the unit at hand (unit_box): returns 1 if every set in its closed box
- * has stride `shift` (every cell regular). */
-static int unit_around(lod *c, const uint32_t first[3], const uint32_t m[3], unsigned shift)
+/* The strides of the lattice sets in the brick at hand's closed box (m[] blocks from block
+ * first[]), by where a set lies per axis (class: a block plane, or strictly inside a
+ * block; classes counted from the brick's low corner, so a block's classes are a window of
+ * the brick's): the finest of the blocks holding it, whose closed boxes are [4i, 4i + 4]
+ * per axis. With a cap, a set on the volume's border has stride 1: the cap's cells are
+ * data cells. Made once per brick, on its first unit with samples on both sides. */
+static void brick_around(lod *c, const uint32_t first[3], const uint32_t m[3])
 {
+    enum { N = BLOCKS_PER_BRICK + 2 };
     /* The blocks from first - 1 to first + m per axis, ISO_TREE_LEVELS where there is none. */
-    uint8_t near[BLOCKS_PER_BRICK + 2][BLOCKS_PER_BRICK + 2][BLOCKS_PER_BRICK + 2];
-    int same = !c->cap;
+    uint8_t near[N][N][N];
     for (uint32_t z = 0; z < m[2] + 2; z++)
         for (uint32_t y = 0; y < m[1] + 2; y++)
             for (uint32_t x = 0; x < m[0] + 2; x++) {
@@ -176,20 +179,16 @@ static int unit_around(lod *c, const uint32_t first[3], const uint32_t m[3], uns
                 uint32_t q[3] = {first[0] + x - 1, first[1] + y - 1, first[2] + z - 1};
                 int inside = q[0] < c->blocks[0] && q[1] < c->blocks[1] && q[2] < c->blocks[2];
                 near[z][y][x] = inside ? c->shift[block_index(c, q)] : ISO_TREE_LEVELS;
-                same &= near[z][y][x] == shift;
             }
-    if (same)
-        return 1; /* every set has the unit's stride: no table below is read */
     for (int d = 0; d < 3; d++) {
-        for (uint32_t r = 0; r <= c->uhi[d] - c->ulo[d]; r++)
-            c->point_class[d][r] = (uint8_t)(r == c->uhi[d] - c->ulo[d] ? 2 * m[d] : r / ISO_TREE_BLOCK * 2 + (r % ISO_TREE_BLOCK != 0));
-        for (uint32_t r = 0; r < c->uhi[d] - c->ulo[d]; r++)
+        for (uint32_t r = 0; r < c->n[d]; r++)
+            c->point_class[d][r] = (uint8_t)(r == c->n[d] - 1 ? 2 * m[d] : r / ISO_TREE_BLOCK * 2 + (r % ISO_TREE_BLOCK != 0));
+        for (uint32_t r = 0; r + 1 < c->n[d]; r++)
             c->span_class[d][r] = (uint8_t)(r / ISO_TREE_BLOCK * 2 + 1);
     }
     /* Class k along an axis is held by near's entries (k + 1) / 2 to k / 2 + 1: both sides
      * of a plane (k even), the block itself inside it (k odd, one entry). The minimum over
      * those, one axis at a time. */
-    enum { N = BLOCKS_PER_BRICK + 2 };
     uint8_t along_x[N][N][UNIT_CLASSES], along_y[N][UNIT_CLASSES][UNIT_CLASSES];
     uint32_t P[3];
     for (int d = 0; d < 3; d++)
@@ -206,13 +205,11 @@ static int unit_around(lod *c, const uint32_t first[3], const uint32_t m[3], uns
                 uint8_t a = along_x[z][(k + 1) / 2][kx], b = along_x[z][k / 2 + 1][kx];
                 along_y[z][k][kx] = a < b ? a : b;
             }
-    int uniform = 1;
     for (uint32_t kz = 0; kz < P[2]; kz++)
         for (uint32_t ky = 0; ky < P[1]; ky++)
             for (uint32_t kx = 0; kx < P[0]; kx++) {
                 uint8_t a = along_y[(kz + 1) / 2][ky][kx], b = along_y[kz / 2 + 1][ky][kx];
                 c->around[kz][ky][kx] = a < b ? a : b;
-                uniform &= c->around[kz][ky][kx] == shift;
             }
     /* With a cap, the sets on the volume's border. */
     for (int d = 0; d < 3 && c->cap; d++) {
@@ -226,12 +223,28 @@ static int unit_around(lod *c, const uint32_t first[3], const uint32_t m[3], uns
                     k[d] = ends[e];
                     k[(d + 1) % 3] = i;
                     k[(d + 2) % 3] = j;
-                    uniform &= shift == 0;
                     c->around[k[2]][k[1]][k[0]] = 0;
                 }
         }
     }
-    return uniform;
+    c->around_stamp = c->stamp;
+}
+
+/* 1 if every lattice set in the closed box of the unit at hand (unit_box, inside the brick
+ * at hand) has stride `shift`: every cell of it is regular. */
+static int unit_uniform(const lod *c, unsigned shift)
+{
+    uint32_t k0[3], k1[3];
+    for (int d = 0; d < 3; d++) {
+        k0[d] = c->point_class[d][c->ulo[d] - c->lo[d]];
+        k1[d] = c->point_class[d][c->uhi[d] - c->lo[d]];
+    }
+    for (uint32_t kz = k0[2]; kz <= k1[2]; kz++)
+        for (uint32_t ky = k0[1]; ky <= k1[1]; ky++)
+            for (uint32_t kx = k0[0]; kx <= k1[0]; kx++)
+                if (c->around[kz][ky][kx] != shift)
+                    return 0;
+    return 1;
 }
 
 /* The stride (log2) of the lattice set with classes k[] in the unit at hand. */
@@ -479,8 +492,8 @@ static int cell_is_regular(const lod *c, const uint32_t o[3], const uint32_t siz
 {
     uint8_t first[3], last[3];
     for (int d = 0; d < 3; d++) {
-        first[d] = c->point_class[d][o[d] - c->ulo[d]];
-        last[d] = c->point_class[d][o[d] + size[d] - c->ulo[d]];
+        first[d] = c->point_class[d][o[d] - c->lo[d]];
+        last[d] = c->point_class[d][o[d] + size[d] - c->lo[d]];
     }
     for (int a = 0; a < 3; a++) {
         int b = (a + 1) % 3, d2 = (a + 2) % 3;
@@ -525,10 +538,10 @@ static int split_side(const lod *c, const uint32_t p[3], const uint32_t q[3], ui
     uint8_t k[3];
     for (int d = 0; d < 3; d++)
         if (d != axis)
-            k[d] = c->point_class[d][p[d] - c->ulo[d]];
+            k[d] = c->point_class[d][p[d] - c->lo[d]];
     if (q[axis] > p[axis]) {
         for (uint32_t x = p[axis];;) {
-            k[axis] = c->span_class[axis][x - c->ulo[axis]];
+            k[axis] = c->span_class[axis][x - c->lo[axis]];
             uint32_t step = 1u << set_shift(c, k);
             x = (x / step + 1) * step;
             if (x >= q[axis])
@@ -538,7 +551,7 @@ static int split_side(const lod *c, const uint32_t p[3], const uint32_t q[3], ui
         }
     } else {
         for (uint32_t x = p[axis];;) {
-            k[axis] = c->span_class[axis][x - 1 - c->ulo[axis]];
+            k[axis] = c->span_class[axis][x - 1 - c->lo[axis]];
             uint32_t step = 1u << set_shift(c, k);
             x = (x - 1) / step * step;
             if (x <= q[axis])
@@ -819,9 +832,9 @@ static int face_segments(lod *c, const uint32_t o[3], const uint32_t size[3], in
     int b = (a + 1) % 3, d2 = (a + 2) % 3;
     uint32_t plane = o[a] + size[a] * (uint32_t)side;
     uint8_t k[3];
-    k[a] = c->point_class[a][plane - c->ulo[a]];
-    k[b] = c->span_class[b][o[b] - c->ulo[b]];
-    k[d2] = c->span_class[d2][o[d2] - c->ulo[d2]];
+    k[a] = c->point_class[a][plane - c->lo[a]];
+    k[b] = c->span_class[b][o[b] - c->lo[b]];
+    k[d2] = c->span_class[d2][o[d2] - c->lo[d2]];
     if (set_shift(c, k) == ISO_TREE_LEVELS) {
         /* Every block holding the first region has stride 8, so the brick across does: the
          * face is one region. */
@@ -833,8 +846,8 @@ static int face_segments(lod *c, const uint32_t o[3], const uint32_t size[3], in
             uint32_t rb1 = (rb0 / ISO_TREE_BLOCK + 1) * ISO_TREE_BLOCK, rc1 = (rc0 / ISO_TREE_BLOCK + 1) * ISO_TREE_BLOCK;
             uint32_t from[2] = {rb0, rc0}, to[2] = {rb1 < o[b] + size[b] ? rb1 : o[b] + size[b],
                                                    rc1 < o[d2] + size[d2] ? rc1 : o[d2] + size[d2]};
-            k[b] = c->span_class[b][rb0 - c->ulo[b]];
-            k[d2] = c->span_class[d2][rc0 - c->ulo[d2]];
+            k[b] = c->span_class[b][rb0 - c->lo[b]];
+            k[d2] = c->span_class[d2][rc0 - c->lo[d2]];
             int rc = region_segments(c, a, side, plane, from, to, 1u << set_shift(c, k));
             if (rc)
                 return rc;
@@ -883,7 +896,9 @@ static int march_unit(lod *c, const uint32_t first[3], const uint32_t m[3], unsi
         c->cells += cells;
         return 0;
     }
-    int uniform = unit_around(c, first, m, shift); /* every cell is regular */
+    if (c->around_stamp != c->stamp)
+        brick_around(c, c->brick_first, c->brick_m);
+    int uniform = unit_uniform(c, shift); /* every cell is regular */
     /* Whether a cell is regular depends only on which of the unit's planes it touches. */
     int8_t by_touch[64];
     memset(by_touch, -1, sizeof by_touch);
@@ -926,7 +941,7 @@ static int march_brick(lod *c, const uint32_t b[3], iso_error *err)
     }
     c->stamp++;
     classify_whole(c);
-    uint32_t first[3], m[3];
+    uint32_t *first = c->brick_first, *m = c->brick_m;
     brick_blocks(c, b, first, m);
     if (c->shift[block_index(c, first)] == ISO_TREE_LEVELS)
         return march_unit(c, first, m, ISO_TREE_LEVELS, err);
