@@ -975,39 +975,16 @@ static unsigned fine_blocks(const lod *c, const uint32_t b[3])
     return fine;
 }
 
-/* 1 if every block of brick b has stride 1. */
-static int brick_fine(const lod *c, const uint32_t b[3])
+/* The blocks brick b has (march.h's bits). */
+static unsigned brick_has(const lod *c, const uint32_t b[3])
 {
     uint32_t first[3], m[3];
     brick_blocks(c, b, first, m);
-    unsigned have = 0; /* the blocks the brick has (march.h's bits) */
+    unsigned have = 0;
     for (unsigned k = 0; k < 8; k++)
         if ((k & 1) < m[0] && (k >> 1 & 1) < m[1] && (k >> 2 & 1) < m[2])
             have |= 1u << k;
-    return fine_blocks(c, b) == have;
-}
-
-/* PASS 2: the blocks with stride 1, march.c's kernel on those (with no min/max, on the
- * bricks the level cannot cross too: they are read and give nothing). marked is scratch,
- * a byte per brick. */
-static int march_fine(lod *c, const iso_extract_params *params, uint8_t *marked, iso_march_part **fine,
-                      iso_error *err)
-{
-    size_t at = 0;
-    for (uint32_t k = 0; k < c->count[2]; k++)
-        for (uint32_t j = 0; j < c->count[1]; j++)
-            for (uint32_t i = 0; i < c->count[0]; i++, at++) {
-                uint32_t b[3] = {i, j, k};
-                marked[at] = (uint8_t)(brick_active(c, at) ? fine_blocks(c, b) : params->no_minmax ? 0xFF : 0);
-            }
-    iso_march_stats ms;
-    int rc = iso_march_selected(c->vol, &c->tree->bricks, c->level, marked, params->threads, c->mesh, &ms, fine, err);
-    if (rc)
-        return rc;
-    c->fine = *fine;
-    c->cells += ms.cells_visited;
-    c->error = ms.error_bound;
-    return 0;
+    return have;
 }
 
 /* 1 if the level crosses no cell of the box lo..hi (inclusive samples) at `stride`, whose
@@ -1065,20 +1042,56 @@ static int coarse_blocks_clear(const lod *c, size_t at, const uint32_t b[3])
     return 1;
 }
 
-/* 1 if no block the level crosses is coarse: every brick the level crosses is stride 1,
- * or its coarse blocks are provably clear of the level (smooth regions beside the surface,
- * which a plan coarsens however small the tolerance). */
-static int all_fine(const lod *c)
+/* PASS 1's last step: per brick, the blocks PASS 2 marches (march.h's marks) into marked,
+ * and 1 returned if every brick the level crosses is marched whole, i.e. no block the
+ * level crosses is coarse. An active brick's marks are its stride-1 blocks; with `prove`,
+ * all of its blocks where its coarse blocks are provably clear of the level (smooth
+ * regions beside the surface, which a plan coarsens however small the tolerance): at
+ * stride 1 they hold no crossing either, so the kernel's surface is the same, its
+ * unmasked rows make it, and PASS 3 passes the brick by. (A clear block beside a coarse
+ * one the level crosses keeps its stride in the plan: the lattice sets they share keep
+ * theirs.) Without min/max pruning the other bricks are marked whole too: they are read
+ * and give nothing. */
+static int mark_fine(const lod *c, int prove, int no_minmax, uint8_t *marked)
 {
+    int whole = 1;
     size_t at = 0;
     for (uint32_t k = 0; k < c->count[2]; k++)
         for (uint32_t j = 0; j < c->count[1]; j++)
             for (uint32_t i = 0; i < c->count[0]; i++, at++) {
                 uint32_t b[3] = {i, j, k};
-                if (brick_active(c, at) && !brick_fine(c, b) && !coarse_blocks_clear(c, at, b))
-                    return 0;
+                if (!brick_active(c, at)) {
+                    marked[at] = no_minmax ? 0xFF : 0;
+                    continue;
+                }
+                unsigned have = brick_has(c, b), fine = fine_blocks(c, b);
+                if (fine != have && prove && coarse_blocks_clear(c, at, b))
+                    fine = have;
+                marked[at] = (uint8_t)fine;
+                whole &= fine == have;
             }
-    return 1;
+    return whole;
+}
+
+/* 1 if active brick `at` is marked whole (PASS 2 makes all of its surface). */
+static int brick_fine(const lod *c, const uint8_t *marked, size_t at, const uint32_t b[3])
+{
+    return marked[at] == brick_has(c, b);
+}
+
+/* PASS 2: the marked blocks (mark_fine), march.c's kernel on those, on the request's
+ * threads. */
+static int march_fine(lod *c, const iso_extract_params *params, const uint8_t *marked, iso_march_part **fine,
+                      iso_error *err)
+{
+    iso_march_stats ms;
+    int rc = iso_march_selected(c->vol, &c->tree->bricks, c->level, marked, params->threads, c->mesh, &ms, fine, err);
+    if (rc)
+        return rc;
+    c->fine = *fine;
+    c->cells += ms.cells_visited;
+    c->error = ms.error_bound;
+    return 0;
 }
 
 /* The largest level error (tree.h) of brick b's coarse blocks, as planned. */
@@ -1100,18 +1113,27 @@ static double brick_fit(const lod *c, size_t at, const uint32_t b[3])
     return worst;
 }
 
+/* The volume's and the grids' sizes, for the level. */
+static void lod_grid(lod *c, const iso_tree *tree, double level)
+{
+    c->tree = tree;
+    c->vol = tree->vol;
+    c->level = level;
+    for (int d = 0; d < 3; d++) {
+        c->dims[d] = (uint32_t)tree->vol->dims[d];
+        c->count[d] = tree->bricks.count[d];
+        c->blocks[d] = (c->dims[d] - 1 + ISO_TREE_BLOCK - 1) / ISO_TREE_BLOCK;
+    }
+}
+
 /* iso_lod_extract's work, with the plan given or (shift NULL) made; with exact not NULL,
  * a plan with no coarse brick sets *exact and extracts nothing. */
 static int extract(const iso_tree *tree, const iso_extract_params *params, const uint8_t *shift, int *exact,
                    iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
 {
-    lod c = {.tree = tree, .vol = tree->vol, .level = params->level, .cap = params->cap, .mesh = mesh};
+    lod c = {.cap = params->cap, .mesh = mesh};
     const iso_bricks *g = &tree->bricks;
-    for (int d = 0; d < 3; d++) {
-        c.dims[d] = (uint32_t)tree->vol->dims[d];
-        c.count[d] = g->count[d];
-        c.blocks[d] = (c.dims[d] - 1 + ISO_TREE_BLOCK - 1) / ISO_TREE_BLOCK;
-    }
+    lod_grid(&c, tree, params->level);
     iso_mesh_clear(mesh);
     size_t total = iso_bricks_total(g), blocks = (size_t)c.blocks[0] * c.blocks[1] * c.blocks[2];
     c.shift = malloc(blocks + total + 1);
@@ -1121,12 +1143,14 @@ static int extract(const iso_tree *tree, const iso_extract_params *params, const
         plan_given(&c, shift);
     else
         plan(&c, params->tolerance);
-    if (!shift && exact && (*exact = all_fine(&c))) {
+    uint8_t *marked = c.shift + blocks;
+    int whole = mark_fine(&c, !shift, params->no_minmax, marked);
+    if (!shift && exact && (*exact = whole)) {
         free(c.shift);
         return 0;
     }
     iso_march_part *fine = NULL;
-    int rc = march_fine(&c, params, c.shift + blocks, &fine, err);
+    int rc = march_fine(&c, params, marked, &fine, err);
     for (uint32_t k = 0; k < g->count[2] && !rc; k++)
         for (uint32_t j = 0; j < g->count[1] && !rc; j++)
             for (uint32_t i = 0; i < g->count[0] && !rc; i++) {
@@ -1136,7 +1160,7 @@ static int extract(const iso_tree *tree, const iso_extract_params *params, const
                     continue;
                 stats->nodes_visited++;
                 uint32_t b[3] = {i, j, k};
-                if (!active || brick_fine(&c, b))
+                if (!active || brick_fine(&c, marked, at, b))
                     continue; /* marched by march_fine */
                 stats->nodes_polygonized++;
                 double fit = brick_fit(&c, at, b);
@@ -1167,4 +1191,11 @@ int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *para
                             iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
 {
     return extract(tree, params, shift, NULL, mesh, stats, err);
+}
+
+void iso_lod_plan(const iso_tree *tree, double level, double tolerance, uint8_t *shift)
+{
+    lod c = {.shift = shift};
+    lod_grid(&c, tree, level);
+    plan(&c, tolerance);
 }

@@ -9,9 +9,11 @@
  *   stride 8, which touches nothing (their samples all lie on one side of the level). No
  *   sample is read.
  * PASS 2 (fine): the stride-1 blocks, marched by the exact kernel (march.h,
- *   iso_march_selected, given per brick the mask of its stride-1 blocks) on the request's
- *   threads; it also numbers the crossings of the edges such a block shares with a brick
- *   that owns them (the brick's own coarse blocks, or a ghost).
+ *   iso_march_selected, given per brick the mask of its stride-1 blocks; a brick whose
+ *   coarse blocks are all provably clear of the level is given whole, as it then holds
+ *   the same surface at stride 1) on the request's threads; it also numbers the crossings
+ *   of the edges such a block shares with a brick that owns them (the brick's own coarse
+ *   blocks, or a ghost).
  * PASS 3 (coarse): the bricks with a coarse block in grid order, each classified once,
  *   then unit after unit (the brick at stride 8, or its coarse blocks at their strides;
  *   a unit whose samples all lie on one side is skipped), cell after cell of the unit's
@@ -59,5 +61,9 @@ int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, int 
  * watertight mesh; only PASS 1's choice makes the value bound hold. */
 int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *params, const uint8_t *shift,
                             iso_mesh *mesh, iso_extract_stats *stats, iso_error *err);
+
+/* PASS 1's plan for the level and tolerance (> 0), into shift as iso_lod_extract_planned
+ * takes it: for tests, which give it back to compare the two answers. */
+void iso_lod_plan(const iso_tree *tree, double level, double tolerance, uint8_t *shift);
 
 #endif
