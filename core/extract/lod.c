@@ -298,8 +298,10 @@ static int box_mixed(const lod *c, const uint32_t lo[3], const uint32_t hi[3])
             unsigned row = c->rows[z * ISO_BRICK_SAMPLES + y] & mask;
             any |= row;
             all &= row;
+            if (any && all != mask)
+                return 1; /* boxes near the surface, the usual ones, are mixed early */
         }
-    return any && all != mask;
+    return 0;
 }
 
 /* f, the data's trilinear interpolant, at x inside the brick at hand. */
@@ -775,8 +777,9 @@ static int fan_loops(lod *c, const double middle[3], iso_error *err)
 /* The segments of the squares of [b0, b1) x [c0, c1) (along axes b and d2) of a transition
  * cell's face in `plane` across axis a (side 1 the high one), squares of stride f: each
  * square's sides split at their own strides (split_side). A square whose sides hold no
- * crossing is skipped: its corners alike and no side split, or every sample of its box
- * alike. */
+ * crossing is skipped before its polygon is built: its corners alike and every sample of
+ * its box alike (a side of one cell is never split, so then the corners are its box), or,
+ * built, its corners alike and no side split. */
 static int region_segments(lod *c, int a, int side, uint32_t plane, const uint32_t from[2], const uint32_t to[2],
                            uint32_t f)
 {
@@ -786,29 +789,18 @@ static int region_segments(lod *c, int a, int side, uint32_t plane, const uint32
         for (uint32_t jb = from[0]; jb < to[0]; jb += f) {
             uint32_t wb = to[0] - jb < f ? to[0] - jb : f, wc = to[1] - jc < f ? to[1] - jc : f;
             uint32_t corner[4][3];
+            unsigned alike = 0;
             for (int k = 0; k < 4; k++) {
                 int q = side ? k : 3 - k; /* (b, c, a) is right-handed: reversed below */
                 corner[k][a] = plane;
                 corner[k][b] = jb + wb * (uint32_t)bc[q][0];
                 corner[k][d2] = jc + wc * (uint32_t)bc[q][1];
+                alike += (unsigned)above(c, corner[k]);
             }
-            uint32_t points[MAX_POLYGON][3];
-            int m = 0;
-            for (int k = 0; k < 4; k++) {
-                memcpy(points[m++], corner[k], sizeof points[0]);
-                /* A side inside the region has the region's stride, no longer than the
-                 * side: only the region's own border may be split. */
-                int across = k % 2 ? b : d2, at = k % 2 ? 0 : 1;
-                if (corner[k][across] == from[at] || corner[k][across] == to[at])
-                    m = split_side(c, corner[k], corner[(k + 1) % 4], points, m);
-            }
-            if (m == 4) {
-                unsigned alike = 0;
-                for (int k = 0; k < 4; k++)
-                    alike += above(c, corner[k]);
-                if (alike == 0 || alike == 4)
+            alike = alike == 0 || alike == 4;
+            if (alike) {
+                if (wb == 1 && wc == 1)
                     continue;
-            } else {
                 uint32_t box_lo[3], box_hi[3];
                 for (int d = 0; d < 3; d++) {
                     box_lo[d] = corner[0][d] < corner[2][d] ? corner[0][d] : corner[2][d];
@@ -817,6 +809,19 @@ static int region_segments(lod *c, int a, int side, uint32_t plane, const uint32
                 if (!box_mixed(c, box_lo, box_hi))
                     continue;
             }
+            uint32_t points[MAX_POLYGON][3];
+            int m = 0;
+            for (int k = 0; k < 4; k++) {
+                memcpy(points[m++], corner[k], sizeof points[0]);
+                /* A side inside the region has the region's stride, no longer than the
+                 * side: only the region's own border may be split, and a side of one
+                 * cell never is. */
+                int across = k % 2 ? b : d2, at = k % 2 ? 0 : 1;
+                if ((k % 2 ? wc : wb) > 1 && (corner[k][across] == from[at] || corner[k][across] == to[at]))
+                    m = split_side(c, corner[k], corner[(k + 1) % 4], points, m);
+            }
+            if (alike && m == 4)
+                continue;
             int rc = polygon_segments(c, (const uint32_t(*)[3])points, m);
             if (rc)
                 return rc;
