@@ -1,7 +1,9 @@
 /* chain.c: a surface's simplification chain, and the meshes it answers (see mesh.h).
  *
  * Passes of iso_mesh_chain_build:
- *   1. keep: the exact surface's positions and triangles become level 0;
+ *   1. keep: the exact surface's positions and triangles become level 0, and its census
+ *      (pinches, closed or not, enclosed volume) is taken beside level 1's simplification,
+ *      with PASS 3's grid and samples of it (prepare: level 1 reads none of them);
  *   2. simplify: level k (k = 1..ISO_CHAIN_LEVELS) is level k - 1 simplified to half its
  *      triangles by collapses that keep the link condition (collapse.c), borders locked,
  *      in up to two slabs on their own threads (simplify_level: 2a gather, 2b collapse
@@ -49,14 +51,44 @@ static iso_mesh view_of(const iso_mesh_chain *chain, int k)
     return m;
 }
 
-static size_t used_vertices(const iso_mesh *m, unsigned char *seen)
+/* Level 0's grid for the measures (NULL below 2 triangles): every level lies within its
+ * bounds. 0 or ISO_E_NOMEM. */
+static int level0_grid(const iso_mesh_chain *chain, iso_mesh_grid **out)
 {
-    memset(seen, 0, m->vertex_count);
+    iso_mesh level0 = view_of(chain, 0);
+    *out = NULL;
+    if (level0.triangle_count < 2)
+        return 0;
+    float lo[3], hi[3];
+    iso_mesh_bounds(&level0, lo, hi);
+    return iso_mesh_grid_build(&level0, lo, hi, out);
+}
+
+/* A level's pinches (manifold.c) counted over its own vertices, numbered in first use
+ * (remap: scratch per chain vertex), so that the count's cost follows the level, not the
+ * chain's vertex count; the topology, and so every count, is the same. Sets *used. */
+static int level_pinches(const iso_mesh *m, uint32_t *remap, size_t *used, iso_mesh_pinches *out)
+{
+    iso_mesh compact;
+    iso_mesh_init(&compact);
+    memset(remap, 0xff, m->vertex_count * sizeof *remap);
     size_t n = 0;
     for (size_t i = 0; i < 3 * m->triangle_count; i++)
-        if (!seen[m->indices[i]])
-            seen[m->indices[i]] = 1, n++;
-    return n;
+        if (remap[m->indices[i]] == UINT32_MAX)
+            remap[m->indices[i]] = (uint32_t)n++;
+    *used = n;
+    if (iso_mesh_reserve(&compact, n, m->triangle_count))
+        return ISO_E_NOMEM;
+    for (size_t i = 0; i < 3 * m->triangle_count; i++) {
+        uint32_t g = m->indices[i];
+        compact.indices[i] = remap[g];
+        memcpy(compact.positions + 3 * (size_t)remap[g], m->positions + 3 * (size_t)g, 3 * sizeof(float));
+    }
+    compact.vertex_count = n;
+    compact.triangle_count = m->triangle_count;
+    int rc = iso_mesh_find_pinches(&compact, NULL, out);
+    iso_mesh_free(&compact);
+    return rc;
 }
 
 #define CHAIN_SLAB_MIN 20000 /* triangles per slab, at least, else one part */
@@ -283,7 +315,7 @@ static int measure_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid,
 
 /* PASS 2 for level k on `threads`. The level is the chain's once this returns, even
  * failing (the builder counts it for destroy). */
-static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *seen, iso_error *err)
+static int add_level(iso_mesh_chain *chain, int k, int threads, uint32_t *remap, iso_error *err)
 {
     const iso_mesh_chain_level *prev = &chain->level[k - 1];
     iso_mesh_chain_level *lv = &chain->level[k];
@@ -304,13 +336,12 @@ static int add_level(iso_mesh_chain *chain, int k, int threads, unsigned char *s
     uint32_t *shrunk = realloc(m.indices, (3 * m.triangle_count + 1) * sizeof *m.indices);
     lv->indices = m.indices = shrunk ? shrunk : m.indices;
     lv->triangle_count = m.triangle_count;
-    lv->vertex_count = used_vertices(&m, seen);
     lv->simplify_ms = r.ms;
     chain->bytes += 3 * lv->triangle_count * sizeof *lv->indices;
     lv->estimate = r.error;
     lv->folds_dropped = r.folds_dropped;
     iso_mesh_pinches pinches;
-    if ((rc = iso_mesh_find_pinches(&m, NULL, &pinches)))
+    if ((rc = level_pinches(&m, remap, &lv->vertex_count, &pinches)))
         return iso_error_set(err, rc, "chain: no memory to count level %d's pinches", k);
     lv->nonmanifold_edges = pinches.pinch_edges;
     lv->pinch_vertices = pinches.pinch_vertices;
@@ -336,24 +367,75 @@ static int measure_step(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid,
 }
 
 /* PASS 2 and 3 side by side: the simplification is one thread's (but for level 1, made
- * before on all threads, since nothing waits to be measured beside it), so the levels
- * already made are measured meanwhile on the chain's other threads, each after the one before
- * (it reuses that one's bounds), and on all of them once the last level is made. Level
- * k's measure writes only level k's measured fields, which nothing else touches; levels
- * are handed over under the lock. */
+ * before on all threads, beside level 0's preparation, since nothing waits to be measured
+ * beside it), so the levels already made are measured meanwhile on the chain's other
+ * threads, each after the one before (it reuses that one's bounds), and on all of them
+ * once the last level is made. Level k's measure writes only level k's measured fields,
+ * which nothing else touches; levels are handed over under the lock. */
 typedef struct pipeline {
     iso_mesh_chain *chain;
-    const iso_mesh_grid *grid;
-    unsigned char *seen;
+    uint32_t *remap;           /* the simplification's scratch, per chain vertex */
     int levels, threads;       /* levels to make; the chain's threads */
     pthread_mutex_t lock;
     pthread_cond_t made_one;
     int made;                  /* levels simplified (under the lock) */
     int over;                  /* the simplification stopped: no more levels (under the lock) */
     int stop;                  /* a measure failed: simplify no further (under the lock) */
-    int rc_simplify, rc_measure;
+    int rc_simplify, rc_measure, rc_prepare;
     iso_error err_simplify, err_measure;
+    iso_mesh_grid *grid;       /* level 0's (PASS 3), made by prepare */
+    iso_mesh_samples *samples; /* level 0's (NULL without memory: each measure counts) */
+    double samples_ms;
 } pipeline;
+
+/* PASS 1's census of level 0 (its pinches, whether it is closed, its volume) and PASS 3's
+ * grid and samples of it: all the measure needs before level 1's, and nothing level 1's
+ * simplification reads, so made beside it. Writes only level 0's counts, the chain's
+ * closed and volume, and p's grid and samples (the chain's bytes are counted after). */
+static void prepare(pipeline *p)
+{
+    iso_mesh_chain *c = p->chain;
+    iso_mesh level0 = view_of(c, 0);
+    iso_mesh_pinches pinches;
+    if (iso_mesh_find_pinches(&level0, NULL, &pinches)) {
+        p->rc_prepare = ISO_E_NOMEM;
+        return;
+    }
+    c->level[0].edges = pinches.edges;
+    c->level[0].nonmanifold_edges = pinches.pinch_edges;
+    c->level[0].pinch_vertices = pinches.pinch_vertices;
+    c->closed = level0.triangle_count > 0 && pinches.open_edges == 0;
+    c->volume = c->closed ? iso_mesh_enclosed_volume(&level0) : 0;
+    if (level0_grid(c, &p->grid)) {
+        p->rc_prepare = ISO_E_NOMEM;
+        return;
+    }
+    double start = iso_clock_ms();
+    /* Out of memory here leaves samples NULL: each measure then counts level 0's samples
+     * itself, and reports its own lack of memory if that fails too. */
+    if (p->levels > 0 && iso_mesh_samples_build(&level0, ISO_CHAIN_SPACING_VOXELS * c->voxel_size, &p->samples))
+        p->samples = NULL;
+    p->samples_ms = iso_clock_ms() - start;
+}
+
+/* Level 1 (share 0, on all threads: its slabs' shares go to any thread free, so also to
+ * this one's once prepare is done) beside prepare (share 1). */
+static void first_stage(void *context, int t, int threads)
+{
+    pipeline *p = context;
+    (void)threads;
+    if (t == 1) {
+        prepare(p);
+        return;
+    }
+    if (p->levels > 0) {
+        p->rc_simplify = add_level(p->chain, 1, p->threads, p->remap, &p->err_simplify);
+        p->made = 1;
+        p->over = p->rc_simplify || p->levels == 1;
+    } else {
+        p->over = 1;
+    }
+}
 
 static void simplify_all(pipeline *p)
 {
@@ -361,7 +443,7 @@ static void simplify_all(pipeline *p)
         pthread_mutex_lock(&p->lock);
         int stop = p->stop;
         pthread_mutex_unlock(&p->lock);
-        int rc = stop ? 0 : add_level(p->chain, k, 1, p->seen, &p->err_simplify);
+        int rc = stop ? 0 : add_level(p->chain, k, 1, p->remap, &p->err_simplify);
         pthread_mutex_lock(&p->lock);
         p->made = stop ? p->made : k; /* a failed level is still the chain's, to free */
         p->over = stop || rc || k == p->levels;
@@ -371,26 +453,11 @@ static void simplify_all(pipeline *p)
         if (stop || rc)
             break;
     }
-    if (p->levels == 0) {
-        pthread_mutex_lock(&p->lock);
-        p->over = 1;
-        pthread_mutex_unlock(&p->lock);
-    }
 }
 
 static void measure_all(pipeline *p)
 {
     double *bound = NULL;
-    /* Level 0's samples, counted once for all levels (NULL without memory: each counts),
-     * in level 1's measure time. */
-    iso_mesh exact = view_of(p->chain, 0);
-    iso_mesh_samples *samples = NULL;
-    double start = iso_clock_ms();
-    /* Out of memory here leaves samples NULL: each measure then counts level 0's samples
-     * itself, and reports its own lack of memory if that fails too. */
-    if (p->levels > 0 && iso_mesh_samples_build(&exact, ISO_CHAIN_SPACING_VOXELS * p->chain->voxel_size, &samples))
-        samples = NULL;
-    double samples_ms = iso_clock_ms() - start;
     for (int k = 1; k <= p->levels; k++) {
         pthread_mutex_lock(&p->lock);
         while (p->made < k && !p->over)
@@ -400,17 +467,16 @@ static void measure_all(pipeline *p)
         if (!ready)
             break;
         int threads = all || p->threads < 2 ? p->threads : p->threads - 1;
-        if ((p->rc_measure = measure_step(p->chain, p->grid, samples, k, threads, &bound, &p->err_measure))) {
+        if ((p->rc_measure = measure_step(p->chain, p->grid, p->samples, k, threads, &bound, &p->err_measure))) {
             pthread_mutex_lock(&p->lock);
             p->stop = 1;
             pthread_mutex_unlock(&p->lock);
             break;
         }
-        if (k == 1)
-            p->chain->level[1].measure_ms += samples_ms;
+        if (k == 1) /* level 0's samples, counted once for all levels, in level 1's time */
+            p->chain->level[1].measure_ms += p->samples_ms;
     }
     free(bound);
-    iso_mesh_samples_destroy(samples);
 }
 
 static void pipeline_stage(void *context, int t, int threads)
@@ -430,10 +496,10 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
         return iso_error_set(err, ISO_E_ARGUMENT, "chain: voxel size %g must be > 0", voxel_size);
     double start = iso_clock_ms();
     iso_mesh_chain *c = calloc(1, sizeof *c);
-    unsigned char *seen = malloc(exact->vertex_count ? exact->vertex_count : 1);
-    if (!c || !seen) {
+    uint32_t *remap = malloc((exact->vertex_count ? exact->vertex_count : 1) * sizeof *remap);
+    if (!c || !remap) {
         free(c);
-        free(seen);
+        free(remap);
         return iso_error_set(err, ISO_E_NOMEM, "chain: no memory");
     }
     c->voxel_size = voxel_size;
@@ -444,7 +510,7 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
         free(c->level[0].indices);
         c->levels = 0;
         iso_mesh_chain_destroy(c);
-        free(seen);
+        free(remap);
         return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for %zu triangles", exact->triangle_count);
     }
     /* PASS 1 */
@@ -454,42 +520,37 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
         memcpy(c->level[0].indices, exact->indices, 3 * exact->triangle_count * sizeof *exact->indices);
     c->level[0].triangle_count = exact->triangle_count;
     c->levels = 1;
-    iso_mesh level0 = view_of(c, 0);
-    c->level[0].vertex_count = used_vertices(&level0, seen);
-    iso_mesh_pinches pinches;
-    if (iso_mesh_find_pinches(&level0, NULL, &pinches)) {
-        iso_mesh_chain_destroy(c);
-        free(seen);
-        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory to count pinches");
-    }
-    c->level[0].edges = pinches.edges;
-    c->level[0].nonmanifold_edges = pinches.pinch_edges;
-    c->level[0].pinch_vertices = pinches.pinch_vertices;
-    c->closed = exact->triangle_count > 0 && pinches.open_edges == 0;
-    c->volume = c->closed ? iso_mesh_enclosed_volume(&level0) : 0;
+    c->level[0].vertex_count = exact->vertex_count;
     c->bytes = sizeof *c + 3 * exact->vertex_count * sizeof *c->positions +
                3 * exact->triangle_count * sizeof *exact->indices;
-    /* PASS 3's grid of level 0, once for all levels (every level lies within its bounds),
-     * and kept for later measures against level 0. */
-    int rc = iso_mesh_chain_grid_build(c)
-                 ? iso_error_set(err, ISO_E_NOMEM, "chain: no memory for the grid of %zu triangles",
-                                 exact->triangle_count)
-                 : 0;
-    pipeline p = {.chain = c, .grid = c->grid, .seen = seen, .threads = iso_parallel_threads(threads),
+    pipeline p = {.chain = c, .remap = remap, .threads = iso_parallel_threads(threads),
                   .lock = PTHREAD_MUTEX_INITIALIZER, .made_one = PTHREAD_COND_INITIALIZER};
     while (p.levels < ISO_CHAIN_LEVELS && (exact->triangle_count >> (p.levels + 1)) >= 1)
         p.levels++;
-    if (!rc && p.levels > 0) { /* level 1 on all threads: nothing to measure beside it yet */
-        p.rc_simplify = add_level(c, 1, p.threads, seen, &p.err_simplify);
-        p.made = 1;
-        p.over = p.rc_simplify || p.levels == 1;
+    if (p.threads > 1) {
+        iso_parallel_run(2, first_stage, &p);
+    } else {
+        prepare(&p);
+        first_stage(&p, 0, 1);
     }
-    if (!rc && p.threads > 1) { /* share 0 makes the levels, share 1 measures them */
+    /* Level 0's vertices, counted after level 1 (whose scratch remap is) */
+    memset(remap, 0, exact->vertex_count * sizeof *remap);
+    size_t used = 0;
+    for (size_t i = 0; i < 3 * exact->triangle_count; i++)
+        used += !remap[exact->indices[i]]++;
+    c->level[0].vertex_count = used;
+    c->grid = p.grid;
+    c->bytes += iso_mesh_grid_bytes(c->grid);
+    int rc = p.rc_prepare ? iso_error_set(err, ISO_E_NOMEM, "chain: no memory for the grid of %zu triangles",
+                                          exact->triangle_count)
+                          : 0;
+    if (!rc && p.threads > 1 && !p.over) { /* share 0 makes the levels, share 1 measures them */
         iso_parallel_run(2, pipeline_stage, &p);
     } else if (!rc) {
         simplify_all(&p);
         measure_all(&p);
     }
+    iso_mesh_samples_destroy(p.samples);
     c->levels = 1 + p.made;
     if (!rc && (p.rc_simplify || p.rc_measure)) {
         rc = p.rc_simplify ? p.rc_simplify : p.rc_measure;
@@ -498,7 +559,7 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
     }
     pthread_mutex_destroy(&p.lock);
     pthread_cond_destroy(&p.made_one);
-    free(seen);
+    free(remap);
     if (rc) {
         iso_mesh_chain_destroy(c);
         return rc;
@@ -510,12 +571,9 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
 
 int iso_mesh_chain_grid_build(iso_mesh_chain *chain)
 {
-    iso_mesh level0 = view_of(chain, 0);
-    if (chain->grid || level0.triangle_count < 2)
+    if (chain->grid)
         return 0;
-    float lo[3], hi[3];
-    iso_mesh_bounds(&level0, lo, hi);
-    int rc = iso_mesh_grid_build(&level0, lo, hi, &chain->grid);
+    int rc = level0_grid(chain, &chain->grid);
     chain->bytes += iso_mesh_grid_bytes(chain->grid);
     return rc;
 }
