@@ -58,8 +58,26 @@ static int emit_caps(const iso_volume *vol, double level, iso_mesh *soup)
     return 0;
 }
 
+/* PASS 3. With an identity direction iso_vol_index_to_world is origin + index * spacing
+ * per axis, to the same bits (its other terms add +0 to a sum that is not -0), as march.c
+ * places its vertices: one multiply-add per coordinate, over the whole array. */
 static void to_world(const iso_volume *vol, iso_mesh *mesh)
 {
+    int aligned = 1;
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++)
+            aligned &= vol->direction[r][c] == (r == c);
+    if (aligned) {
+        float *p = mesh->positions;
+        const double o0 = vol->origin[0], o1 = vol->origin[1], o2 = vol->origin[2];
+        const double s0 = vol->spacing[0], s1 = vol->spacing[1], s2 = vol->spacing[2];
+        for (size_t v = 0; v < mesh->vertex_count; v++, p += 3) {
+            p[0] = (float)(o0 + (double)p[0] * s0);
+            p[1] = (float)(o1 + (double)p[1] * s1);
+            p[2] = (float)(o2 + (double)p[2] * s2);
+        }
+        return;
+    }
     for (size_t v = 0; v < mesh->vertex_count; v++) {
         float *p = mesh->positions + 3 * v;
         double index[3] = {p[0], p[1], p[2]}, world[3];

@@ -837,6 +837,58 @@ static void test_clear_bricks_marched_whole(void)
     iso_vol_destroy(vol);
 }
 
+/* World positions off the tolerance path (and its cap, and the full scan) are the index
+ * positions through iso_vol_index_to_world, bit for bit: extract.c's one multiply-add per
+ * coordinate with an identity direction, the general map with a rotated one. */
+static void test_world_positions_are_the_index_map(void)
+{
+    double r0;
+    iso_volume *vol = sphere_volume(40, &r0);
+    const double spacing[3] = {0.957, 1.5, 0.3}, origin[3] = {-120.4, -0.0, 33.3};
+    for (int d = 0; d < 3; d++) {
+        vol->spacing[d] = spacing[d];
+        vol->origin[d] = origin[d];
+    }
+    iso_tree *tree = surface_build(vol);
+    for (int rotated = 0; rotated < 2; rotated++) {
+        if (rotated) { /* a quarter turn about z */
+            double turn[3][3] = {{0, -1, 0}, {1, 0, 0}, {0, 0, 1}};
+            memcpy(vol->direction, turn, sizeof turn);
+        }
+        for (int variant = 0; variant < 3; variant++) {
+            iso_mesh index, world;
+            iso_mesh_init(&index);
+            iso_mesh_init(&world);
+            iso_extract_params p = {.level = 4, .tolerance = variant == 2 ? 0 : 0.15, .cap = variant == 1,
+                                    .space = ISO_SPACE_INDEX, .threads = 1};
+            iso_error err;
+            if (variant == 2) {
+                CHECK_OK(iso_extract_full_scan(vol, p.level, ISO_SPACE_INDEX, &index, NULL, &err), &err);
+                CHECK_OK(iso_extract_full_scan(vol, p.level, ISO_SPACE_WORLD, &world, NULL, &err), &err);
+            } else {
+                CHECK_OK(iso_extract(tree, &p, &index, NULL, &err), &err);
+                p.space = ISO_SPACE_WORLD;
+                CHECK_OK(iso_extract(tree, &p, &world, NULL, &err), &err);
+            }
+            CHECK(index.vertex_count > 0);
+            CHECK_EQ(world.vertex_count, index.vertex_count);
+            size_t off = 0;
+            for (size_t v = 0; v < index.vertex_count && v < world.vertex_count; v++) {
+                const float *a = index.positions + 3 * v, *b = world.positions + 3 * v;
+                double x[3] = {a[0], a[1], a[2]}, w[3];
+                iso_vol_index_to_world(vol, x, w);
+                for (int d = 0; d < 3; d++)
+                    off += memcmp(&(float){(float)w[d]}, &b[d], sizeof(float)) != 0;
+            }
+            CHECKF(off == 0, "rotated %d variant %d: %zu coordinates not the map's", rotated, variant, off);
+            iso_mesh_free(&index);
+            iso_mesh_free(&world);
+        }
+    }
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_mc_table_shapes);
@@ -854,6 +906,7 @@ int main(void)
     CHECK_RUN(test_tolerance_on_one_cell_bricks);
     CHECK_RUN(test_tolerance_that_coarsens_nothing_is_exact);
     CHECK_RUN(test_clear_bricks_marched_whole);
+    CHECK_RUN(test_world_positions_are_the_index_map);
     CHECK_RUN(test_level_errors_are_lemma1_per_coarse_cell);
     CHECK_RUN(test_level_codes);
     CHECK_RUN(test_cthead_guarantee_and_trend);
