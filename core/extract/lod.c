@@ -169,17 +169,21 @@ static void unit_box(lod *c, const uint32_t first[3], const uint32_t m[3])
  * data cells. Made once per brick, on its first unit with samples on both sides. */
 static void brick_around(lod *c, const uint32_t first[3], const uint32_t m[3])
 {
-    enum { N = BLOCKS_PER_BRICK + 2 };
-    /* The blocks from first - 1 to first + m per axis, ISO_TREE_LEVELS where there is none. */
+    enum { N = BLOCKS_PER_BRICK + 2, K = UNIT_CLASSES };
+    /* The blocks from first - 1 to first + m per axis, ISO_TREE_LEVELS where there is none
+     * (past first + m too: those entries only make classes past the brick's, unread). */
     uint8_t near[N][N][N];
-    for (uint32_t z = 0; z < m[2] + 2; z++)
-        for (uint32_t y = 0; y < m[1] + 2; y++)
-            for (uint32_t x = 0; x < m[0] + 2; x++) {
-                /* first + x - 1 as unsigned: the block before 0 wraps past the grid */
-                uint32_t q[3] = {first[0] + x - 1, first[1] + y - 1, first[2] + z - 1};
-                int inside = q[0] < c->blocks[0] && q[1] < c->blocks[1] && q[2] < c->blocks[2];
-                near[z][y][x] = inside ? c->shift[block_index(c, q)] : ISO_TREE_LEVELS;
-            }
+    int have[3][N];
+    for (int d = 0; d < 3; d++)
+        for (uint32_t x = 0; x < N; x++)
+            /* first + x - 1 as unsigned: the block before 0 wraps past the grid */
+            have[d][x] = x < m[d] + 2 && first[d] + x - 1 < c->blocks[d];
+    for (uint32_t z = 0; z < N; z++)
+        for (uint32_t y = 0; y < N; y++) {
+            size_t row = ((size_t)(first[2] + z - 1) * c->blocks[1] + (first[1] + y - 1)) * c->blocks[0] + first[0];
+            for (uint32_t x = 0; x < N; x++)
+                near[z][y][x] = have[2][z] && have[1][y] && have[0][x] ? c->shift[row + x - 1] : ISO_TREE_LEVELS;
+        }
     for (int d = 0; d < 3; d++) {
         for (uint32_t r = 0; r < c->n[d]; r++)
             c->point_class[d][r] = (uint8_t)(r == c->n[d] - 1 ? 2 * m[d] : r / ISO_TREE_BLOCK * 2 + (r % ISO_TREE_BLOCK != 0));
@@ -189,25 +193,25 @@ static void brick_around(lod *c, const uint32_t first[3], const uint32_t m[3])
     /* Class k along an axis is held by near's entries (k + 1) / 2 to k / 2 + 1: both sides
      * of a plane (k even), the block itself inside it (k odd, one entry). The minimum over
      * those, one axis at a time. */
-    uint8_t along_x[N][N][UNIT_CLASSES], along_y[N][UNIT_CLASSES][UNIT_CLASSES];
+    uint8_t along_x[N][N][K], along_y[N][K][K];
     uint32_t P[3];
     for (int d = 0; d < 3; d++)
         P[d] = 2 * m[d] + 1;
-    for (uint32_t z = 0; z < m[2] + 2; z++)
-        for (uint32_t y = 0; y < m[1] + 2; y++)
-            for (uint32_t k = 0; k < P[0]; k++) {
+    for (uint32_t z = 0; z < N; z++)
+        for (uint32_t y = 0; y < N; y++)
+            for (uint32_t k = 0; k < K; k++) {
                 uint8_t a = near[z][y][(k + 1) / 2], b = near[z][y][k / 2 + 1];
                 along_x[z][y][k] = a < b ? a : b;
             }
-    for (uint32_t z = 0; z < m[2] + 2; z++)
-        for (uint32_t k = 0; k < P[1]; k++)
-            for (uint32_t kx = 0; kx < P[0]; kx++) {
+    for (uint32_t z = 0; z < N; z++)
+        for (uint32_t k = 0; k < K; k++)
+            for (uint32_t kx = 0; kx < K; kx++) {
                 uint8_t a = along_x[z][(k + 1) / 2][kx], b = along_x[z][k / 2 + 1][kx];
                 along_y[z][k][kx] = a < b ? a : b;
             }
-    for (uint32_t kz = 0; kz < P[2]; kz++)
-        for (uint32_t ky = 0; ky < P[1]; ky++)
-            for (uint32_t kx = 0; kx < P[0]; kx++) {
+    for (uint32_t kz = 0; kz < K; kz++)
+        for (uint32_t ky = 0; ky < K; ky++)
+            for (uint32_t kx = 0; kx < K; kx++) {
                 uint8_t a = along_y[(kz + 1) / 2][ky][kx], b = along_y[kz / 2 + 1][ky][kx];
                 c->around[kz][ky][kx] = a < b ? a : b;
             }
@@ -327,13 +331,6 @@ static double value_at(lod *c, const double x[3])
         c->corner_stamp = c->stamp;
     }
     return iso_tri_eval(c->corner, u[0], u[1], u[2]);
-}
-
-static void measure(lod *c, const double x[3])
-{
-    double e = fabs(value_at(c, x) - c->level);
-    if (e > c->error)
-        c->error = e; /* NaN (a NaN or infinite sample nearby) proves nothing and is left out */
 }
 
 static int grow_map(vertex_map *m)
@@ -616,8 +613,8 @@ static int polygon_segments(lod *c, const uint32_t points[][3], int m)
  * with the Illinois rule (the end that stays is halved in weight, so both ends close in):
  * a few trilinear evaluations where bisection takes CENTRE_STEPS. Every point tried lies
  * strictly between a and b, hence strictly inside the cell; the one nearest the level is
- * kept. */
-static void centre_root(lod *c, const double a[3], double fa, const double b[3], double fb, double x[3])
+ * kept, and its |f - level| returned. */
+static double centre_root(lod *c, const double a[3], double fa, const double b[3], double fb, double x[3])
 {
     double s0 = 0, s1 = 1, g0 = fa, g1 = fb, best = fabs(fa), stop = CENTRE_STOP * (fabs(fa) + fabs(fb));
     int kept = 0; /* which end stayed last: -1 the low one, +1 the high one */
@@ -649,6 +646,7 @@ static void centre_root(lod *c, const double a[3], double fa, const double b[3],
             kept = -1;
         }
     }
+    return best;
 }
 
 /* A point on f = level for a loop: its vertices' mean pulled a quarter of the way to the
@@ -656,9 +654,9 @@ static void centre_root(lod *c, const double a[3], double fa, const double b[3],
  * samples strictly on the other side of the level (centre_root). The root is then strictly
  * inside too, never on a face, so no fan triangle lies flat in one. Without such a sample
  * (a tie: a sample exactly on the level) the nearest sample is approached by bisection only
- * to ISO_MC_END_GAP of the way, as crossings are. */
-static void place_centre(lod *c, const uint32_t *loop, size_t n, const loop_segment *const *ends,
-                         const double middle[3], double x[3])
+ * to ISO_MC_END_GAP of the way, as crossings are. Returns |f(x) - level| at the point. */
+static double place_centre(lod *c, const uint32_t *loop, size_t n, const loop_segment *const *ends,
+                           const double middle[3], double x[3])
 {
     const float *pos = c->mesh->positions;
     double a[3] = {0, 0, 0};
@@ -687,21 +685,23 @@ static void place_centre(lod *c, const uint32_t *loop, size_t n, const loop_segm
                 b[d] = opposite ? p[d] : a[d] + (1 - ISO_MC_END_GAP) * (p[d] - a[d]);
         }
     }
-    if (strict) {
-        centre_root(c, a, fa, b, fb, x);
-        return;
-    }
+    if (strict)
+        return centre_root(c, a, fa, b, fb, x);
+    double at_a = fa;
     for (int step = 0; step < CENTRE_STEPS && fa != 0; step++) {
-        double mid[3];
+        double mid[3], v;
         for (int d = 0; d < 3; d++)
             mid[d] = 0.5 * (a[d] + b[d]);
-        if ((value_at(c, mid) > c->level) == a_above)
+        if (((v = value_at(c, mid)) > c->level) == a_above) {
             memcpy(a, mid, sizeof a);
-        else
+            at_a = v - c->level;
+        } else {
             memcpy(b, mid, sizeof b);
+        }
     }
     /* The end still on a's side: b may be the sample itself after a tie. */
     memcpy(x, a, 3 * sizeof *x);
+    return fabs(at_a);
 }
 
 /* Chains the cell's segments into loops and fans each, reversed so that normals point
@@ -759,12 +759,11 @@ static int fan_loops(lod *c, const double middle[3], iso_error *err)
                         seg[m++] = &c->segments[k];
                         break;
                     }
-            double x[3];
-            place_centre(c, r, m < n ? m : n, seg, middle, x);
+            double x[3], e = place_centre(c, r, m < n ? m : n, seg, middle, x);
             uint32_t centre;
             rc = add_vertex(c, x, &centre);
-            if (!rc)
-                measure(c, x);
+            if (e > c->error)
+                c->error = e; /* NaN (a NaN or infinite sample nearby) proves nothing and is left out */
             for (size_t i = 0; i < n && !rc; i++)
                 rc = add_triangle(c, centre, r[i], r[(i + 1) % n]);
         }
