@@ -105,22 +105,23 @@ static int brick_active(const lod *c, size_t at)
 static void plan(lod *c, double tolerance)
 {
     const iso_tree *tree = c->tree;
+    memset(c->shift, ISO_TREE_LEVELS, (size_t)c->blocks[0] * c->blocks[1] * c->blocks[2]);
     size_t at = 0;
     for (uint32_t k = 0; k < c->count[2]; k++)
         for (uint32_t j = 0; j < c->count[1]; j++)
             for (uint32_t i = 0; i < c->count[0]; i++, at++) {
+                if (!brick_active(c, at) || iso_tree_level_error(tree, at) <= tolerance)
+                    continue;
                 uint32_t b[3] = {i, j, k}, first[3], m[3];
                 brick_blocks(c, b, first, m);
-                int whole = !brick_active(c, at) || iso_tree_level_error(tree, at) <= tolerance;
                 for (uint32_t z = 0; z < m[2]; z++)
                     for (uint32_t y = 0; y < m[1]; y++)
                         for (uint32_t x = 0; x < m[0]; x++) {
                             uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
-                            int l = ISO_TREE_LEVELS;
-                            if (!whole)
-                                for (l = ISO_TREE_BLOCK_LEVELS; l > 0; l--)
-                                    if (iso_tree_block_error(tree, at, (int)(x | y << 1 | z << 2), l) <= tolerance)
-                                        break;
+                            int l;
+                            for (l = ISO_TREE_BLOCK_LEVELS; l > 0; l--)
+                                if (iso_tree_block_error(tree, at, (int)(x | y << 1 | z << 2), l) <= tolerance)
+                                    break;
                             c->shift[block_index(c, q)] = (uint8_t)l;
                         }
             }
@@ -1071,16 +1072,16 @@ static int mark_fine(const lod *c, int prove, int no_minmax, uint8_t *marked)
                 unsigned have = brick_has(c, b), fine = fine_blocks(c, b);
                 if (fine != have && prove && coarse_blocks_clear(c, at, b))
                     fine = have;
-                marked[at] = (uint8_t)fine;
+                marked[at] = (uint8_t)(fine == have ? 0xFF : fine);
                 whole &= fine == have;
             }
     return whole;
 }
 
 /* 1 if active brick `at` is marked whole (PASS 2 makes all of its surface). */
-static int brick_fine(const lod *c, const uint8_t *marked, size_t at, const uint32_t b[3])
+static int brick_fine(const uint8_t *marked, size_t at)
 {
-    return marked[at] == brick_has(c, b);
+    return marked[at] == 0xFF;
 }
 
 /* PASS 2: the marked blocks (mark_fine), march.c's kernel on those, on the request's
@@ -1164,7 +1165,7 @@ static int extract(const iso_tree *tree, const iso_extract_params *params, const
                     continue;
                 stats->nodes_visited++;
                 uint32_t b[3] = {i, j, k};
-                if (!active || brick_fine(&c, marked, at, b))
+                if (!active || brick_fine(marked, at))
                     continue; /* marched by march_fine */
                 stats->nodes_polygonized++;
                 double fit = brick_fit(&c, at, b);
