@@ -125,6 +125,32 @@ int proto_encode_glb(const iso_mesh *mesh, const proto_encode_options *opt,
 int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *opt,
                              unsigned char **out, size_t *out_size, iso_error *err);
 
+/* proto_encode_glb_meshopt for a request pipeline (pipeline.c), with its steps overlapped
+ * on two threads: the normals made first by a callback (the index view, which does not
+ * read them, is numbered and coded beside them), and the gzip member made too, each
+ * stream deflated on the thread that coded it as soon as it is coded; the glb's bytes are
+ * proto_encode_glb_meshopt's. */
+typedef struct proto_meshopt_run {
+    /* NULL: the mesh has its normals or none. Else called once, before the normals are
+     * read, on `threads` threads (1 while the other codes the indices); it sets the mesh's
+     * normals (the mesh given to the encoder) or fails with its error. */
+    int (*make_normals)(void *context, int threads, iso_error *err);
+    void *context;
+    int gzip;                    /* 1: also the gzip member of the glb (proto_gzip's form) */
+    unsigned char *gzip_bytes;   /* out: that member (malloc'd), NULL without gzip */
+    size_t gzip_size;
+    /* out, iso_clock_ms() when the normals were made, the glb done, the gzip member done:
+     * the steps end in this order, so their differences add up to the call's time. */
+    double normals_done, glb_done, gzip_done;
+} proto_meshopt_run;
+
+int proto_encode_glb_meshopt_run(const iso_mesh *mesh, const proto_encode_options *opt,
+                                 proto_meshopt_run *run, unsigned char **out, size_t *out_size,
+                                 iso_error *err);
+
+/* 1 when the n floats at v are all finite (a pass without a branch per value). */
+int proto_floats_finite(const float *v, size_t n);
+
 /* One gzip member (RFC 1952) holding `in`, deflated by gzip.c's greedy matcher (about as
  * small as zlib's fastest level, several times as fast), for HTTP's Content-Encoding: gzip.
  * Returns 0 or ISO_E_NOMEM / ISO_E_LIMIT (over 4 GiB). */

@@ -30,10 +30,12 @@
 #include "base/base.h"
 #include "glb_container.h"
 #include "glb_meshopt_codec.h"
+#include "gzip_parts.h"
 
 #include <assert.h>
 #include <math.h>
 #include <meshoptimizer.h>
+#include <pthread.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -213,38 +215,143 @@ static size_t number_by_first_use(const iso_mesh *mesh, uint32_t *seen, uint32_t
     return corners;
 }
 
-/* Passes 1 and 2 on up to two threads, after pass 0: the renumbered indices' codec (it
- * takes the longest) on one; the values' check (positions and normals finite; pass 0
- * checked the indices), the positions' grid, both quantizings and the vertex streams on
- * the other. */
+/* The encode as tasks for up to two threads (the caller's and one helper, see run()). */
+enum { TASK_NUMBER, TASK_INDEX, TASK_NORMALS, TASK_POSITIONS, TASK_NORMAL_VIEW, TASK_COUNT };
+
+/* What each task reads that another makes: the index view and both vertex views need the
+ * numbering, the normal view needs the normals. */
+static const unsigned task_needs[TASK_COUNT] = {
+    [TASK_INDEX] = 1u << TASK_NUMBER, [TASK_POSITIONS] = 1u << TASK_NUMBER,
+    [TASK_NORMAL_VIEW] = 1u << TASK_NUMBER | 1u << TASK_NORMALS};
+
+/* The order in which each share takes the tasks: one starts the longest chain (the
+ * numbering, then the index codec, sequential by its format), the other the normals, which
+ * the index side does not read; each then takes what is left. */
+static const int task_order[2][TASK_COUNT] = {
+    {TASK_NUMBER, TASK_INDEX, TASK_POSITIONS, TASK_NORMALS, TASK_NORMAL_VIEW},
+    {TASK_NORMALS, TASK_POSITIONS, TASK_NORMAL_VIEW, TASK_NUMBER, TASK_INDEX}};
+
+/* The gzip member's parts, in the glb's order: the container's head (deflated last, when
+ * its JSON is known), the vertex views, the index view's header and codes (matched: the
+ * codec's repeats), its data and table (Huffman only). */
+enum { PART_HEAD, PART_POSITIONS, PART_NORMALS, PART_INDEX_CODES, PART_INDEX_DATA, PART_COUNT };
+
 typedef struct pack_job {
     const iso_mesh *mesh;
     const proto_encode_options *opt;
+    const proto_meshopt_run *run;    /* the normals to make first, gzip or not */
     quantized *q;
     void *positions, *normals;       /* the quantized data the views read */
-    const uint32_t *order;           /* pass 0's: new vertex to old */
-    int rc;                          /* the values' check */
-    iso_error *err;
+    uint32_t *seen, *order, *renumbered; /* pass 0's tables */
+    int shares;                      /* 1 or 2 */
+    proto_deflate parts[PART_COUNT]; /* when gzipping */
+    double normals_done;             /* iso_clock_ms() when the normals were there */
+    pthread_mutex_t lock;            /* over the fields below */
+    pthread_cond_t changed;
+    unsigned claimed, done;          /* bit masks of tasks */
+    int rc;                          /* the first failing task's */
+    iso_error err;
 } pack_job;
 
-static void pack_share(void *context, int t, int threads)
+/* A stream's packed bytes padded with zeros to 4, as the BIN chunk holds them (the codec's
+ * bound leaves 4 bytes of room), and, when gzipping, deflated as its part (or two). */
+static void finish_view(pack_job *job, int view_index, int part)
 {
-    pack_job *job = context;
-    quantized *q = job->q;
+    view *v = &job->q->views[view_index];
+    size_t padded = proto_glb_pad4(v->packed_length);
+    memset(v->packed + v->packed_length, 0, padded - v->packed_length);
+    if (!job->run->gzip)
+        return;
+    proto_deflate *d = &job->parts[part];
+    if (part == PART_INDEX_CODES) { /* a header byte, a code byte per triangle */
+        size_t codes = 1 + job->mesh->triangle_count;
+        d->in = v->packed, d->size = codes;
+        proto_deflate_run(d);
+        d = &job->parts[PART_INDEX_DATA];
+        d->in = v->packed + codes, d->size = padded - codes;
+    } else {
+        d->in = v->packed, d->size = padded;
+    }
+    proto_deflate_run(d);
+}
+
+/* One task; 0 or its error (into *err). */
+static int run_task(pack_job *job, int task, iso_error *err)
+{
     const iso_mesh *mesh = job->mesh;
-    iso_mesh values = *mesh;
-    values.triangle_count = 0; /* pass 0 checked the indices */
-    if (t == 0 && !(job->rc = proto_mesh_check_data(&values, 1, job->err))) {
+    quantized *q = job->q;
+    switch (task) {
+    case TASK_NUMBER:
+        if (number_by_first_use(mesh, job->seen, job->order, job->renumbered) < q->views[VIEW_INDEX].count)
+            return proto_mesh_check_data(mesh, 0, err); /* says which index */
+        return 0;
+    case TASK_INDEX:
+        encode_view(&q->views[VIEW_INDEX]);
+        finish_view(job, VIEW_INDEX, PART_INDEX_CODES);
+        return 0;
+    case TASK_NORMALS: {
+        int rc = job->run->make_normals ? job->run->make_normals(job->run->context, job->shares > 1 ? 1 : job->opt->threads, err) : 0;
+        job->normals_done = iso_clock_ms();
+        return rc;
+    }
+    case TASK_POSITIONS:
+        if (!proto_floats_finite(mesh->positions, 3 * mesh->vertex_count))
+            return iso_error_set(err, ISO_E_ARGUMENT, "mesh has a non-finite position");
         position_grid(mesh, job->opt->position_bits, q);
         quantize_positions(mesh, job->order, q, job->positions);
         encode_view(&q->views[VIEW_POSITION]);
-        if (q->normals) {
-            quantize_normals(mesh, job->order, job->opt->normal_bits, job->normals);
-            encode_view(&q->views[VIEW_NORMAL]);
-        }
+        finish_view(job, VIEW_POSITION, PART_POSITIONS);
+        return 0;
+    case TASK_NORMAL_VIEW:
+        if (!q->normals)
+            return 0;
+        if (!mesh->normals)
+            return iso_error_set(err, ISO_E_INTERNAL, "the normals were promised and not made");
+        if (!proto_floats_finite(mesh->normals, 3 * mesh->vertex_count))
+            return iso_error_set(err, ISO_E_ARGUMENT, "mesh has a non-finite normal");
+        quantize_normals(mesh, job->order, job->opt->normal_bits, job->normals);
+        encode_view(&q->views[VIEW_NORMAL]);
+        finish_view(job, VIEW_NORMAL, PART_NORMALS);
+        return 0;
     }
-    if (t == threads - 1)
-        encode_view(&q->views[VIEW_INDEX]);
+    return 0;
+}
+
+/* A share takes, in its order, the first task not taken whose inputs are taken (being
+ * made by a share that is running, so waiting for them cannot deadlock, whichever shares
+ * run and when), waits for those inputs, runs it; until none is left. After a failure the
+ * tasks left are taken and skipped. */
+static void pack_share(void *context, int t, int threads)
+{
+    (void)threads;
+    pack_job *job = context;
+    const int *order = task_order[t % 2];
+    pthread_mutex_lock(&job->lock);
+    for (;;) {
+        int task = -1;
+        for (int k = 0; k < TASK_COUNT && task < 0; k++) {
+            int c = order[k];
+            if (!(job->claimed >> c & 1) && (task_needs[c] & ~job->claimed) == 0)
+                task = c;
+        }
+        if (task < 0)
+            break;
+        job->claimed |= 1u << task;
+        while ((task_needs[task] & ~job->done) != 0)
+            pthread_cond_wait(&job->changed, &job->lock);
+        int skip = job->rc != 0;
+        pthread_mutex_unlock(&job->lock);
+        iso_error err = {0};
+        int rc = skip ? 0 : run_task(job, task, &err);
+        pthread_mutex_lock(&job->lock);
+        if (rc && !job->rc) {
+            job->rc = rc;
+            job->err = err;
+        }
+        job->done |= 1u << task;
+        pthread_cond_broadcast(&job->changed);
+    }
+    pthread_mutex_unlock(&job->lock);
 }
 
 /* Lays out the views' compressed bytes in the BIN chunk, each 4-byte aligned, and the
@@ -334,12 +441,73 @@ static size_t plan_buffer(quantized *q, const proto_encode_options *opt)
     return at;
 }
 
-int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *opt,
-                             unsigned char **out, size_t *out_size, iso_error *err)
+/* The most input bytes of each gzip part (the streams at their codecs' bounds, padded),
+ * into room[]; returns the sum of their deflate bounds. */
+static size_t part_rooms(const quantized *q, size_t triangles, size_t room[PART_COUNT])
 {
-    assert(mesh && out && out_size);
+    room[PART_HEAD] = PROTO_GLB_HEAD_MAX;
+    room[PART_POSITIONS] = q->views[VIEW_POSITION].bound + 4;
+    room[PART_NORMALS] = q->normals ? q->views[VIEW_NORMAL].bound + 4 : 0;
+    room[PART_INDEX_CODES] = 1 + triangles;
+    room[PART_INDEX_DATA] = q->views[VIEW_INDEX].bound + 4;
+    size_t total = 0;
+    for (int i = 0; i < PART_COUNT; i++)
+        total += proto_deflate_bound(room[i]);
+    return total;
+}
+
+/* Pass 3: the JSON and the head in front of the streams, which move down behind it; the
+ * buffer shrunk to the glb. With gzip, the head deflated and the parts joined. */
+static int assemble(pack_job *job, unsigned char *buf, proto_meshopt_run *run, unsigned char **out,
+                    size_t *out_size, iso_error *err)
+{
+    quantized *q = job->q;
+    size_t bin_size = layout(q), size;
+    proto_glb_json json = {.len = 0};
+    json_mesh(&json, q, bin_size);
+    int rc = proto_glb_size(&json, bin_size, &size, err);
+    if (rc)
+        return rc;
+    size_t head = proto_glb_head(&json, bin_size, buf);
+    if (run->gzip) {
+        proto_deflate *d = &job->parts[PART_HEAD];
+        d->in = buf, d->size = head;
+        proto_deflate_run(d);
+    }
+    for (int i = 0; i < VIEW_COUNT; i++) {
+        view *v = &q->views[i];
+        if (v->packed)
+            memmove(buf + head + v->packed_offset, v->packed, proto_glb_pad4(v->packed_length));
+    }
+    assert(head + bin_size == size);
+    run->glb_done = iso_clock_ms();
+    if (run->gzip) {
+        /* The parts, no normals' part without normals; the member joined from them. */
+        proto_deflate parts[PART_COUNT];
+        int n = 0;
+        for (int i = 0; i < PART_COUNT; i++)
+            if (i != PART_NORMALS || q->normals)
+                parts[n++] = job->parts[i];
+        rc = proto_gzip_join(parts, n, &run->gzip_bytes, &run->gzip_size, err);
+        run->gzip_done = iso_clock_ms();
+        if (rc)
+            return rc;
+    }
+    unsigned char *shrunk = realloc(buf, size);
+    *out = shrunk ? shrunk : buf;
+    *out_size = size;
+    return 0;
+}
+
+int proto_encode_glb_meshopt_run(const iso_mesh *mesh, const proto_encode_options *opt,
+                                 proto_meshopt_run *run, unsigned char **out, size_t *out_size,
+                                 iso_error *err)
+{
+    assert(mesh && run && out && out_size);
     *out = NULL;
     *out_size = 0;
+    run->gzip_bytes = NULL;
+    run->gzip_size = 0;
     proto_encode_options defaults;
     if (!opt) {
         proto_encode_options_init(&defaults);
@@ -353,14 +521,26 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
     int rc = proto_mesh_check_counts(mesh, err);
     if (rc)
         return rc;
-    proto_glb_json json = {.len = 0};
     if (mesh->triangle_count == 0) {
+        /* Nothing to overlap: the normals, then the empty glb (and its gzip). */
+        if (run->make_normals && (rc = run->make_normals(run->context, opt->threads, err)))
+            return rc;
+        run->normals_done = iso_clock_ms();
+        proto_glb_json json = {.len = 0};
         if ((rc = proto_mesh_check_data(mesh, 1, err)))
             return rc;
         proto_glb_json_empty(&json);
-        return proto_glb_write(&json, NULL, 0, out, out_size, err);
+        rc = proto_glb_write(&json, NULL, 0, out, out_size, err);
+        run->glb_done = iso_clock_ms();
+        if (!rc && run->gzip && (rc = proto_gzip(*out, *out_size, &run->gzip_bytes, &run->gzip_size, err))) {
+            free(*out);
+            *out = NULL;
+            *out_size = 0;
+        }
+        run->gzip_done = iso_clock_ms();
+        return rc;
     }
-    quantized q = {.normals = mesh->normals != NULL};
+    quantized q = {.normals = mesh->normals != NULL || run->make_normals};
     q.index_type = mesh->vertex_count <= UINT16_MAX ? PROTO_GLTF_UNSIGNED_SHORT : PROTO_GLTF_UNSIGNED_INT;
     q.views[VIEW_POSITION].count = q.views[VIEW_NORMAL].count = mesh->vertex_count;
     q.views[VIEW_INDEX] = (view){.count = 3 * mesh->triangle_count,
@@ -371,22 +551,37 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
     size_t capacity = plan_buffer(&q, opt);
     size_t position_bytes = mesh->vertex_count * q.views[VIEW_POSITION].stride;
     size_t vertex_bytes = position_bytes + mesh->vertex_count * q.views[VIEW_NORMAL].stride;
+    pack_job job = {.mesh = mesh, .opt = opt, .run = run, .q = &q, .shares = 1,
+                    .lock = PTHREAD_MUTEX_INITIALIZER, .changed = PTHREAD_COND_INITIALIZER};
     /* The quantized streams, then pass 0's tables: seen and order (a vertex each, order
-     * one more), the renumbered indices. Taken before the glb's buffer, which outlives
-     * the call (a server caches it): the scratch of the call before, freed, then fits it
-     * again, and its pages are not faulted in anew. */
-    unsigned char *vertex_data = malloc(vertex_bytes + (2 * mesh->vertex_count + 1 + 3 * mesh->triangle_count) * 4);
+     * one more), the renumbered indices; then the gzip parts' room. Taken before the glb's
+     * buffer, which outlives the call (a server caches it): the scratch of the call before,
+     * freed, then fits it again, and its pages are not faulted in anew. */
+    size_t tables = vertex_bytes + (2 * mesh->vertex_count + 1 + 3 * mesh->triangle_count) * 4;
+    size_t rooms[PART_COUNT], parts_room = run->gzip ? part_rooms(&q, mesh->triangle_count, rooms) : 0;
+    unsigned char *scratch = malloc(tables + parts_room);
     unsigned char *buf = malloc(capacity);
-    if (!buf || !vertex_data) {
+    if (!buf || !scratch) {
         free(buf);
-        free(vertex_data);
+        free(scratch);
         return iso_error_set(err, ISO_E_NOMEM, "no memory to encode a glb of %zu vertices", mesh->vertex_count);
     }
-    uint32_t *seen = (uint32_t *)(void *)(vertex_data + vertex_bytes), *order = seen + mesh->vertex_count;
-    uint32_t *renumbered = order + mesh->vertex_count + 1;
-    q.views[VIEW_POSITION].data = vertex_data;
-    q.views[VIEW_NORMAL].data = vertex_data + position_bytes;
-    q.views[VIEW_INDEX].data = renumbered;
+    job.positions = scratch;
+    job.normals = scratch + position_bytes;
+    job.seen = (uint32_t *)(void *)(scratch + vertex_bytes);
+    job.order = job.seen + mesh->vertex_count;
+    job.renumbered = job.order + mesh->vertex_count + 1;
+    if (run->gzip) {
+        unsigned char *room = scratch + tables;
+        for (int i = 0; i < PART_COUNT; i++) {
+            job.parts[i] = (proto_deflate){.out = room, .huffman = i != PART_INDEX_CODES,
+                                           .last = i == PART_INDEX_DATA};
+            room += proto_deflate_bound(rooms[i]);
+        }
+    }
+    q.views[VIEW_POSITION].data = job.positions;
+    q.views[VIEW_NORMAL].data = job.normals;
+    q.views[VIEW_INDEX].data = job.renumbered;
     q.normal_type = opt->normal_bits > 8 ? PROTO_GLTF_SHORT : PROTO_GLTF_BYTE;
     size_t at = PROTO_GLB_HEAD_MAX;
     for (int i = 0; i < VIEW_COUNT; i++)
@@ -394,43 +589,33 @@ int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *o
             q.views[i].packed = buf + at;
             at += q.views[i].bound + 4;
         }
-    if (number_by_first_use(mesh, seen, order, renumbered) < q.views[VIEW_INDEX].count) {
-        rc = proto_mesh_check_data(mesh, 0, err); /* says which index */
-    } else {
-        pack_job job = {.mesh = mesh, .opt = opt, .q = &q, .positions = vertex_data,
-                        .normals = vertex_data + position_bytes, .order = order, .err = err};
-        int threads = iso_parallel_threads(opt->threads);
-        if (mesh->triangle_count < MESHOPT_TRIANGLES_PER_THREAD)
-            threads = 1;
-        iso_parallel_run(threads > 1 ? 2 : 1, pack_share, &job);
-        rc = job.rc;
-    }
-    free(vertex_data);
+    int threads = iso_parallel_threads(opt->threads);
+    if (threads > 1 && mesh->triangle_count >= MESHOPT_TRIANGLES_PER_THREAD)
+        job.shares = 2;
+    iso_parallel_run(job.shares, pack_share, &job);
+    pthread_mutex_destroy(&job.lock);
+    pthread_cond_destroy(&job.changed);
+    run->normals_done = job.normals_done;
+    rc = job.rc;
+    if (rc && err)
+        *err = job.err;
+    if (!rc)
+        rc = assemble(&job, buf, run, out, out_size, err);
+    free(scratch);
     if (rc) {
         free(buf);
-        return rc;
+        free(run->gzip_bytes);
+        run->gzip_bytes = NULL;
+        run->gzip_size = 0;
     }
-    size_t bin_size = layout(&q), size;
-    json_mesh(&json, &q, bin_size);
-    rc = proto_glb_size(&json, bin_size, &size, err);
-    if (rc) {
-        free(buf);
-        return rc;
-    }
-    size_t head = proto_glb_head(&json, bin_size, buf);
-    for (int i = 0; i < VIEW_COUNT; i++) {
-        view *v = &q.views[i];
-        if (!v->packed)
-            continue;
-        unsigned char *to = buf + head + v->packed_offset;
-        memmove(to, v->packed, v->packed_length);
-        memset(to + v->packed_length, 0, proto_glb_pad4(v->packed_length) - v->packed_length);
-    }
-    assert(head + bin_size == size);
-    unsigned char *shrunk = realloc(buf, size);
-    *out = shrunk ? shrunk : buf;
-    *out_size = size;
-    return 0;
+    return rc;
+}
+
+int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *opt,
+                             unsigned char **out, size_t *out_size, iso_error *err)
+{
+    proto_meshopt_run run = {.gzip = 0};
+    return proto_encode_glb_meshopt_run(mesh, opt, &run, out, out_size, err);
 }
 
 int proto_glb_meshopt_gzip_pieces(const unsigned char *glb, size_t size,

@@ -2,7 +2,7 @@
  * (see encode.h).
  *
  * The buffer may be cut into pieces, each with its own strategy, and a Huffman-only piece
- * into parts of whole blocks; each part is deflated on its own (raw deflate, the parts
+ * into parts of whole blocks; each part is proto_deflate on its own (raw deflate, the parts
  * but the last ending in a sync flush, so that they join byte-aligned into one stream, as
  * pigz does), the threads taking the costliest left first; then the header, the joined
  * stream, and the trailer (the CRC-32 and length of the whole input, combined).
@@ -41,6 +41,7 @@
 #endif
 
 #include "base/base.h"
+#include "gzip_parts.h"
 
 /* Below this many bytes one thread deflates every piece: another thread's share would
  * cost more to hand over than to do. */
@@ -427,14 +428,14 @@ static void lz_write(bit_writer *w, const uint32_t *items, size_t count, const b
 
 /* The bytes a piece of n bytes may take, either strategy: at most 15 bits a literal and
  * 48 bits a match of 4 bytes or more, a header per block, the ending, the flush's slack. */
-static size_t piece_bound(size_t n)
+size_t proto_deflate_bound(size_t n)
 {
     return n / BLOCK_BYTES * 700 + 700 + n * 15 / 8 + 32;
 }
 
 /* A piece's blocks, then the sync flush's empty stored block, or for the last piece an
  * empty final fixed-code block. m NULL: Huffman only. Returns the bytes written to out,
- * which holds piece_bound(n). */
+ * which holds proto_deflate_bound(n). */
 static size_t deflate_blocks(const unsigned char *in, size_t n, int last, matcher *m, unsigned char *out)
 {
     bit_writer w = {.out = out};
@@ -527,25 +528,12 @@ static uLong crc_of(const unsigned char *p, size_t n)
 }
 #endif
 
-/* A part of a piece deflated on its own (a Huffman-only piece is cut into parts of whole
- * blocks, each ended by a sync flush, so that threads share it; a matching piece stays
- * whole, its matches reaching back across it), written at `out` (piece_bound(size)). */
-typedef struct deflated {
-    const unsigned char *in;
-    size_t size;
-    int huffman, last;
-    unsigned char *out;
-    size_t out_size;
-    uLong crc;
-    int rc; /* 0 or ISO_E_NOMEM */
-} deflated;
-
 /* At most this many parts (the Huffman-only ones of at least PART_BYTES, more for a
  * large buffer, see proto_gzip_pieces). */
 #define PARTS_MAX (32 + 2 * PROTO_GZIP_PIECES_MAX)
 #define PART_BYTES (256u << 10)
 
-static void deflate_part(deflated *d)
+void proto_deflate_run(proto_deflate *d)
 {
     matcher *m = d->huffman ? NULL : malloc(sizeof *m);
     if (!d->huffman && !m) {
@@ -561,7 +549,7 @@ static void deflate_part(deflated *d)
  * that starts late (a busy machine) takes what remains, and none waits on a share that
  * another has not begun. */
 typedef struct gzip_job {
-    deflated *parts;
+    proto_deflate *parts;
     int order[PARTS_MAX];
     int count;
     atomic_int next;
@@ -572,13 +560,38 @@ static void gzip_share(void *context, int t, int threads)
     (void)t, (void)threads;
     gzip_job *job = context;
     for (int k; (k = atomic_fetch_add(&job->next, 1)) < job->count;)
-        deflate_part(&job->parts[job->order[k]]);
+        proto_deflate_run(&job->parts[job->order[k]]);
 }
 
 /* A part's cost, in Huffman-coded bytes: matching costs about 3 times as much a byte. */
-static size_t part_cost(const deflated *d)
+static size_t part_cost(const proto_deflate *d)
 {
     return d->huffman ? d->size : 3 * d->size;
+}
+
+enum { GZIP_HEADER = 10, GZIP_TRAILER = 8 };
+
+/* The member at buf: the header, the parts' deflate streams in order (each moved down from
+ * where it was deflated, which may be in buf, at or after its place), the trailer (the
+ * CRC-32 of the whole input combined from the parts', and its length). Returns its size. */
+static size_t member(const proto_deflate *d, int count, unsigned char *buf)
+{
+    /* The header: magic, deflate, no flags, no time, fastest (XFL 4), Unix. */
+    static const unsigned char header[GZIP_HEADER] = {0x1f, 0x8b, 8, 0, 0, 0, 0, 0, 4, 3};
+    memcpy(buf, header, sizeof header);
+    size_t at = sizeof header, size = 0;
+    uLong crc = 0;
+    for (int i = 0; i < count; i++) {
+        memmove(buf + at, d[i].out, d[i].out_size);
+        at += d[i].out_size;
+        crc = crc32_combine(crc, d[i].crc, (z_off_t)d[i].size);
+        size += d[i].size;
+    }
+    for (int b = 0; b < 4; b++)
+        buf[at++] = (unsigned char)(crc >> (8 * b));
+    for (int b = 0; b < 4; b++)
+        buf[at++] = (unsigned char)((uint32_t)size >> (8 * b));
+    return at;
 }
 
 int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_piece *pieces, int count,
@@ -591,30 +604,29 @@ int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_pie
         return iso_error_set(err, ISO_E_LIMIT, "gzip: cannot compress %zu bytes", size);
     /* One buffer: the header, each part's room (its bound), the trailer; the parts are
      * moved down against each other when done. */
-    enum { HEADER = 10, TRAILER = 8 };
     size_t part_bytes = (size / 32 + BLOCK_BYTES - 1) / BLOCK_BYTES * BLOCK_BYTES;
     part_bytes = part_bytes > PART_BYTES ? part_bytes : PART_BYTES;
-    deflated d[PARTS_MAX];
+    proto_deflate d[PARTS_MAX];
     gzip_job job = {.parts = d};
-    size_t from = 0, room = HEADER;
+    size_t from = 0, room = GZIP_HEADER;
     for (int i = 0; i < count; i++) {
         size_t end = i == count - 1 ? size : pieces[i].end;
         assert(end >= from && end <= size);
         do { /* at least one part, if empty */
             size_t n = pieces[i].huffman && end - from > part_bytes ? part_bytes : end - from;
             assert(job.count < PARTS_MAX);
-            d[job.count++] = (deflated){.in = in + from, .size = n, .huffman = pieces[i].huffman,
+            d[job.count++] = (proto_deflate){.in = in + from, .size = n, .huffman = pieces[i].huffman,
                                         .last = i == count - 1 && from + n == end};
-            room += piece_bound(n);
+            room += proto_deflate_bound(n);
             from += n;
         } while (from < end);
     }
-    unsigned char *buf = malloc(room + TRAILER);
+    unsigned char *buf = malloc(room + GZIP_TRAILER);
     if (!buf)
         return iso_error_set(err, ISO_E_NOMEM, "gzip: no memory to compress %zu bytes", size);
-    d[0].out = buf + HEADER;
+    d[0].out = buf + GZIP_HEADER;
     for (int i = 1; i < job.count; i++)
-        d[i].out = d[i - 1].out + piece_bound(d[i - 1].size);
+        d[i].out = d[i - 1].out + proto_deflate_bound(d[i - 1].size);
     for (int i = 0; i < job.count; i++) { /* costliest first: insertion, a few dozen */
         int k = i;
         for (; k > 0 && part_cost(&d[job.order[k - 1]]) < part_cost(&d[i]); k--)
@@ -631,23 +643,33 @@ int proto_gzip_pieces(const unsigned char *in, size_t size, const proto_gzip_pie
         free(buf);
         return iso_error_set(err, rc, "gzip: no memory to compress %zu bytes", size);
     }
-    /* The header: magic, deflate, no flags, no time, fastest (XFL 4), Unix. */
-    static const unsigned char header[HEADER] = {0x1f, 0x8b, 8, 0, 0, 0, 0, 0, 4, 3};
-    memcpy(buf, header, sizeof header);
-    size_t at = sizeof header;
-    uLong crc = 0;
-    for (int i = 0; i < job.count; i++) {
-        memmove(buf + at, d[i].out, d[i].out_size);
-        at += d[i].out_size;
-        crc = crc32_combine(crc, d[i].crc, (z_off_t)d[i].size);
-    }
-    for (int b = 0; b < 4; b++)
-        buf[at++] = (unsigned char)(crc >> (8 * b));
-    for (int b = 0; b < 4; b++)
-        buf[at++] = (unsigned char)((uint32_t)size >> (8 * b));
+    size_t at = member(d, job.count, buf);
     unsigned char *fit = realloc(buf, at); /* gives back the rooms' unused ends */
     *out = fit ? fit : buf;
     *out_size = at;
+    return 0;
+}
+
+int proto_gzip_join(const proto_deflate *parts, int count, unsigned char **out, size_t *out_size,
+                    iso_error *err)
+{
+    assert(parts && count >= 1 && out && out_size && parts[count - 1].last);
+    *out = NULL;
+    *out_size = 0;
+    size_t room = GZIP_HEADER + GZIP_TRAILER, size = 0;
+    for (int i = 0; i < count; i++) {
+        if (parts[i].rc)
+            return iso_error_set(err, parts[i].rc, "gzip: no memory to compress a part of %zu bytes", parts[i].size);
+        room += parts[i].out_size;
+        size += parts[i].size;
+    }
+    if (size > UINT32_MAX)
+        return iso_error_set(err, ISO_E_LIMIT, "gzip: cannot compress %zu bytes", size);
+    unsigned char *buf = malloc(room);
+    if (!buf)
+        return iso_error_set(err, ISO_E_NOMEM, "gzip: no memory for a member of %zu bytes", room);
+    *out_size = member(parts, count, buf);
+    *out = buf;
     return 0;
 }
 

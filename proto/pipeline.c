@@ -27,6 +27,9 @@ void proto_pipeline_result_free(proto_pipeline_result *res)
     free(res->bytes);
     res->bytes = NULL;
     res->size = 0;
+    free(res->gzip);
+    res->gzip = NULL;
+    res->gzip_size = 0;
 }
 
 static double voxel_size(const iso_volume *vol, const proto_pipeline_request *req)
@@ -277,9 +280,7 @@ static int encode(const proto_pipeline_request *req, proto_pipeline_result *res,
     case PROTO_FORMAT_GLB:
         rc = proto_glb_encode_info(&res->mesh, &req->encode, &res->bytes, &res->size, &info, err);
         break;
-    case PROTO_FORMAT_GLB_MESHOPT:
-        rc = proto_encode_glb_meshopt(&res->mesh, &req->encode, &res->bytes, &res->size, err);
-        break;
+    case PROTO_FORMAT_GLB_MESHOPT: break; /* with the normals, in meshopt_steps */
     case PROTO_FORMAT_PLY: rc = proto_encode_ply(&res->mesh, &res->bytes, &res->size, err); break;
     case PROTO_FORMAT_STL: rc = proto_encode_stl(&res->mesh, &res->bytes, &res->size, err); break;
     case PROTO_FORMAT_OBJ: rc = proto_encode_obj(&res->mesh, &res->bytes, &res->size, err); break;
@@ -287,6 +288,42 @@ static int encode(const proto_pipeline_request *req, proto_pipeline_result *res,
     }
     res->draco_speed = info.speed;
     return rc;
+}
+
+/* The normals for the meshopt encoder, which asks for them on the thread it gives them. */
+typedef struct normals_job {
+    const iso_volume *vol;
+    const proto_pipeline_request *req;
+    iso_mesh *mesh;
+} normals_job;
+
+static int make_normals(void *context, int threads, iso_error *err)
+{
+    normals_job *n = context;
+    return iso_normals_compute(n->vol, n->mesh, n->req->normals, n->req->extract.space, threads, err);
+}
+
+/* Steps 4 and 5 for the meshopt glb: the encoder numbers and codes the index view (which
+ * does not read the normals) on one thread while the normals are made on the other, then
+ * codes the vertex views, and makes the gzip member when asked, each stream deflated on the
+ * thread that coded it (proto_encode_glb_meshopt_run). The steps overlap; each one's time
+ * is counted from the end of the one before, so that they add up to the request's. */
+static int meshopt_steps(const iso_volume *vol, const proto_pipeline_request *req,
+                         proto_pipeline_result *res, double start, iso_error *err)
+{
+    normals_job n = {.vol = vol, .req = req, .mesh = &res->mesh};
+    proto_meshopt_run run = {.make_normals = req->normals && res->mesh.vertex_count ? make_normals : NULL,
+                             .context = &n, .gzip = req->gzip};
+    int rc = proto_encode_glb_meshopt_run(&res->mesh, &req->encode, &run, &res->bytes, &res->size, err);
+    if (rc)
+        return rc;
+    double normals_done = run.make_normals ? run.normals_done : start;
+    res->normals_ms = normals_done - start;
+    res->encode_ms = run.glb_done - normals_done;
+    res->gzip = run.gzip_bytes;
+    res->gzip_size = run.gzip_size;
+    res->gzip_ms = req->gzip ? run.gzip_done - run.glb_done : 0;
+    return 0;
 }
 
 /* Steps 4 and 5: normals and encoding here, the measures beside them when asked. If no
@@ -301,13 +338,18 @@ static int finish(const iso_volume *vol, const proto_pipeline_request *req,
         measure(&m);
     double t0 = iso_clock_ms();
     int rc = 0;
-    if (req->normals && res->mesh.vertex_count)
-        rc = iso_normals_compute(vol, &res->mesh, req->normals, req->extract.space,
-                                 req->extract.threads, err);
-    double t1 = iso_clock_ms();
-    if (!rc)
-        rc = encode(req, res, err);
-    double t2 = iso_clock_ms();
+    if (req->format == PROTO_FORMAT_GLB_MESHOPT) {
+        rc = meshopt_steps(vol, req, res, t0, err);
+    } else {
+        if (req->normals && res->mesh.vertex_count)
+            rc = iso_normals_compute(vol, &res->mesh, req->normals, req->extract.space,
+                                     req->extract.threads, err);
+        double t1 = iso_clock_ms();
+        if (!rc)
+            rc = encode(req, res, err);
+        res->normals_ms = t1 - t0;
+        res->encode_ms = iso_clock_ms() - t1;
+    }
     if (beside)
         pthread_join(measurer, NULL);
     if (!rc && req->measure && m.rc) {
@@ -315,8 +357,6 @@ static int finish(const iso_volume *vol, const proto_pipeline_request *req,
         if (err)
             *err = m.err;
     }
-    res->normals_ms = t1 - t0;
-    res->encode_ms = t2 - t1;
     res->measure_ms = m.ms;
     res->measured = req->measure && !rc;
     res->census = m.census;

@@ -10,7 +10,8 @@
  *      the steps that cost several times the extraction's memory;
  *   4. normals, and beside them on a thread of their own the measures (edge census, area,
  *      enclosed volume), which read only positions and indices;
- *   5. encode, in the request's format (or not at all, PROTO_FORMAT_NONE).
+ *   5. encode, in the request's format (or not at all, PROTO_FORMAT_NONE); a meshopt glb
+ *      overlaps it with step 4's normals, and makes its gzip member too when asked.
  * Each step is timed. Errors are the steps' own ISO_E_* codes; ISO_E_NOMEM always leaves
  * nothing allocated behind. Thread-safe over a shared tree and volume. */
 #ifndef PROTO_PIPELINE_H
@@ -41,12 +42,15 @@ typedef struct proto_pipeline_request {
     int measure;                /* 1: census, area, enclosed volume */
     proto_format format;        /* PROTO_FORMAT_NONE: keep the mesh, encode nothing */
     proto_encode_options encode;/* Draco and glb options */
+    int gzip;                   /* 1: a meshopt glb's gzip member too (the others: ignored) */
 } proto_pipeline_request;
 
 typedef struct proto_pipeline_result {
     iso_mesh mesh;              /* the final mesh, normals included when asked */
     unsigned char *bytes;       /* the encoded mesh (malloc'd), NULL for PROTO_FORMAT_NONE */
     size_t size;
+    unsigned char *gzip;        /* its gzip member when asked (malloc'd), else NULL */
+    size_t gzip_size;
     iso_extract_stats stats;    /* triangles and vertices: the final mesh's */
     iso_budget_result chosen;   /* the tolerance used; for a budget, fits and extractions;
                                  * `simplified` and `simplify` when the mesh was simplified */
@@ -76,7 +80,10 @@ typedef struct proto_pipeline_result {
     iso_mesh_distance distance;
     iso_mesh_chain *chain_built;/* a chain built by this run (owned; the caller may take it
                                  * and set this to NULL, else result_free destroys it) */
-    double extract_ms, simplify_ms, normals_ms, measure_ms, encode_ms;
+    /* Each step's wall time. The meshopt glb's steps overlap (normals beside the index
+     * view, gzip beside the encode): normals, encode and gzip are each counted from the end
+     * of the step before, so that the steps add up to the request's time. */
+    double extract_ms, simplify_ms, normals_ms, measure_ms, encode_ms, gzip_ms;
 } proto_pipeline_result;
 
 /* Fills the defaults: world space, all cores, no budget, tricubic normals, no measures,

@@ -25,7 +25,7 @@ void proto_encode_options_init(proto_encode_options *opt)
 /* Every value finite: its exponent bits not all ones. Four values at a time, without a
  * branch per value (the loop that stopped at the first non-finite value took 1.5 ms for
  * CThead skin's 1.5 M values, and the compiler does not vectorize either form). */
-static int all_finite(const float *v, size_t n)
+int proto_floats_finite(const float *v, size_t n)
 {
     const uint32_t exponent = 0x7f800000u;
     uint32_t bad = 0;
@@ -65,9 +65,9 @@ int proto_mesh_check_data(const iso_mesh *mesh, int finite, iso_error *err)
         if (mesh->indices[i] >= mesh->vertex_count)
             return iso_error_set(err, ISO_E_ARGUMENT, "triangle %zu: index %u >= %zu vertices",
                                  i / 3, mesh->indices[i], mesh->vertex_count);
-    if (finite && !all_finite(mesh->positions, 3 * mesh->vertex_count))
+    if (finite && !proto_floats_finite(mesh->positions, 3 * mesh->vertex_count))
         return iso_error_set(err, ISO_E_ARGUMENT, "mesh has a non-finite position");
-    if (finite && mesh->normals && !all_finite(mesh->normals, 3 * mesh->vertex_count))
+    if (finite && mesh->normals && !proto_floats_finite(mesh->normals, 3 * mesh->vertex_count))
         return iso_error_set(err, ISO_E_ARGUMENT, "mesh has a non-finite normal");
     return 0;
 }

@@ -618,6 +618,7 @@ static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_r
     work->request = mr;
     work->cache = s->cache;
     work->max_triangles = s->config.max_triangles;
+    work->accept_gzip = accepts_gzip(c);
     int coalesced;
     srv_job *job = srv_pool_submit(s->pool, key, srv_mesh_job_run, work, srv_mesh_job_free, &coalesced);
     if (!job)

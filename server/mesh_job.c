@@ -41,6 +41,7 @@ static void pipeline_request(const srv_mesh_job *job, proto_pipeline_request *re
     req->encode.position_bits = r->position_bits;
     req->encode.normal_bits = r->normal_bits;
     req->encode.speed = r->speed;
+    req->gzip = job->accept_gzip && r->format == PROTO_FORMAT_GLB_MESHOPT;
 }
 
 /* The problem body of a failed step, its status from status.h. An allocation that failed
@@ -70,6 +71,27 @@ static int gzip_wanted(const srv_body *body, proto_format format)
     return format == PROTO_FORMAT_GLB_MESHOPT && body->size >= 1024;
 }
 
+/* Kept when it saves at least a twentieth of the body. */
+static int gzip_pays(size_t gzip_size, size_t size)
+{
+    return gzip_size <= size - size / 20;
+}
+
+/* The gzip form the pipeline made with the body (the request accepted gzip), taken over
+ * when it pays, so that the first response needs no second pass. */
+static void take_gzip(srv_body *body, proto_pipeline_result *res)
+{
+    if (!body->gzip_wanted || !res->gzip)
+        return;
+    body->gzip_tried = 1;
+    if (gzip_pays(res->gzip_size, body->size)) {
+        body->gzip_data = res->gzip;
+        body->gzip_size = res->gzip_size;
+        body->gzip_ms = res->gzip_ms;
+        res->gzip = NULL;
+    }
+}
+
 int srv_mesh_body_gzip(srv_body *body)
 {
     if (!body->gzip_wanted)
@@ -81,11 +103,11 @@ int srv_mesh_body_gzip(srv_body *body)
         double start = iso_clock_ms();
         unsigned char *gz;
         size_t size;
-        /* Kept when it saves at least a twentieth; failing to make it only leaves it out. */
+        /* Failing to make it only leaves it out. */
         proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
         int count = proto_glb_meshopt_gzip_pieces(body->data, body->size, pieces);
         if (!proto_gzip_pieces(body->data, body->size, pieces, count, 0, &gz, &size, NULL)) {
-            if (size > body->size - body->size / 20) {
+            if (!gzip_pays(size, body->size)) {
                 free(gz);
             } else {
                 body->gzip_data = gz;
@@ -206,6 +228,7 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     }
     body->content_type = proto_format_content_type(req.format);
     body->gzip_wanted = gzip_wanted(body, req.format);
+    take_gzip(body, &res);
     body->triangles = res.stats.triangles;
     body->vertices = res.stats.vertices;
     body->cells_visited = res.stats.cells_visited;

@@ -15,6 +15,8 @@ typedef struct srv_mesh_job {
     srv_cache *cache;       /* where the body goes when done; may be NULL */
     char *key;              /* the cache key (owned) */
     size_t max_triangles;   /* serve --max-triangles: a larger mesh is refused (422); 0: none */
+    int accept_gzip;        /* the request accepts gzip: a meshopt body's gzip form is made
+                             * with it, beside its encode, instead of after it */
 } srv_mesh_job;
 
 /* A job for the pool (see pool.h's srv_job_fn): arg is a srv_mesh_job. */

@@ -405,6 +405,18 @@ draco3d.createDecoderModule({}).then(m => {
         assert refused.getheader("Vary") == "Accept-Encoding"
         for etag in (r.getheader("ETag"), g.getheader("ETag")):
             assert s.get(url, {"If-None-Match": etag}).status == 304, etag
+        # A first request that accepts gzip gets the gzip form made with the body (beside
+        # its encode); a later one without gzip gets the body it inflates to, from the cache.
+        url2 = f"/v1/volumes/blob/mesh?level={level + 1e-3}&tolerance={tol}&format=glb-meshopt"
+        before = s.metric("isoserve_mesh_cache_bytes")
+        first = s.get(url2, {"Accept-Encoding": "gzip"})
+        assert first.status == 200 and first.getheader("Content-Encoding") == "gzip", first.getheader("Content-Encoding")
+        assert first.getheader("X-Iso-Cache") == "miss" and float(first.getheader("X-Iso-Gzip-Ms")) >= 0
+        plain = s.get(url2)
+        assert plain.getheader("X-Iso-Cache") == "hit" and plain.getheader("Content-Encoding") is None
+        assert gzip.decompress(first.body) == plain.body and len(first.body) <= 0.95 * len(plain.body)
+        grew = s.metric("isoserve_mesh_cache_bytes") - before
+        assert grew == len(first.body) + len(plain.body), (grew, len(first.body), len(plain.body))
         # Draco is entropy coded already: never gzipped.
         d = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=glb", {"Accept-Encoding": "gzip"})
         assert d.getheader("Content-Encoding") is None and d.getheader("Vary") is None

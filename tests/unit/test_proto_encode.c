@@ -1231,6 +1231,60 @@ static void first_use_numbering(const iso_mesh *m, uint32_t *number, uint32_t *o
         order[number[v]] = (uint32_t)v;
 }
 
+/* The normals proto_encode_glb_meshopt_run asks for: a copy of `normals` given to `mesh`,
+ * or the error `fail`; `calls` counts the asks. */
+typedef struct given_normals {
+    iso_mesh *mesh;
+    const float *normals;
+    int fail, calls, threads;
+} given_normals;
+
+static int give_normals(void *context, int threads, iso_error *err)
+{
+    given_normals *g = context;
+    g->calls++;
+    g->threads = threads;
+    if (g->fail)
+        return iso_error_set(err, g->fail, "no normals today");
+    size_t bytes = 3 * g->mesh->vertex_count * sizeof(float);
+    if (!(g->mesh->normals = malloc(bytes)))
+        return iso_error_set(err, ISO_E_NOMEM, "no memory for normals");
+    memcpy(g->mesh->normals, g->normals, bytes);
+    return 0;
+}
+
+/* The pipeline's form of the encode (proto_encode_glb_meshopt_run) on `threads`: the
+ * normals asked for once, on one thread when the encode has two (then beside the index
+ * view) and on `threads` when it has one; the glb byte for byte `glb`; its gzip member
+ * inflating to it; the steps' clocks in order. */
+static void check_glb_meshopt_run(const iso_mesh *m, const proto_encode_options *opt, int threads,
+                                  const unsigned char *glb, size_t glb_size)
+{
+    iso_error err;
+    proto_encode_options o = *opt;
+    o.threads = threads;
+    iso_mesh c = *m;
+    c.normals = NULL;
+    given_normals g = {.mesh = &c, .normals = m->normals};
+    proto_meshopt_run run = {.make_normals = m->normals ? give_normals : NULL, .context = &g, .gzip = 1};
+    unsigned char *buf;
+    size_t size;
+    double start = iso_clock_ms();
+    CHECK_OK(proto_encode_glb_meshopt_run(&c, &o, &run, &buf, &size, &err), &err);
+    CHECKF(buf && size == glb_size && !memcmp(buf, glb, size), "%zu against %zu bytes", size, glb_size);
+    CHECK_EQ(g.calls, m->normals ? 1 : 0);
+    if (m->normals)
+        CHECK_EQ(g.threads, threads == 2 && m->triangle_count >= 100000 ? 1 : threads);
+    CHECK(run.gzip_bytes && run.gzip_size > 18);
+    if (run.gzip_bytes)
+        check_gunzip(run.gzip_bytes, run.gzip_size, glb, glb_size);
+    CHECK(run.gzip_done >= run.glb_done && run.glb_done >= (m->normals ? run.normals_done : start) &&
+          (!m->normals || run.normals_done >= start));
+    free(run.gzip_bytes);
+    free(buf);
+    free(c.normals);
+}
+
 /* Encodes m, reads every view back with meshoptimizer's decoders, and checks the counts
  * exactly; the vertices numbered by first use: each triangle, in order, a rotation of m's
  * through that numbering; each decoded vertex's position within half a quantization step
@@ -1254,6 +1308,8 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
     CHECK_OK(proto_encode_glb_meshopt(m, &opt, &one, &one_size, &err), &err);
     CHECK(one && one_size == size && !memcmp(one, buf, size));
     free(one);
+    check_glb_meshopt_run(m, &opt, 2, buf, size);
+    check_glb_meshopt_run(m, &opt, 1, buf, size);
     proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
     int count = proto_glb_meshopt_gzip_pieces(buf, size, pieces);
     /* The vertex streams, the index stream's header (its first byte, 0xe0 | version) and
@@ -1681,6 +1737,21 @@ static void test_glb_meshopt_refuses_and_empties(void)
     m.positions[4] = 0;
     m.indices[0] = 6;
     CHECK_EQ(proto_encode_glb_meshopt(&m, NULL, &buf, &size, &err), ISO_E_ARGUMENT);
+    iso_mesh_free(&m);
+    make_mesh(&m, oct_pos, oct_pos, 6, oct_idx, 8);
+    /* The pipeline's form: the normals' own failure, and normals made non-finite. */
+    iso_mesh c = m;
+    c.normals = NULL;
+    given_normals g = {.mesh = &c, .normals = m.normals, .fail = ISO_E_NOMEM};
+    proto_meshopt_run run = {.make_normals = give_normals, .context = &g, .gzip = 1};
+    CHECK_EQ(proto_encode_glb_meshopt_run(&c, NULL, &run, &buf, &size, &err), ISO_E_NOMEM);
+    CHECK(buf == NULL && size == 0 && run.gzip_bytes == NULL && strstr(err.message, "no normals today"));
+    m.normals[7] = INFINITY;
+    g.fail = 0;
+    CHECK_EQ(proto_encode_glb_meshopt_run(&c, NULL, &run, &buf, &size, &err), ISO_E_ARGUMENT);
+    CHECK(buf == NULL && run.gzip_bytes == NULL && strstr(err.message, "non-finite normal"));
+    free(c.normals);
+    m.normals[7] = 0;
     m.triangle_count = 0;
     CHECK_OK(proto_encode_glb_meshopt(&m, NULL, &buf, &size, &err), &err);
     char *json = buf ? glb_parse(buf, size, &bin, &bin_size) : NULL;
