@@ -445,11 +445,32 @@ static void reorder(collapser *c, uint32_t u)
  * cache lines instead of walking the corner list again for each triangle. */
 #define BORDER 1
 #define PINCHED 2
+
+/* kind_of's common case, in about n * n / 2 comparisons instead of 3 * n * n: the walk
+ * from triangle 0 to the first triangle whose corner before u is this one's corner after
+ * u comes back to triangle 0 first after exactly n steps. Then it met every triangle once,
+ * so each corner after u is the corner before u of exactly one triangle: every edge is
+ * used once each way and the triangles make one closed fan. 0 leaves the full check. */
+static int one_closed_fan(const uint32_t *xs, const uint32_t *ys, size_t n)
+{
+    size_t i = 0;
+    for (size_t steps = 1; steps <= n; steps++) {
+        size_t j = 0;
+        while (j < n && ys[j] != xs[i])
+            j++;
+        if (j == n || (j == 0) != (steps == n))
+            return 0;
+        i = j;
+    }
+    return 1;
+}
 static int kind_of(const collapser *c, uint32_t u, uint32_t *xs, uint32_t *ys)
 {
     size_t n = 0, open = 0, start = 0;
     for (uint32_t k = c->head[u]; k != NONE; k = c->next[k])
         xs[n] = after(c, k), ys[n++] = before(c, k);
+    if (n >= 3 && one_closed_fan(xs, ys, n))
+        return 0;
     for (size_t i = 0; i < n; i++) {
         size_t forward = 0, backward = 0, into = 0;
         for (size_t j = 0; j < n; j++)

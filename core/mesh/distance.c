@@ -51,6 +51,7 @@
 #include "distance.h"
 
 #include <math.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -556,6 +557,7 @@ typedef struct direction {
     int exhaustive;           /* PASS 5 without block tests (for checks) */
     int select;               /* PASS 4 by select_top (drawn points, no mean wanted) */
     const float *block_boxes; /* PASS 5's boxes of whole blocks (iso_mesh_samples), or NULL */
+    atomic_size_t next_chunk; /* PASS 5's next chunk to claim (measure_max) */
     double part_max[ISO_PARALLEL_MAX_THREADS];
     int part_failed[ISO_PARALLEL_MAX_THREADS]; /* a share had no memory for its points */
 } direction;
@@ -917,25 +919,36 @@ static void raise_max_vertices(const direction *d, size_t i0, size_t i1, uint32_
     }
 }
 
-/* PASS 5 on one thread's share: the centroids (when pass 3 drew its own points) and the
- * vertices, BLOCK at a time. */
+/* PASS 5 on one thread's share: chunks of CHUNK_BLOCKS blocks of the centroids (when pass 3
+ * drew its own points), then of the vertices, claimed in turn, so that no thread idles while
+ * another still has blocks the bounds do not settle (where they do varies a lot along a
+ * surface). Each thread keeps its own maximum and hint; the maximum is exact whichever
+ * thread measures which sample, so the result is the same on any number of threads. */
+#define CHUNK_BLOCKS 16
 static void measure_max(void *context, int part, int parts)
 {
     direction *d = context;
     const iso_mesh *m = d->src;
+    (void)parts;
     double max = d->start_max * d->start_max;
     uint32_t hint = NO_TRIANGLE;
     double (*pts)[3] = d->drawn ? malloc(256 * 256 * sizeof *pts) : NULL;
-    size_t t0 = m->triangle_count * (size_t)part / (size_t)parts;
-    size_t t1 = m->triangle_count * (size_t)(part + 1) / (size_t)parts;
-    for (size_t t = t0, e; pts && t < t1; t = e) { /* blocks from 0, as the cached boxes */
-        e = (t / BLOCK + 1) * BLOCK;
-        raise_max_block(d, t, e < t1 ? e : t1, pts, &hint, &max);
+    const size_t chunk = CHUNK_BLOCKS * BLOCK;
+    size_t triangle_chunks = d->drawn ? (m->triangle_count + chunk - 1) / chunk : 0;
+    size_t chunks = triangle_chunks + (d->vertex_count + chunk - 1) / chunk;
+    for (size_t c; (c = atomic_fetch_add(&d->next_chunk, 1)) < chunks;) {
+        if (c < triangle_chunks && !pts)
+            continue; /* part_failed: the measure reports no memory */
+        size_t n = c < triangle_chunks ? m->triangle_count : d->vertex_count;
+        size_t i0 = (c < triangle_chunks ? c : c - triangle_chunks) * chunk, i1 = i0 + chunk < n ? i0 + chunk : n;
+        for (size_t i = i0; i < i1; i += BLOCK) { /* blocks from 0, as the cached boxes */
+            size_t e = i + BLOCK < i1 ? i + BLOCK : i1;
+            if (c < triangle_chunks)
+                raise_max_block(d, i, e, pts, &hint, &max);
+            else
+                raise_max_vertices(d, i, e, &hint, &max);
+        }
     }
-    size_t v0 = d->vertex_count * (size_t)part / (size_t)parts;
-    size_t v1 = d->vertex_count * (size_t)(part + 1) / (size_t)parts;
-    for (size_t i = v0; i < v1; i += BLOCK)
-        raise_max_vertices(d, i, i + BLOCK < v1 ? i + BLOCK : v1, &hint, &max);
     d->part_max[part] = sqrt(max);
     d->part_failed[part] |= d->drawn && !pts;
     free(pts);
@@ -1185,6 +1198,7 @@ static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh
         goto done;
     for (size_t i = 0; i < n; i++)
         d.start_max = d.start_max > dist[i] ? d.start_max : dist[i];
+    atomic_init(&d.next_chunk, 0);
     iso_parallel_run(workers, measure_max, &d); /* PASS 5 */
     out->max = d.start_max;
     for (int w = 0; w < workers; w++) {
