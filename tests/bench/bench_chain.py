@@ -12,7 +12,11 @@ For each case, in one run on the same exact surface (world mm):
            its share of the exact triangles and its measured distance;
   pinch    the chain's worst level: its pinches (edges of 3+ triangles and vertices of
            2+ fans) per 10,000 edges (the target is under 1).
-Ratios are chain time / single time, measured in the same run. Under each row, the
+Ratios are chain time / single time, measured in the same run. With ISO_BENCH_LEVELS=1,
+each chain level is also compared with one meshopt_simplify of the exact mesh to that
+level's triangle count (`extract --simplify N`, measured at one voxel's spacing where the
+chain measures at three: the p99s, drawn by area, compare; the maxima less so): triangles,
+p99 and max of both, and the single call's pinches (edges of 3+ triangles). Under each row, the
 chain's levels: p99 and max (mm) and simplification ms. With ISOSERVE_BIN_BASE set, each
 case runs with that build first, then with ISOSERVE_BIN, side by side, and a line gives
 each level's p99 and max of the second over the first's, minus 1, in per cent. Prints a
@@ -57,6 +61,22 @@ def print_change(base, new):
         return " ".join(f"{100 * (n[key] / b[key] - 1):+.1f}" if b[key] else "0"
                         for b, n in zip(base["chain_levels"][1:], new["chain_levels"][1:]))
     print(f"  new/base-1 % p99 {change('p99')} | max {change('max')}", flush=True)
+
+
+def compare_levels(path, level, built):
+    """Each chain level beside one meshopt_simplify to its triangle count (ISO_BENCH_LEVELS)."""
+    rows = []
+    for k, b in enumerate(built[1:], 1):
+        single = extract(path, level, "--threads", "1", "--simplify", str(b["triangles"]))
+        d = single["simplify"]["distance"]
+        rows.append({"level": k, "chain_triangles": b["triangles"], "single_triangles": single["triangles"],
+                     "chain_p99": b["p99"], "single_p99": d["p99"], "chain_max": b["max"], "single_max": d["max"],
+                     "single_nonmanifold_edges": single["nonmanifold_edges"]})
+        print(f"    level {k}: {b['triangles']:>7} tris p99 {b['p99']:.4f} max {b['max']:.3f} | single "
+              f"{single['triangles']:>7} tris p99 {d['p99']:.4f} max {d['max']:.3f} pinch edges "
+              f"{single['nonmanifold_edges']} | p99 chain/single {b['p99'] / d['p99'] if d['p99'] else float('nan'):.3f}",
+              flush=True)
+    return rows
 
 
 def main():
@@ -115,6 +135,8 @@ def main():
                   f"{100 * row['answer_share']:>5.1f}% {answer['distance']['p99']:>6.3f} {answer['distance']['max']:>6.2f} "
                   f"{'' if vol is None else f'{vol:+.2f}':>6} {row['pinches_per_10k_edges']:>6.2f}", flush=True)
             print_levels(row, tag)
+            if os.environ.get("ISO_BENCH_LEVELS") and binary == BIN:
+                row["levels_vs_single"] = compare_levels(path, level, built)
         if len(pair) == 2:
             print_change(pair[0], pair[1])
     os.makedirs("bench/results", exist_ok=True)
