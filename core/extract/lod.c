@@ -44,6 +44,8 @@ typedef struct lod {
     int cap;
     uint32_t dims[3], count[3], blocks[3];
     uint8_t *shift;               /* per block: log2 of its stride (PASS 1) */
+    uint32_t *active;             /* the bricks whose [min, max] hold the level, grid order */
+    size_t active_count;
     const iso_march_part *fine;   /* PASS 2's stride-1 blocks, marched by march.c */
     iso_mesh *mesh;
     vertex_map map;
@@ -98,6 +100,26 @@ static int brick_active(const lod *c, size_t at)
     return g->min[at] <= c->level && c->level < g->max[at];
 }
 
+/* Brick `at`'s coordinates in the brick grid. */
+static void brick_at(const lod *c, size_t at, uint32_t b[3])
+{
+    b[0] = (uint32_t)(at % c->count[0]);
+    b[1] = (uint32_t)(at / c->count[0] % c->count[1]);
+    b[2] = (uint32_t)(at / c->count[0] / c->count[1]);
+}
+
+/* Lists the bricks the level crosses, once: the passes below walk those only (5% of the
+ * bricks of a sparse volume). */
+static void list_active(lod *c)
+{
+    size_t total = iso_bricks_total(&c->tree->bricks), n = 0;
+    for (size_t at = 0; at < total; at++) {
+        c->active[n] = (uint32_t)at;
+        n += (size_t)brick_active(c, at);
+    }
+    c->active_count = n;
+}
+
 /* Every brick whose [min, max] holds the level: stride 8 whole if its level 3 error is
  * within the tolerance, else per block the coarsest of strides 4, 2 whose error is, or 1.
  * The other bricks' blocks get stride 8, which touches nothing (all their samples lie on
@@ -106,25 +128,24 @@ static void plan(lod *c, double tolerance)
 {
     const iso_tree *tree = c->tree;
     memset(c->shift, ISO_TREE_LEVELS, (size_t)c->blocks[0] * c->blocks[1] * c->blocks[2]);
-    size_t at = 0;
-    for (uint32_t k = 0; k < c->count[2]; k++)
-        for (uint32_t j = 0; j < c->count[1]; j++)
-            for (uint32_t i = 0; i < c->count[0]; i++, at++) {
-                if (!brick_active(c, at) || iso_tree_level_error(tree, at) <= tolerance)
-                    continue;
-                uint32_t b[3] = {i, j, k}, first[3], m[3];
-                brick_blocks(c, b, first, m);
-                for (uint32_t z = 0; z < m[2]; z++)
-                    for (uint32_t y = 0; y < m[1]; y++)
-                        for (uint32_t x = 0; x < m[0]; x++) {
-                            uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
-                            int l;
-                            for (l = ISO_TREE_BLOCK_LEVELS; l > 0; l--)
-                                if (iso_tree_block_error(tree, at, (int)(x | y << 1 | z << 2), l) <= tolerance)
-                                    break;
-                            c->shift[block_index(c, q)] = (uint8_t)l;
-                        }
-            }
+    for (size_t n = 0; n < c->active_count; n++) {
+        size_t at = c->active[n];
+        if (iso_tree_level_error(tree, at) <= tolerance)
+            continue;
+        uint32_t b[3], first[3], m[3];
+        brick_at(c, at, b);
+        brick_blocks(c, b, first, m);
+        for (uint32_t z = 0; z < m[2]; z++)
+            for (uint32_t y = 0; y < m[1]; y++)
+                for (uint32_t x = 0; x < m[0]; x++) {
+                    uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
+                    int l;
+                    for (l = ISO_TREE_BLOCK_LEVELS; l > 0; l--)
+                        if (iso_tree_block_error(tree, at, (int)(x | y << 1 | z << 2), l) <= tolerance)
+                            break;
+                    c->shift[block_index(c, q)] = (uint8_t)l;
+                }
+    }
 }
 
 /* A given plan, made valid: stride 8 only where every block of the brick has it (else 4). */
@@ -1060,21 +1081,17 @@ static int coarse_blocks_clear(const lod *c, size_t at, const uint32_t b[3])
 static int mark_fine(const lod *c, int prove, int no_minmax, uint8_t *marked)
 {
     int whole = 1;
-    size_t at = 0;
-    for (uint32_t k = 0; k < c->count[2]; k++)
-        for (uint32_t j = 0; j < c->count[1]; j++)
-            for (uint32_t i = 0; i < c->count[0]; i++, at++) {
-                uint32_t b[3] = {i, j, k};
-                if (!brick_active(c, at)) {
-                    marked[at] = no_minmax ? 0xFF : 0;
-                    continue;
-                }
-                unsigned have = brick_has(c, b), fine = fine_blocks(c, b);
-                if (fine != have && prove && coarse_blocks_clear(c, at, b))
-                    fine = have;
-                marked[at] = (uint8_t)(fine == have ? 0xFF : fine);
-                whole &= fine == have;
-            }
+    memset(marked, no_minmax ? 0xFF : 0, iso_bricks_total(&c->tree->bricks));
+    for (size_t n = 0; n < c->active_count; n++) {
+        size_t at = c->active[n];
+        uint32_t b[3];
+        brick_at(c, at, b);
+        unsigned have = brick_has(c, b), fine = fine_blocks(c, b);
+        if (fine != have && prove && coarse_blocks_clear(c, at, b))
+            fine = have;
+        marked[at] = (uint8_t)(fine == have ? 0xFF : fine);
+        whole &= fine == have;
+    }
     return whole;
 }
 
@@ -1142,8 +1159,13 @@ static int extract(const iso_tree *tree, const iso_extract_params *params, const
     iso_mesh_clear(mesh);
     size_t total = iso_bricks_total(g), blocks = (size_t)c.blocks[0] * c.blocks[1] * c.blocks[2];
     c.shift = malloc(blocks + total + 1);
-    if (!c.shift)
+    c.active = malloc((total + 1) * sizeof *c.active);
+    if (!c.shift || !c.active) {
+        free(c.shift);
+        free(c.active);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    }
+    list_active(&c);
     if (shift)
         plan_given(&c, shift);
     else
@@ -1152,30 +1174,28 @@ static int extract(const iso_tree *tree, const iso_extract_params *params, const
     int whole = mark_fine(&c, !shift, params->no_minmax, marked);
     if (!shift && exact && (*exact = whole)) {
         free(c.shift);
+        free(c.active);
         return 0;
     }
     iso_march_part *fine = NULL;
     int rc = march_fine(&c, params, marked, &fine, err);
-    for (uint32_t k = 0; k < g->count[2] && !rc; k++)
-        for (uint32_t j = 0; j < g->count[1] && !rc; j++)
-            for (uint32_t i = 0; i < g->count[0] && !rc; i++) {
-                size_t at = ((size_t)k * g->count[1] + j) * g->count[0] + i;
-                int active = brick_active(&c, at);
-                if (!active && !params->no_minmax)
-                    continue;
-                stats->nodes_visited++;
-                uint32_t b[3] = {i, j, k};
-                if (!active || brick_fine(marked, at))
-                    continue; /* marched by march_fine */
-                stats->nodes_polygonized++;
-                double fit = brick_fit(&c, at, b);
-                stats->fit_error = fit > stats->fit_error ? fit : stats->fit_error;
-                rc = march_brick(&c, b, err);
-            }
+    stats->nodes_visited += params->no_minmax ? total : c.active_count;
+    for (size_t n = 0; n < c.active_count && !rc; n++) {
+        size_t at = c.active[n];
+        if (brick_fine(marked, at))
+            continue; /* marched by march_fine */
+        uint32_t b[3];
+        brick_at(&c, at, b);
+        stats->nodes_polygonized++;
+        double fit = brick_fit(&c, at, b);
+        stats->fit_error = fit > stats->fit_error ? fit : stats->fit_error;
+        rc = march_brick(&c, b, err);
+    }
     stats->cells_visited = c.cells;
     stats->error_bound = c.error;
     iso_march_part_free(fine);
     free(c.shift);
+    free(c.active);
     free(c.map.keys);
     free(c.map.ids);
     free(c.segments);
@@ -1198,9 +1218,15 @@ int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *para
     return extract(tree, params, shift, NULL, mesh, stats, err);
 }
 
-void iso_lod_plan(const iso_tree *tree, double level, double tolerance, uint8_t *shift)
+int iso_lod_plan(const iso_tree *tree, double level, double tolerance, uint8_t *shift)
 {
     lod c = {.shift = shift};
     lod_grid(&c, tree, level);
+    c.active = malloc((iso_bricks_total(&tree->bricks) + 1) * sizeof *c.active);
+    if (!c.active)
+        return ISO_E_NOMEM;
+    list_active(&c);
     plan(&c, tolerance);
+    free(c.active);
+    return 0;
 }

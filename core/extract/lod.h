@@ -63,7 +63,8 @@ int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *para
                             iso_mesh *mesh, iso_extract_stats *stats, iso_error *err);
 
 /* PASS 1's plan for the level and tolerance (> 0), into shift as iso_lod_extract_planned
- * takes it: for tests, which give it back to compare the two answers. */
-void iso_lod_plan(const iso_tree *tree, double level, double tolerance, uint8_t *shift);
+ * takes it: for tests, which give it back to compare the two answers. Returns 0 or
+ * ISO_E_NOMEM. */
+int iso_lod_plan(const iso_tree *tree, double level, double tolerance, uint8_t *shift);
 
 #endif

@@ -780,7 +780,7 @@ static void check_clear_bricks_marched_whole(const iso_tree *tree, double level,
         blocks *= (vol->dims[d] - 1 + ISO_TREE_BLOCK - 1) / ISO_TREE_BLOCK;
     uint8_t *plan = malloc(blocks);
     CHECK(plan != NULL);
-    iso_lod_plan(tree, level, tolerance, plan);
+    CHECK(iso_lod_plan(tree, level, tolerance, plan) == 0);
     iso_extract_params p = {.level = level, .tolerance = tolerance, .space = ISO_SPACE_INDEX, .threads = 1};
     iso_mesh a, b;
     iso_mesh_init(&a);
