@@ -70,7 +70,10 @@ typedef struct lod {
     uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES];
     uint32_t corner_cell[3], corner_stamp; /* value_at's last data cell, and its corners */
     double corner[8];
-    uint32_t inner_id[BRICK_SAMPLES * 3], inner_stamp[BRICK_SAMPLES * 3];
+    /* The crossings' vertices by segment (low end, axis), with the length they were made
+     * for; valid where the stamp is the brick's (crossing). */
+    uint32_t seen_id[BRICK_SAMPLES * 3], seen_stamp[BRICK_SAMPLES * 3];
+    uint8_t seen_length[BRICK_SAMPLES * 3];
     loop_segment *segments;
     size_t segment_count, segment_capacity;
     uint32_t *loop;
@@ -397,20 +400,15 @@ static int add_vertex(lod *c, const double x[3], uint32_t *id)
     return 0;
 }
 
-/* The vertex of the crossing on the lattice segment from p along axis, length long: made
- * on first use, where iso_mc_edge_t puts it between the segment's two samples. */
-static int crossing(lod *c, const uint32_t p[3], int axis, uint32_t length, uint32_t *id)
+/* The vertex of the crossing on the lattice segment from p along axis, length long (the
+ * brick at hand's first use of it): made on first use, where iso_mc_edge_t puts it between
+ * the segment's two samples. */
+static int make_crossing(lod *c, const uint32_t p[3], int axis, uint32_t length, uint32_t *id)
 {
     int inner = 1; /* strictly inside the unit at hand across the axis: only it holds the segment */
     for (int d = 0; d < 3; d++)
         if (d != axis && (p[d] == c->ulo[d] || p[d] == c->uhi[d]))
             inner = 0;
-    size_t local = (((size_t)(p[2] - c->lo[2]) * ISO_BRICK_SAMPLES + (p[1] - c->lo[1])) * ISO_BRICK_SAMPLES +
-                    (p[0] - c->lo[0])) * 3 + (size_t)axis;
-    if (inner && c->inner_stamp[local] == c->stamp) {
-        *id = c->inner_id[local];
-        return 0;
-    }
     /* A data edge a stride-1 brick holds (or its ghost owns): march.c made its vertex. */
     if (!inner && length == 1 && c->fine && iso_march_part_vertex(c->fine, p, axis, id))
         return 0;
@@ -447,15 +445,33 @@ static int crossing(lod *c, const uint32_t p[3], int axis, uint32_t length, uint
         e = iso_mc_edge_error(sample(c, e0), sample(c, e1), x[axis] - e0[axis], c->level);
     }
     c->error = e > c->error ? e : c->error; /* NaN (a NaN or infinite sample) proves nothing */
-    if (inner) {
-        /* Only this unit holds the segment, at its own stride: no other length occurs. */
-        c->inner_stamp[local] = c->stamp;
-        c->inner_id[local] = *id;
-        return 0;
-    }
+    if (inner)
+        return 0; /* only this unit holds the segment: crossing's per-brick table is its map */
     m->keys[at] = key;
     m->ids[at] = *id;
     m->count++;
+    return 0;
+}
+
+/* The vertex of the crossing on the lattice segment from p along axis, length long, kept
+ * per brick by the segment's low end, axis and length (most segments are asked for again:
+ * by the other face holding a cell edge, the other square holding a side, the next cell;
+ * a segment's length is its lattice set's stride, so one length per end and axis is all
+ * a brick sees, and another one only goes the longer way). */
+static int crossing(lod *c, const uint32_t p[3], int axis, uint32_t length, uint32_t *id)
+{
+    size_t local = (((size_t)(p[2] - c->lo[2]) * ISO_BRICK_SAMPLES + (p[1] - c->lo[1])) * ISO_BRICK_SAMPLES +
+                    (p[0] - c->lo[0])) * 3 + (size_t)axis;
+    if (c->seen_stamp[local] == c->stamp && c->seen_length[local] == length) {
+        *id = c->seen_id[local];
+        return 0;
+    }
+    int rc = make_crossing(c, p, axis, length, id);
+    if (rc)
+        return rc;
+    c->seen_stamp[local] = c->stamp;
+    c->seen_length[local] = (uint8_t)length;
+    c->seen_id[local] = *id;
     return 0;
 }
 
