@@ -39,6 +39,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 /* Below this many triangles one thread encodes it all: handing half to another thread
  * (waiting for it on a busy machine) would cost more than it saves. */
@@ -120,9 +123,47 @@ static void position_grid(const iso_mesh *mesh, int bits, quantized *q)
     }
 }
 
-/* Pass 1b, positions on the grid, vertex i being the mesh's order[i]. The division is done as a product
- * by its inverse; a result within 1e-6 of a half step, where the two could round apart, is
+/* Pass 1b, positions on the grid, vertex i being the mesh's order[i]: vertex i's component a
+ * as its step count, clamped to the grid. The division is done as a product by its
+ * inverse; a result within 1e-6 of a half step, where the two could round apart, is
  * redone as the division. */
+static uint16_t position_component(float p, float lo, double extent, double steps, double inverse)
+{
+    double t = ((double)p - lo) * inverse; /* >= 0 */
+    double half = t - (double)(long)t - 0.5;
+    long r = fabs(half) < 1e-6 ? position_step(p, lo, extent, steps) : (long)(t + 0.5);
+    return (uint16_t)(r > (long)steps ? (long)steps : r);
+}
+
+#if defined(__SSE2__)
+/* position_component on a vertex's three components at once (two lanes of doubles, the
+ * same operations in the same order, so the same results); 0 when one of them is near a
+ * half step and needs the division. */
+static inline int position_vertex_sse2(const float *p, __m128d lo01, __m128d lo2, __m128d inverse,
+                                       __m128i steps, uint16_t *out)
+{
+    const __m128d half = _mm_set1_pd(0.5), near = _mm_set1_pd(1e-6), sign = _mm_set1_pd(-0.0);
+    double xy;
+    memcpy(&xy, p, sizeof xy);
+    __m128d a = _mm_cvtps_pd(_mm_castpd_ps(_mm_set_sd(xy))), b = _mm_cvtps_pd(_mm_set_ss(p[2]));
+    a = _mm_mul_pd(_mm_sub_pd(a, lo01), inverse);
+    b = _mm_mul_pd(_mm_sub_pd(b, lo2), inverse); /* z, and 0 in the pad lane */
+    __m128d fa = _mm_sub_pd(_mm_sub_pd(a, _mm_cvtepi32_pd(_mm_cvttpd_epi32(a))), half);
+    __m128d fb = _mm_sub_pd(_mm_sub_pd(b, _mm_cvtepi32_pd(_mm_cvttpd_epi32(b))), half);
+    if (_mm_movemask_pd(_mm_cmplt_pd(_mm_andnot_pd(sign, fa), near)) |
+        _mm_movemask_pd(_mm_cmplt_pd(_mm_andnot_pd(sign, fb), near)))
+        return 0;
+    __m128i r = _mm_unpacklo_epi64(_mm_cvttpd_epi32(_mm_add_pd(a, half)), _mm_cvttpd_epi32(_mm_add_pd(b, half)));
+    __m128i over = _mm_cmpgt_epi32(r, steps);
+    r = _mm_or_si128(_mm_and_si128(over, steps), _mm_andnot_si128(over, r));
+    /* 0..65535 to uint16 through the signed pack: shifted down by 32768 and back. */
+    const __m128i bias32 = _mm_set1_epi32(32768), bias16 = _mm_set1_epi16(-32768);
+    r = _mm_xor_si128(_mm_packs_epi32(_mm_sub_epi32(r, bias32), _mm_sub_epi32(r, bias32)), bias16);
+    _mm_storel_epi64((__m128i *)(void *)out, r);
+    return 1;
+}
+#endif
+
 static void quantize_positions(const iso_mesh *mesh, const uint32_t *order, const quantized *q, void *out)
 {
     if (q->float_positions) {
@@ -133,15 +174,19 @@ static void quantize_positions(const iso_mesh *mesh, const uint32_t *order, cons
     }
     uint16_t *k = out;
     const double extent = q->extent, steps = q->steps, inverse = extent > 0 ? steps / extent : 0;
+#if defined(__SSE2__)
+    const __m128d lo01 = _mm_set_pd(q->origin[1], q->origin[0]), lo2 = _mm_set_pd(0, q->origin[2]);
+    const __m128d inv = _mm_set1_pd(inverse);
+    const __m128i top = _mm_set1_epi32((int)steps);
+#endif
     for (size_t i = 0; i < mesh->vertex_count; i++) {
         const float *p = mesh->positions + 3 * (size_t)order[i];
-        for (int a = 0; a < 3; a++) {
-            float lo = q->origin[a];
-            double t = ((double)p[a] - lo) * inverse; /* >= 0 */
-            double half = t - (double)(long)t - 0.5;
-            long r = fabs(half) < 1e-6 ? position_step(p[a], lo, extent, steps) : (long)(t + 0.5);
-            k[4 * i + a] = (uint16_t)(r > (long)steps ? (long)steps : r);
-        }
+#if defined(__SSE2__)
+        if (position_vertex_sse2(p, lo01, lo2, inv, top, k + 4 * i))
+            continue;
+#endif
+        for (int a = 0; a < 3; a++)
+            k[4 * i + a] = position_component(p[a], q->origin[a], extent, steps, inverse);
         k[4 * i + 3] = 0;
     }
 }
@@ -149,6 +194,31 @@ static void quantize_positions(const iso_mesh *mesh, const uint32_t *order, cons
 /* Pass 1b, normals (vertex i being the mesh's order[i]): int8 (stride 4) up to 8 bits, else int16
  * (stride 8) rounded to qn bits: round(x * max / grain) * grain, the grain a power of two
  * (so dividing by it is multiplying by its exact inverse). */
+#if defined(__SSE2__)
+/* round_half_away(v * max * inverse) * grain, clamped to +-top, on two lanes (the same
+ * operations in the same order as the scalar loop, so the same results), in the low two
+ * int32 lanes; *big set when a lane is past 2^16 steps, which the shift by the grain
+ * could carry past int32 (the scalar loop then does the vertex). */
+static inline __m128i normal_lanes(__m128d v, __m128d max, __m128d inverse, __m128i shift, __m128i top, int *big)
+{
+    const __m128d half = _mm_set1_pd(0.5), sign = _mm_set1_pd(-0.0), limit = _mm_set1_pd(1 << 16);
+    v = _mm_mul_pd(_mm_mul_pd(v, max), inverse);
+    __m128d a = _mm_andnot_pd(sign, v);
+    *big |= _mm_movemask_pd(_mm_cmpge_pd(a, limit));
+    __m128i k = _mm_cvttpd_epi32(_mm_add_pd(a, half));
+    __m128i over = _mm_shuffle_epi32(_mm_castpd_si128(_mm_cmpgt_pd(_mm_sub_pd(_mm_cvtepi32_pd(k), a), half)),
+                                     _MM_SHUFFLE(3, 3, 2, 0));
+    k = _mm_add_epi32(k, over); /* a + 0.5 rounded up: one less */
+    __m128i negative = _mm_shuffle_epi32(_mm_castpd_si128(_mm_cmplt_pd(v, _mm_setzero_pd())), _MM_SHUFFLE(3, 3, 2, 0));
+    k = _mm_sub_epi32(_mm_xor_si128(k, negative), negative);
+    k = _mm_sll_epi32(k, shift);
+    __m128i high = _mm_cmpgt_epi32(k, top), bottom = _mm_sub_epi32(_mm_setzero_si128(), top);
+    k = _mm_or_si128(_mm_and_si128(high, top), _mm_andnot_si128(high, k));
+    __m128i low = _mm_cmplt_epi32(k, bottom);
+    return _mm_or_si128(_mm_and_si128(low, bottom), _mm_andnot_si128(low, k));
+}
+#endif
+
 static void quantize_normals(const iso_mesh *mesh, const uint32_t *order, int bits, void *out)
 {
     const int wide = bits > 8;
@@ -157,8 +227,24 @@ static void quantize_normals(const iso_mesh *mesh, const uint32_t *order, int bi
     const double inverse = 1.0 / (double)grain;
     if (wide) {
         int16_t *k = out;
+#if defined(__SSE2__)
+        const __m128d max2 = _mm_set1_pd(max), inverse2 = _mm_set1_pd(inverse);
+        const __m128i shift = _mm_cvtsi32_si128(16 - bits), top4 = _mm_set1_epi32((int)top);
+#endif
         for (size_t i = 0; i < mesh->vertex_count; i++) {
             const float *x = mesh->normals + 3 * (size_t)order[i];
+#if defined(__SSE2__)
+            double xy;
+            memcpy(&xy, x, sizeof xy);
+            int big = 0;
+            __m128i lanes = _mm_unpacklo_epi64(
+                normal_lanes(_mm_cvtps_pd(_mm_castpd_ps(_mm_set_sd(xy))), max2, inverse2, shift, top4, &big),
+                normal_lanes(_mm_cvtps_pd(_mm_set_ss(x[2])), max2, inverse2, shift, top4, &big));
+            if (!big) {
+                _mm_storel_epi64((__m128i *)(void *)(k + 4 * i), _mm_packs_epi32(lanes, lanes));
+                continue;
+            }
+#endif
             for (int a = 0; a < 3; a++) {
                 long r = round_half_away((double)x[a] * max * inverse) * grain;
                 k[4 * i + a] = (int16_t)(r > top ? top : r < -top ? -top : r);
