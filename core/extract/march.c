@@ -467,15 +467,19 @@ static size_t keep_marked(active_brick *ab)
                     cells[z * S + y] |= (uint16_t)(((1u << (hi[0] - lo[0])) - 1) << lo[0]);
         }
     }
-    ab->crossing_rows[0] = ab->crossing_rows[1] = 0;
-    ab->marching_rows[0] = ab->marching_rows[1] = 0;
-    for (int r = 0; r < ROWS; r++) {
-        unsigned any = 0;
-        for (int a = 0; a < 3; a++)
-            any |= ab->cross[a][r] &= keep[a][r];
-        ab->marching[r] &= (uint8_t)cells[r];
-        ab->crossing_rows[r / 64] |= (uint64_t)(any != 0) << (r % 64);
-        ab->marching_rows[r / 64] |= (uint64_t)(ab->marching[r] != 0) << (r % 64);
+    /* Only the rows with work can lose it (cross and marching are 0 in the others). */
+    for (int word = 0; word < 2; word++) {
+        uint64_t rows = ab->crossing_rows[word] | ab->marching_rows[word];
+        ab->crossing_rows[word] = ab->marching_rows[word] = 0;
+        for (; rows; rows &= rows - 1) {
+            int r = 64 * word + __builtin_ctzll(rows);
+            unsigned any = 0;
+            for (int a = 0; a < 3; a++)
+                any |= ab->cross[a][r] &= keep[a][r];
+            ab->marching[r] &= (uint8_t)cells[r];
+            ab->crossing_rows[word] |= (uint64_t)(any != 0) << (r % 64);
+            ab->marching_rows[word] |= (uint64_t)(ab->marching[r] != 0) << (r % 64);
+        }
     }
     return count;
 }
@@ -774,27 +778,48 @@ static int vertex_of(const march_job *job, const uint32_t p[3], int axis, uint32
 /* fill_shared_ids where the brick or a neighbour is not wholly marked: edge by edge, each
  * crossing edge of its box that a neighbour owns, from the owner (which kept it if a
  * marked block of this brick holds it, the only ones its cells use). */
+/* The ids of the crossing edges m of row (y, z) along axis a of the brick at lo, each
+ * from its owner (vertex_of). */
+static inline void shared_ids_looked_up(const march_job *job, const size_t lo[3], id_table *table, unsigned m, int a,
+                                        int y, int z)
+{
+    for (; m; m &= m - 1) {
+        int x = __builtin_ctz(m);
+        uint32_t p[3] = {(uint32_t)(lo[0] + (size_t)x), (uint32_t)(lo[1] + (size_t)y), (uint32_t)(lo[2] + (size_t)z)},
+                 id;
+        if (vertex_of(job, p, a, &id))
+            table->at[a][z * S + y][x] = id;
+    }
+}
+
 static void fill_shared_ids_partial(const march_job *job, const active_brick *ab, id_table *table)
 {
+    const uint8_t *n = ab->n, *o = ab->owned;
     size_t lo[3];
     brick_origin(ab, lo);
-    for (int z = 0; z < ab->n[2]; z++)
-        for (int y = 0; y < ab->n[1]; y++) {
+    /* The rows of its upper y and z faces: any edge of theirs. */
+    for (int z = 0; z < n[2]; z++)
+        for (int y = z < o[2] ? o[1] : 0; y < n[1]; y++) {
             int r = z * S + y;
             unsigned row = ab->inside[r];
-            unsigned along[3] = {(row ^ (row >> 1)) & ((1u << (ab->n[0] - 1)) - 1),
-                                 y + 1 < ab->n[1] ? row ^ ab->inside[r + 1] : 0,
-                                 z + 1 < ab->n[2] ? row ^ ab->inside[r + S] : 0};
-            for (int a = 0; a < 3; a++)
-                for (unsigned m = along[a]; m; m &= m - 1) {
-                    int x = __builtin_ctz(m);
-                    if (x < ab->owned[0] && y < ab->owned[1] && z < ab->owned[2])
-                        continue; /* its own */
-                    uint32_t p[3] = {(uint32_t)(lo[0] + (size_t)x), (uint32_t)(lo[1] + (size_t)y),
-                                     (uint32_t)(lo[2] + (size_t)z)}, id;
-                    if (vertex_of(job, p, a, &id))
-                        table->at[a][r][x] = id;
-                }
+            shared_ids_looked_up(job, lo, table, (row ^ (row >> 1)) & ((1u << (n[0] - 1)) - 1), 0, y, z);
+            if (y + 1 < n[1])
+                shared_ids_looked_up(job, lo, table, row ^ ab->inside[r + 1], 1, y, z);
+            if (z + 1 < n[2])
+                shared_ids_looked_up(job, lo, table, row ^ ab->inside[r + S], 2, y, z);
+        }
+    /* The other rows: the edges along y and z at its upper x face, if it has one. */
+    if (o[0] == n[0])
+        return;
+    unsigned column = 1u << o[0];
+    for (int z = 0; z < o[2]; z++)
+        for (int y = 0; y < o[1]; y++) {
+            int r = z * S + y;
+            unsigned row = ab->inside[r];
+            if (y + 1 < n[1])
+                shared_ids_looked_up(job, lo, table, (row ^ ab->inside[r + 1]) & column, 1, y, z);
+            if (z + 1 < n[2])
+                shared_ids_looked_up(job, lo, table, (row ^ ab->inside[r + S]) & column, 2, y, z);
         }
 }
 
