@@ -1,0 +1,78 @@
+/* test_chain_quality.c: each level of the simplification chain against one
+ * meshoptimizer simplification of the exact surface to the same triangle count, both
+ * measured against the exact surface by the chain's own measure (the same samples and
+ * percentile), on the quarter head's skin and bone: the chain, made step by step and
+ * making no pinch, must not lose to the single call by more than a few per cent at any
+ * level but the coarsest, where its link condition refuses collapses on thin bone (about
+ * half of the level's vertices have one refused) and the single call makes pinches
+ * instead; there it must stay within a bound that says how far (docs/performance.md,
+ * "The coarse levels against one call"). */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#include "mesh/mesh.h"
+#include "check.h"
+#include "extract/extract.h"
+#include "hierarchy/tree.h"
+#include "io/io.h"
+#include "surface.h"
+
+/* The single call's p99 at level k's count, by the chain's measure. */
+static double single_p99(const iso_mesh_chain *chain, int k)
+{
+    iso_mesh m;
+    iso_mesh_init(&m);
+    iso_error err = {0};
+    iso_mesh_distance d = {0};
+    CHECK_OK(iso_mesh_chain_mesh(chain, 0, &m, &err), &err);
+    iso_simplify_params sp = {.target_triangles = chain->level[k].triangle_count, .target_error = INFINITY,
+                              .lock_border = 1};
+    iso_simplify_result r;
+    CHECK_OK(iso_simplify(&m, &sp, &r, &err), &err);
+    CHECK(m.triangle_count <= chain->level[k].triangle_count);
+    CHECK_OK(iso_mesh_chain_distance(chain, &m, 0, &d, &err), &err);
+    iso_mesh_free(&m);
+    return d.p99;
+}
+
+/* Every level's p99 within `slack` times the single call's at its count (which has as
+ * many triangles or fewer), the coarsest within `coarsest` times. */
+static void check_levels(const char *file, double level, double slack, double coarsest)
+{
+    iso_volume *vol = surface_load_shared(file);
+    if (!vol)
+        return;
+    iso_tree *tree = surface_build(vol);
+    iso_mesh m;
+    iso_mesh_init(&m);
+    iso_extract_stats st;
+    iso_error err = {0};
+    iso_extract_params xp = {.level = level, .space = ISO_SPACE_INDEX};
+    CHECK_OK(iso_extract(tree, &xp, &m, &st, &err), &err);
+    iso_mesh_chain *chain = NULL;
+    CHECK_OK(iso_mesh_chain_build(&m, 1, 0, &chain, &err), &err);
+    for (int k = 1; chain && k < chain->levels; k++) {
+        double single = single_p99(chain, k), own = chain->level[k].distance.p99;
+        printf("  %s %g level %d: %zu triangles, p99 %.4f voxels, single call %.4f (%.3f)\n", file, level, k,
+               chain->level[k].triangle_count, own, single, own / single);
+        CHECKF(own <= (k + 1 < chain->levels ? slack : coarsest) * single, "%s at %g, level %d: p99 %.4f against the single call's %.4f", file, level,
+               k, own, single);
+    }
+    iso_mesh_chain_destroy(chain);
+    iso_mesh_free(&m);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+static void test_levels_against_one_call(void)
+{
+    check_levels("headsq_quarter_64x64x93_u16le.nhdr", 500, 1.08, 1.0);
+    check_levels("headsq_quarter_64x64x93_u16le.nhdr", 1150, 1.08, 1.7);
+}
+
+int main(void)
+{
+    CHECK_RUN(test_levels_against_one_call);
+    return check_finish();
+}
