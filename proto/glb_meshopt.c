@@ -302,20 +302,24 @@ static size_t number_by_first_use(const iso_mesh *mesh, uint32_t *seen, uint32_t
 }
 
 /* The encode as tasks for up to two threads (the caller's and one helper, see run()). */
-enum { TASK_NUMBER, TASK_INDEX, TASK_NORMALS, TASK_POSITIONS, TASK_NORMAL_VIEW, TASK_COUNT };
+enum { TASK_NUMBER, TASK_INDEX, TASK_NORMALS, TASK_POSITIONS, TASK_NORMAL_VIEW, TASK_POSITION_GZIP, TASK_COUNT };
 
 /* What each task reads that another makes: the index view and both vertex views need the
- * numbering, the normal view needs the normals. */
+ * numbering, the normal view needs the normals, the positions' gzip part their view. */
 static const unsigned task_needs[TASK_COUNT] = {
     [TASK_INDEX] = 1u << TASK_NUMBER, [TASK_POSITIONS] = 1u << TASK_NUMBER,
-    [TASK_NORMAL_VIEW] = 1u << TASK_NUMBER | 1u << TASK_NORMALS};
+    [TASK_NORMAL_VIEW] = 1u << TASK_NUMBER | 1u << TASK_NORMALS,
+    [TASK_POSITION_GZIP] = 1u << TASK_POSITIONS};
 
 /* The order in which each share takes the tasks: one starts the longest chain (the
- * numbering, then the index codec, sequential by its format), the other the normals, which
- * the index side does not read; each then takes what is left. */
+ * numbering, then the index codec, sequential by its format, and its gzip parts), the other
+ * the normals, which the index side does not read, then the vertex views; each then takes
+ * what is left. The normals and both vertex views outweigh the index side on a large
+ * mesh (docs/performance.md), so the positions' gzip part is a task of its own, which the
+ * index side takes once done. */
 static const int task_order[2][TASK_COUNT] = {
-    {TASK_NUMBER, TASK_INDEX, TASK_POSITIONS, TASK_NORMALS, TASK_NORMAL_VIEW},
-    {TASK_NORMALS, TASK_POSITIONS, TASK_NORMAL_VIEW, TASK_NUMBER, TASK_INDEX}};
+    {TASK_NUMBER, TASK_INDEX, TASK_POSITION_GZIP, TASK_POSITIONS, TASK_NORMALS, TASK_NORMAL_VIEW},
+    {TASK_NORMALS, TASK_POSITIONS, TASK_NORMAL_VIEW, TASK_POSITION_GZIP, TASK_NUMBER, TASK_INDEX}};
 
 /* The gzip member's parts, in the glb's order: the container's head (deflated last, when
  * its JSON is known), the vertex views, the index view's header and codes (matched: the
@@ -340,12 +344,17 @@ typedef struct pack_job {
 } pack_job;
 
 /* A stream's packed bytes padded with zeros to 4, as the BIN chunk holds them (the codec's
- * bound leaves 4 bytes of room), and, when gzipping, deflated as its part (or two). */
-static void finish_view(pack_job *job, int view_index, int part)
+ * bound leaves 4 bytes of room). */
+static void pad_view(view *v)
+{
+    memset(v->packed + v->packed_length, 0, proto_glb_pad4(v->packed_length) - v->packed_length);
+}
+
+/* A padded stream deflated as its gzip part (or two), when gzipping. */
+static void deflate_view(pack_job *job, int view_index, int part)
 {
     view *v = &job->q->views[view_index];
     size_t padded = proto_glb_pad4(v->packed_length);
-    memset(v->packed + v->packed_length, 0, padded - v->packed_length);
     if (!job->run->gzip)
         return;
     proto_deflate *d = &job->parts[part];
@@ -373,7 +382,8 @@ static int run_task(pack_job *job, int task, iso_error *err)
         return 0;
     case TASK_INDEX:
         encode_view(&q->views[VIEW_INDEX]);
-        finish_view(job, VIEW_INDEX, PART_INDEX_CODES);
+        pad_view(&q->views[VIEW_INDEX]);
+        deflate_view(job, VIEW_INDEX, PART_INDEX_CODES);
         return 0;
     case TASK_NORMALS: {
         int rc = job->run->make_normals ? job->run->make_normals(job->run->context, job->shares > 1 ? 1 : job->opt->threads, err) : 0;
@@ -386,7 +396,10 @@ static int run_task(pack_job *job, int task, iso_error *err)
         position_grid(mesh, job->opt->position_bits, q);
         quantize_positions(mesh, job->order, q, job->positions);
         encode_view(&q->views[VIEW_POSITION]);
-        finish_view(job, VIEW_POSITION, PART_POSITIONS);
+        pad_view(&q->views[VIEW_POSITION]);
+        return 0;
+    case TASK_POSITION_GZIP:
+        deflate_view(job, VIEW_POSITION, PART_POSITIONS);
         return 0;
     case TASK_NORMAL_VIEW:
         if (!q->normals)
@@ -397,7 +410,8 @@ static int run_task(pack_job *job, int task, iso_error *err)
             return iso_error_set(err, ISO_E_ARGUMENT, "mesh has a non-finite normal");
         quantize_normals(mesh, job->order, job->opt->normal_bits, job->normals);
         encode_view(&q->views[VIEW_NORMAL]);
-        finish_view(job, VIEW_NORMAL, PART_NORMALS);
+        pad_view(&q->views[VIEW_NORMAL]);
+        deflate_view(job, VIEW_NORMAL, PART_NORMALS);
         return 0;
     }
     return 0;
