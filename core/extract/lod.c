@@ -348,10 +348,11 @@ static double value_at(lod *c, const double x[3])
     }
     /* A centre's root finder evaluates one data cell many times over. */
     if (c->corner_stamp != c->stamp || memcmp(cell, c->corner_cell, sizeof cell)) {
-        for (int k = 0; k < 8; k++) {
-            uint32_t p[3] = {cell[0] + (k & 1), cell[1] + ((k >> 1) & 1), cell[2] + ((k >> 2) & 1)};
-            c->corner[k] = sample(c, p);
-        }
+        /* Read straight from the volume: most of a centre's cells are read once. */
+        size_t at = ((size_t)cell[2] * c->dims[1] + cell[1]) * c->dims[0] + cell[0], dy = c->dims[0],
+               dz = (size_t)c->dims[0] * c->dims[1];
+        for (int k = 0; k < 8; k++)
+            c->corner[k] = iso_vol_sample(c->vol, at + (size_t)(k & 1) + (size_t)(k >> 1 & 1) * dy + (size_t)(k >> 2 & 1) * dz);
         memcpy(c->corner_cell, cell, sizeof cell);
         c->corner_stamp = c->stamp;
     }
