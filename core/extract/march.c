@@ -1042,13 +1042,14 @@ static int marks_of(const march_job *job, const uint32_t b[3], float level, uint
     static const unsigned upper_half[3] = {0xAA, 0xCC, 0xF0};
     const iso_bricks *g = job->bricks;
     size_t at = ((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0];
-    unsigned have = blocks_of(job, b), own = job->marked[at] & have, reach = 0;
+    unsigned mark = job->marked[at];
     int active = g->min[at] <= level && g->max[at] > level;
+    if (!mark && !active)
+        return 0; /* most bricks: decided before their blocks are counted */
+    unsigned have = blocks_of(job, b), own = mark & have, reach = 0;
     lower[0] = (uint8_t)own;
     if (own == have)
         return 1;
-    if (!own && !active)
-        return 0;
     for (int k = 1; k < 8; k++) {
         uint32_t o[3] = {k & 1, k >> 1 & 1, k >> 2 & 1};
         lower[k] = 0;
