@@ -19,7 +19,9 @@ ISO_BENCH_SECONDS sets each wrk run's length (default 6).
 First, the server's side of an uncached CThead skin request per codec (Draco; meshopt with
 and without gzip accepted), the binaries up at once and asked in turn: extraction,
 normals (and their ratio to the extraction), encoding, gzip, their total and its ratio to the
-extraction (medians of the per-request ratios). ISO_BENCH_ONLY=split
+extraction (medians of the per-request ratios). Where the server overlaps steps (meshopt:
+the index view beside the normals, gzip beside the encode), each header counts from the end
+of the step before, so the total is still the request's time. ISO_BENCH_ONLY=split
 runs that alone (bench/results/http_split.json)."""
 
 import http.client
