@@ -494,14 +494,18 @@ static int probe(const iso_mesh_grid *ix, const double p[3], double stop, search
     double r = sqrt(stop);
     r = r < g->h ? r : g->h; /* most samples lie much nearer than the maximum */
     int lo[3], hi[3], c[3];
-    for (int a = 0; a < 3; a++) {
-        lo[a] = cell_of(g, p[a] - r, a), hi[a] = cell_of(g, p[a] + r, a), c[a] = cell_of(g, p[a], a);
-        if (hi[a] - lo[a] >= PROBE_CELLS)
-            return 0;
-    }
+    for (int a = 0; a < 3; a++)
+        c[a] = cell_of(g, p[a], a);
+    /* The box p +- r, r at most a cell, spans at most PROBE_CELLS cells a side: p's own
+     * cell, which settles most samples, is tried before the box's range is found. */
     size_t own = cell_index(g, c[0], c[1], c[2]);
     if (probe_cell(ix, own, p, stop, s))
         return 1;
+    for (int a = 0; a < 3; a++) {
+        lo[a] = cell_of(g, p[a] - r, a), hi[a] = cell_of(g, p[a] + r, a);
+        if (hi[a] - lo[a] >= PROBE_CELLS)
+            return 0;
+    }
     for (int k = lo[2]; k <= hi[2]; k++)
         for (int j = lo[1]; j <= hi[1]; j++)
             for (int i = lo[0]; i <= hi[0]; i++) {
