@@ -302,24 +302,30 @@ static size_t number_by_first_use(const iso_mesh *mesh, uint32_t *seen, uint32_t
 }
 
 /* The encode as tasks for up to two threads (the caller's and one helper, see run()). */
-enum { TASK_NUMBER, TASK_INDEX, TASK_NORMALS, TASK_POSITIONS, TASK_NORMAL_VIEW, TASK_POSITION_GZIP, TASK_COUNT };
+enum { TASK_NUMBER, TASK_INDEX, TASK_NORMALS, TASK_POSITIONS, TASK_NORMAL_VIEW, TASK_POSITION_GZIP,
+       TASK_INDEX_CODES_GZIP, TASK_INDEX_DATA_GZIP, TASK_COUNT };
 
 /* What each task reads that another makes: the index view and both vertex views need the
- * numbering, the normal view needs the normals, the positions' gzip part their view. */
+ * numbering, the normal view needs the normals, the gzip parts of the positions and the
+ * index their views. */
 static const unsigned task_needs[TASK_COUNT] = {
     [TASK_INDEX] = 1u << TASK_NUMBER, [TASK_POSITIONS] = 1u << TASK_NUMBER,
     [TASK_NORMAL_VIEW] = 1u << TASK_NUMBER | 1u << TASK_NORMALS,
-    [TASK_POSITION_GZIP] = 1u << TASK_POSITIONS};
+    [TASK_POSITION_GZIP] = 1u << TASK_POSITIONS, [TASK_INDEX_CODES_GZIP] = 1u << TASK_INDEX,
+    [TASK_INDEX_DATA_GZIP] = 1u << TASK_INDEX};
 
 /* The order in which each share takes the tasks: one starts the longest chain (the
  * numbering, then the index codec, sequential by its format, and its gzip parts), the other
  * the normals, which the index side does not read, then the vertex views; each then takes
- * what is left. The normals and both vertex views outweigh the index side on a large
- * mesh (docs/performance.md), so the positions' gzip part is a task of its own, which the
- * index side takes once done. */
+ * what is left. The gzip parts of the positions and the index are tasks of their own, so
+ * that whichever share is done first takes them: with tricubic normals the index side
+ * ends first and takes the positions' (docs/performance.md), with cheaper normals the other
+ * share takes the index's. */
 static const int task_order[2][TASK_COUNT] = {
-    {TASK_NUMBER, TASK_INDEX, TASK_POSITION_GZIP, TASK_POSITIONS, TASK_NORMALS, TASK_NORMAL_VIEW},
-    {TASK_NORMALS, TASK_POSITIONS, TASK_NORMAL_VIEW, TASK_POSITION_GZIP, TASK_NUMBER, TASK_INDEX}};
+    {TASK_NUMBER, TASK_INDEX, TASK_INDEX_CODES_GZIP, TASK_INDEX_DATA_GZIP, TASK_POSITION_GZIP, TASK_POSITIONS,
+     TASK_NORMALS, TASK_NORMAL_VIEW},
+    {TASK_NORMALS, TASK_POSITIONS, TASK_NORMAL_VIEW, TASK_POSITION_GZIP, TASK_INDEX_DATA_GZIP,
+     TASK_INDEX_CODES_GZIP, TASK_NUMBER, TASK_INDEX}};
 
 /* The gzip member's parts, in the glb's order: the container's head (deflated last, when
  * its JSON is known), the vertex views, the index view's header and codes (matched: the
@@ -350,23 +356,20 @@ static void pad_view(view *v)
     memset(v->packed + v->packed_length, 0, proto_glb_pad4(v->packed_length) - v->packed_length);
 }
 
-/* A padded stream deflated as its gzip part (or two), when gzipping. */
+/* A padded stream's gzip part, when gzipping: the whole of a vertex view; the index view's
+ * header and codes (a header byte, a code byte per triangle) or the rest. */
 static void deflate_view(pack_job *job, int view_index, int part)
 {
     view *v = &job->q->views[view_index];
-    size_t padded = proto_glb_pad4(v->packed_length);
+    size_t padded = proto_glb_pad4(v->packed_length), codes = 1 + job->mesh->triangle_count;
     if (!job->run->gzip)
         return;
     proto_deflate *d = &job->parts[part];
-    if (part == PART_INDEX_CODES) { /* a header byte, a code byte per triangle */
-        size_t codes = 1 + job->mesh->triangle_count;
-        d->in = v->packed, d->size = codes;
-        proto_deflate_run(d);
-        d = &job->parts[PART_INDEX_DATA];
-        d->in = v->packed + codes, d->size = padded - codes;
-    } else {
-        d->in = v->packed, d->size = padded;
-    }
+    d->in = v->packed, d->size = padded;
+    if (part == PART_INDEX_CODES)
+        d->size = codes;
+    else if (part == PART_INDEX_DATA)
+        d->in += codes, d->size -= codes;
     proto_deflate_run(d);
 }
 
@@ -383,7 +386,12 @@ static int run_task(pack_job *job, int task, iso_error *err)
     case TASK_INDEX:
         encode_view(&q->views[VIEW_INDEX]);
         pad_view(&q->views[VIEW_INDEX]);
+        return 0;
+    case TASK_INDEX_CODES_GZIP:
         deflate_view(job, VIEW_INDEX, PART_INDEX_CODES);
+        return 0;
+    case TASK_INDEX_DATA_GZIP:
+        deflate_view(job, VIEW_INDEX, PART_INDEX_DATA);
         return 0;
     case TASK_NORMALS: {
         int rc = job->run->make_normals ? job->run->make_normals(job->run->context, job->shares > 1 ? 1 : job->opt->threads, err) : 0;
