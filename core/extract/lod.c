@@ -138,15 +138,15 @@ static void plan(lod *c, double tolerance)
         uint32_t b[3], first[3], m[3];
         brick_at(c, at, b);
         brick_blocks(c, b, first, m);
+        size_t base = block_index(c, first), row = c->blocks[0], plane = row * c->blocks[1];
         for (uint32_t z = 0; z < m[2]; z++)
             for (uint32_t y = 0; y < m[1]; y++)
                 for (uint32_t x = 0; x < m[0]; x++) {
-                    uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
                     int l;
                     for (l = ISO_TREE_BLOCK_LEVELS; l > 0; l--)
                         if (iso_tree_block_error(tree, at, (int)(x | y << 1 | z << 2), l) <= tolerance)
                             break;
-                    c->shift[block_index(c, q)] = (uint8_t)l;
+                    c->shift[base + x + y * row + z * plane] = (uint8_t)l;
                 }
     }
 }
@@ -1003,30 +1003,21 @@ static int march_brick(lod *c, const uint32_t b[3], iso_error *err)
     return 0;
 }
 
-/* The blocks of brick b with stride 1, bit x | y << 1 | z << 2 (march.h's marks). */
-static unsigned fine_blocks(const lod *c, const uint32_t b[3])
+/* Brick b's blocks' strides (log2) into s by march.h's bit k = x | y << 1 | z << 2 (its
+ * block at x, y, z); returns the bits of the blocks it has. */
+static unsigned brick_shifts(const lod *c, const uint32_t b[3], uint8_t s[8])
 {
     uint32_t first[3], m[3];
     brick_blocks(c, b, first, m);
-    unsigned fine = 0;
-    for (uint32_t z = 0; z < m[2]; z++)
-        for (uint32_t y = 0; y < m[1]; y++)
-            for (uint32_t x = 0; x < m[0]; x++) {
-                uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
-                fine |= (unsigned)(c->shift[block_index(c, q)] == 0) << (x | y << 1 | z << 2);
-            }
-    return fine;
-}
-
-/* The blocks brick b has (march.h's bits). */
-static unsigned brick_has(const lod *c, const uint32_t b[3])
-{
-    uint32_t first[3], m[3];
-    brick_blocks(c, b, first, m);
+    size_t base = block_index(c, first), row = c->blocks[0], plane = row * c->blocks[1];
     unsigned have = 0;
-    for (unsigned k = 0; k < 8; k++)
-        if ((k & 1) < m[0] && (k >> 1 & 1) < m[1] && (k >> 2 & 1) < m[2])
+    for (unsigned k = 0; k < 8; k++) {
+        unsigned x = k & 1, y = k >> 1 & 1, z = k >> 2;
+        if (x < m[0] && y < m[1] && z < m[2]) {
+            s[k] = c->shift[base + x + y * row + z * plane];
             have |= 1u << k;
+        }
+    }
     return have;
 }
 
@@ -1037,51 +1028,49 @@ static unsigned brick_has(const lod *c, const uint32_t b[3])
  * box (Lemma 1, tree.h), so every fine sample of it is on that side too, none of them read. */
 static int box_clear_of_level(const lod *c, const uint32_t lo[3], const uint32_t hi[3], uint32_t stride, double error)
 {
+    /* The stride grid's coordinates per axis (at most ISO_TREE_BLOCK + 1), as offsets. */
+    size_t at[3][ISO_TREE_BLOCK + 1], step[3] = {1, c->dims[0], (size_t)c->dims[0] * c->dims[1]};
+    int n[3];
+    for (int d = 0; d < 3; d++) {
+        n[d] = 0;
+        for (uint32_t v = lo[d];; v = v + stride < hi[d] ? v + stride : hi[d]) {
+            at[d][n[d]++] = v * step[d];
+            if (v == hi[d])
+                break;
+        }
+    }
     double low = INFINITY, high = -INFINITY;
-    for (uint32_t z = lo[2];; z = z + stride < hi[2] ? z + stride : hi[2]) {
-        for (uint32_t y = lo[1];; y = y + stride < hi[1] ? y + stride : hi[1]) {
-            for (uint32_t x = lo[0];; x = x + stride < hi[0] ? x + stride : hi[0]) {
-                double v = iso_vol_sample(c->vol, ((size_t)z * c->dims[1] + y) * c->dims[0] + x);
+    for (int z = 0; z < n[2]; z++)
+        for (int y = 0; y < n[1]; y++)
+            for (int x = 0; x < n[0]; x++) {
+                double v = iso_vol_sample(c->vol, at[2][z] + at[1][y] + at[0][x]);
                 if (v != v)
                     return 0;
                 low = v < low ? v : low;
                 high = v > high ? v : high;
-                if (x == hi[0])
-                    break;
             }
-            if (y == hi[1])
-                break;
-        }
-        if (z == hi[2])
-            break;
-    }
     return low - error > c->level || high + error < c->level;
 }
 
-/* 1 if the level crosses none of brick b's coarse blocks (box_clear_of_level): marched at
+/* 1 if the level crosses none of brick b's coarse blocks (strides s and blocks `have` from
+ * brick_shifts; box_clear_of_level): marched at
  * stride 1 they would hold no crossing either. A brick at stride 8 whole is never clear:
  * it is only planned so when its min and max hold the level. */
-static int coarse_blocks_clear(const lod *c, size_t at, const uint32_t b[3])
+static int coarse_blocks_clear(const lod *c, size_t at, const uint32_t b[3], const uint8_t s[8], unsigned have)
 {
-    uint32_t first[3], m[3];
-    brick_blocks(c, b, first, m);
-    if (c->shift[block_index(c, first)] == ISO_TREE_LEVELS)
+    if (s[0] == ISO_TREE_LEVELS)
         return 0;
-    for (uint32_t z = 0; z < m[2]; z++)
-        for (uint32_t y = 0; y < m[1]; y++)
-            for (uint32_t x = 0; x < m[0]; x++) {
-                uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z}, lo[3], hi[3];
-                unsigned l = c->shift[block_index(c, q)];
-                if (!l)
-                    continue;
-                for (int d = 0; d < 3; d++) {
-                    lo[d] = q[d] * ISO_TREE_BLOCK;
-                    hi[d] = lo[d] + ISO_TREE_BLOCK < c->dims[d] - 1 ? lo[d] + ISO_TREE_BLOCK : c->dims[d] - 1;
-                }
-                double error = iso_tree_block_error(c->tree, at, (int)(x | y << 1 | z << 2), (int)l);
-                if (!box_clear_of_level(c, lo, hi, 1u << l, error))
-                    return 0;
-            }
+    for (unsigned k = 0; k < 8; k++) {
+        if (!(have >> k & 1) || !s[k])
+            continue;
+        uint32_t lo[3], hi[3];
+        for (int d = 0; d < 3; d++) {
+            lo[d] = (BLOCKS_PER_BRICK * b[d] + (k >> d & 1)) * ISO_TREE_BLOCK;
+            hi[d] = lo[d] + ISO_TREE_BLOCK < c->dims[d] - 1 ? lo[d] + ISO_TREE_BLOCK : c->dims[d] - 1;
+        }
+        if (!box_clear_of_level(c, lo, hi, 1u << s[k], iso_tree_block_error(c->tree, at, (int)k, s[k])))
+            return 0;
+    }
     return 1;
 }
 
@@ -1103,8 +1092,11 @@ static int mark_fine(const lod *c, int prove, int no_minmax, uint8_t *marked)
         size_t at = c->active[n];
         uint32_t b[3];
         brick_at(c, at, b);
-        unsigned have = brick_has(c, b), fine = fine_blocks(c, b);
-        if (fine != have && prove && coarse_blocks_clear(c, at, b))
+        uint8_t s[8];
+        unsigned have = brick_shifts(c, b, s), fine = 0;
+        for (unsigned k = 0; k < 8; k++)
+            fine |= (unsigned)((have >> k & 1) && !s[k]) << k;
+        if (fine != have && prove && coarse_blocks_clear(c, at, b, s, have))
             fine = have;
         marked[at] = (uint8_t)(fine == have ? 0xFF : fine);
         whole &= fine == have;
