@@ -80,12 +80,15 @@ static void to_world(const iso_volume *vol, iso_mesh *mesh)
         const __m128d s01 = _mm_set_pd(s1, s0), s20 = _mm_set_pd(s0, s2), s12 = _mm_set_pd(s2, s1);
         const __m128d o01 = _mm_set_pd(o1, o0), o20 = _mm_set_pd(o0, o2), o12 = _mm_set_pd(o2, o1);
         for (; v + 2 <= mesh->vertex_count; v += 2, p += 6) {
-            __m128 a = _mm_loadu_ps(p), b = _mm_castpd_ps(_mm_load_sd((const double *)(p + 4)));
+            double last; /* the second vertex's y and z, as one 8-byte lane */
+            memcpy(&last, p + 4, sizeof last);
+            __m128 a = _mm_loadu_ps(p), b = _mm_castpd_ps(_mm_set_sd(last));
             __m128d xy = _mm_add_pd(o01, _mm_mul_pd(_mm_cvtps_pd(a), s01));
             __m128d zx = _mm_add_pd(o20, _mm_mul_pd(_mm_cvtps_pd(_mm_movehl_ps(a, a)), s20));
             __m128d yz = _mm_add_pd(o12, _mm_mul_pd(_mm_cvtps_pd(b), s12));
             _mm_storeu_ps(p, _mm_movelh_ps(_mm_cvtpd_ps(xy), _mm_cvtpd_ps(zx)));
-            _mm_store_sd((double *)(p + 4), _mm_castps_pd(_mm_cvtpd_ps(yz)));
+            last = _mm_cvtsd_f64(_mm_castps_pd(_mm_cvtpd_ps(yz)));
+            memcpy(p + 4, &last, sizeof last);
         }
 #endif
         for (; v < mesh->vertex_count; v++, p += 3) {
