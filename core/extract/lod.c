@@ -186,42 +186,14 @@ static void unit_box(lod *c, const uint32_t first[3], const uint32_t m[3])
     }
 }
 
-/* The strides of the lattice sets in the brick at hand's closed box (m[] blocks from block
- * first[]), by where a set lies per axis (class: a block plane, or strictly inside a
- * block; classes counted from the brick's low corner, so a block's classes are a window of
- * the brick's): the finest of the blocks holding it, whose closed boxes are [4i, 4i + 4]
- * per axis. With a cap, a set on the volume's border has stride 1: the cap's cells are
- * data cells. Made once per brick, on its first unit with samples on both sides. */
-static void brick_around(lod *c, const uint32_t first[3], const uint32_t m[3])
+/* brick_around's minima over near[] (the block strides around the brick): class k along
+ * an axis is held by near's entries (k + 1) / 2 to k / 2 + 1, both sides of a plane (k
+ * even), the block itself inside it (k odd, one entry). The minimum over those, one axis at
+ * a time. */
+static void around_minima(lod *c, const uint8_t near[][BLOCKS_PER_BRICK + 2][BLOCKS_PER_BRICK + 2])
 {
     enum { N = BLOCKS_PER_BRICK + 2, K = UNIT_CLASSES };
-    /* The blocks from first - 1 to first + m per axis, ISO_TREE_LEVELS where there is none
-     * (past first + m too: those entries only make classes past the brick's, unread). */
-    uint8_t near[N][N][N];
-    int have[3][N];
-    for (int d = 0; d < 3; d++)
-        for (uint32_t x = 0; x < N; x++)
-            /* first + x - 1 as unsigned: the block before 0 wraps past the grid */
-            have[d][x] = x < m[d] + 2 && first[d] + x - 1 < c->blocks[d];
-    for (uint32_t z = 0; z < N; z++)
-        for (uint32_t y = 0; y < N; y++) {
-            size_t row = ((size_t)(first[2] + z - 1) * c->blocks[1] + (first[1] + y - 1)) * c->blocks[0] + first[0];
-            for (uint32_t x = 0; x < N; x++)
-                near[z][y][x] = have[2][z] && have[1][y] && have[0][x] ? c->shift[row + x - 1] : ISO_TREE_LEVELS;
-        }
-    for (int d = 0; d < 3; d++) {
-        for (uint32_t r = 0; r < c->n[d]; r++)
-            c->point_class[d][r] = (uint8_t)(r == c->n[d] - 1 ? 2 * m[d] : r / ISO_TREE_BLOCK * 2 + (r % ISO_TREE_BLOCK != 0));
-        for (uint32_t r = 0; r + 1 < c->n[d]; r++)
-            c->span_class[d][r] = (uint8_t)(r / ISO_TREE_BLOCK * 2 + 1);
-    }
-    /* Class k along an axis is held by near's entries (k + 1) / 2 to k / 2 + 1: both sides
-     * of a plane (k even), the block itself inside it (k odd, one entry). The minimum over
-     * those, one axis at a time. */
     uint8_t along_x[N][N][K], along_y[N][K][K];
-    uint32_t P[3];
-    for (int d = 0; d < 3; d++)
-        P[d] = 2 * m[d] + 1;
     for (uint32_t z = 0; z < N; z++)
         for (uint32_t y = 0; y < N; y++)
             for (uint32_t k = 0; k < K; k++) {
@@ -240,14 +212,63 @@ static void brick_around(lod *c, const uint32_t first[3], const uint32_t m[3])
                 uint8_t a = along_y[(kz + 1) / 2][ky][kx], b = along_y[kz / 2 + 1][ky][kx];
                 c->around[kz][ky][kx] = a < b ? a : b;
             }
+}
+
+/* The strides of the lattice sets in the brick at hand's closed box (m[] blocks from block
+ * first[]), by where a set lies per axis (class: a block plane, or strictly inside a
+ * block; classes counted from the brick's low corner, so a block's classes are a window of
+ * the brick's): the finest of the blocks holding it, whose closed boxes are [4i, 4i + 4]
+ * per axis. With a cap, a set on the volume's border has stride 1: the cap's cells are
+ * data cells. Made once per brick, on its first unit with samples on both sides. */
+static void brick_around(lod *c, const uint32_t first[3], const uint32_t m[3])
+{
+    enum { N = BLOCKS_PER_BRICK + 2 };
+    /* The blocks from first - 1 to first + m per axis, ISO_TREE_LEVELS where there is none
+     * (past first + m too: those entries only make classes past the brick's, unread). */
+    uint8_t near[N][N][N];
+    int have[3][N];
+    for (int d = 0; d < 3; d++)
+        for (uint32_t x = 0; x < N; x++)
+            /* first + x - 1 as unsigned: the block before 0 wraps past the grid */
+            have[d][x] = x < m[d] + 2 && first[d] + x - 1 < c->blocks[d];
+    unsigned low = ISO_TREE_LEVELS, high = 0; /* near's least and largest strides */
+    for (uint32_t z = 0; z < N; z++)
+        for (uint32_t y = 0; y < N; y++) {
+            uint8_t *out = near[z][y];
+            if (!have[2][z] || !have[1][y]) {
+                memset(out, ISO_TREE_LEVELS, N);
+                high = ISO_TREE_LEVELS;
+                continue;
+            }
+            const uint8_t *shift =
+                c->shift + ((size_t)(first[2] + z - 1) * c->blocks[1] + (first[1] + y - 1)) * c->blocks[0] + first[0] - 1;
+            for (uint32_t x = 0; x < N; x++) {
+                out[x] = have[0][x] ? shift[x] : ISO_TREE_LEVELS;
+                low = out[x] < low ? out[x] : low;
+                high = out[x] > high ? out[x] : high;
+            }
+        }
+    for (int d = 0; d < 3; d++) {
+        for (uint32_t r = 0; r < c->n[d]; r++)
+            c->point_class[d][r] = (uint8_t)(r == c->n[d] - 1 ? 2 * m[d] : r / ISO_TREE_BLOCK * 2 + (r % ISO_TREE_BLOCK != 0));
+        for (uint32_t r = 0; r + 1 < c->n[d]; r++)
+            c->span_class[d][r] = (uint8_t)(r / ISO_TREE_BLOCK * 2 + 1);
+    }
+    /* One stride all round (a stride-8 brick among its like, the preview's common case):
+     * every minimum is that stride. */
+    if (low == high)
+        memset(c->around, (int)low, sizeof c->around);
+    else
+        around_minima(c, (const uint8_t(*)[N][N])near);
     /* With a cap, the sets on the volume's border. */
     for (int d = 0; d < 3 && c->cap; d++) {
-        uint32_t ends[2] = {first[d] == 0 ? 0 : UINT32_MAX, first[d] + m[d] == c->blocks[d] ? P[d] - 1 : UINT32_MAX};
+        uint32_t P[2] = {2 * m[(d + 1) % 3] + 1, 2 * m[(d + 2) % 3] + 1};
+        uint32_t ends[2] = {first[d] == 0 ? 0 : UINT32_MAX, first[d] + m[d] == c->blocks[d] ? 2 * m[d] : UINT32_MAX};
         for (int e = 0; e < 2; e++) {
             if (ends[e] == UINT32_MAX)
                 continue;
-            for (uint32_t i = 0; i < P[(d + 1) % 3]; i++)
-                for (uint32_t j = 0; j < P[(d + 2) % 3]; j++) {
+            for (uint32_t i = 0; i < P[0]; i++)
+                for (uint32_t j = 0; j < P[1]; j++) {
                     uint32_t k[3];
                     k[d] = ends[e];
                     k[(d + 1) % 3] = i;
