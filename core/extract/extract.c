@@ -3,7 +3,7 @@
  *
  * PASS 1 (surface): at tolerance 0 the exact brick kernel (march.c): marching cubes over
  *   the bricks whose [min, max] holds the level, every crossing computed once. Above it,
- *   the bricks on their own coarse grids joined by transition cells (lod.c), in index
+ *   the bricks on their own coarse grids joined by transition cells (lod.h), in index
  *   space.
  * PASS 2 (cap, if asked): the cells between the volume's border samples and a virtual
  *   layer below every level around it, welded on in index space.

@@ -14,22 +14,23 @@
  *   the same surface at stride 1) on the request's threads; it also numbers the crossings
  *   of the edges such a block shares with a brick that owns them (the brick's own coarse
  *   blocks, or a ghost).
- * PASS 3 (coarse): the bricks with a coarse block in grid order, each classified once,
- *   then unit after unit (the brick at stride 8, or its coarse blocks at their strides;
- *   a unit whose samples all lie on one side is skipped), cell after cell of the unit's
- *   grid. Every lattice set (a face, edge or line of a block's closed
- *   box, or the open part of one inside a block) has a stride of its own, the finest of
- *   the blocks that hold it (with a cap, the volume's border counts as stride 1). A cell
- *   whose faces, and the edges and lines in them, all have its stride is a regular cell:
- *   marching cubes (mc.h) on its 8 corners. Any other cell is a transition cell: each face
- *   is cut into regions, one per block face it spans, each region into squares of its own
- *   stride, each square's sides split at the strides of the sets they run along; each
- *   such polygon gets mc.h's face rule (a run of inside corners is cut off by a segment
- *   from the side where it is left to the side where it was entered); the segments chain
- *   into closed loops on the cell's boundary, each fanned around a centre placed on
- *   f = level (a loop of three is one triangle). A crossing is named by its lattice
- *   segment (low end, axis, length), so a vertex shared by cells is made once; on a data
- *   edge the kernel's vertex is used where PASS 2 made one.
+ * PASS 3 (coarse; coarse.c, the others lod.c, whose extract() runs them in this order):
+ *   the bricks with a coarse block in grid order, each classified once, then unit after
+ *   unit (the brick at stride 8, or its coarse blocks at their strides; a unit whose
+ *   samples all lie on one side is skipped), cell after cell of the unit's grid. Every
+ *   lattice set (a face, edge or line of a block's closed box, or the open part of one
+ *   inside a block) has a stride of its own, the finest of the blocks that hold it (with a
+ *   cap, the volume's border counts as stride 1). A cell whose faces, and the edges and
+ *   lines in them, all have its stride is a regular cell: marching cubes (mc.h) on its 8
+ *   corners. Any other cell is a transition cell: each face is cut into regions, one per
+ *   block face it spans, each region into squares of its own stride, each square's sides
+ *   split at the strides of the sets they run along; each such polygon gets mc.h's face
+ *   rule (a run of inside corners is cut off by a segment from the side where it is left to
+ *   the side where it was entered); the segments chain into closed loops on the cell's
+ *   boundary, each fanned around a centre placed on f = level (a loop of three is one
+ *   triangle). A crossing is named by its lattice segment (low end, axis, length), so a
+ *   vertex shared by cells is made once; on a data edge the kernel's vertex is used where
+ *   PASS 2 made one.
  *
  * The value bound: a crossing on a lattice segment of stride 2^l lies on a grid edge of a
  * block (or, at stride 8, a brick) at level l, where |f - T_l| <= err_l <= tolerance
