@@ -74,14 +74,20 @@ static inline void lanes_push3(lanes *l, uint32_t e0, uint32_t e1, uint32_t e2)
     LANES_SHIFT_IN(l, 3, _mm_set_epi32(0, (int)e2, (int)e1, (int)e0));
 }
 
+/* The 16 lanes of four compares' results (all ones or zero, entries 0..15 in order) as
+ * a 16-bit mask: packed down to bytes (saturation keeps -1 and 0) and one movemask, not
+ * four movemasks shifted into place. */
+static inline unsigned mask16(__m128i c0, __m128i c1, __m128i c2, __m128i c3)
+{
+    return (unsigned)_mm_movemask_epi8(_mm_packs_epi16(_mm_packs_epi32(c0, c1), _mm_packs_epi32(c2, c3)));
+}
+
 /* Bit k set where entry k equals x. */
 static inline unsigned lanes_match(const lanes *l, uint32_t x)
 {
     __m128i k = _mm_set1_epi32((int)x);
-    unsigned m = 0;
-    for (int q = 0; q < 4; q++)
-        m |= (unsigned)_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(l->v[q], k))) << 4 * q;
-    return m;
+    return mask16(_mm_cmpeq_epi32(l->v[0], k), _mm_cmpeq_epi32(l->v[1], k), _mm_cmpeq_epi32(l->v[2], k),
+                  _mm_cmpeq_epi32(l->v[3], k));
 }
 #else
 typedef struct lanes {
@@ -158,13 +164,11 @@ static inline int edge_find(const edges *e, uint32_t a, uint32_t b, uint32_t c)
     unsigned ab, bc, ca;
 #if MESHOPT_SSE2
     __m128i va = _mm_set1_epi32((int)a), vb = _mm_set1_epi32((int)b), vc = _mm_set1_epi32((int)c);
-    ab = bc = ca = 0;
-    for (int k = 0; k < 4; k++) {
-        __m128i f = e->from.v[k], t = e->to.v[k];
-        ab |= (unsigned)_mm_movemask_ps(_mm_castsi128_ps(_mm_and_si128(_mm_cmpeq_epi32(f, va), _mm_cmpeq_epi32(t, vb)))) << 4 * k;
-        bc |= (unsigned)_mm_movemask_ps(_mm_castsi128_ps(_mm_and_si128(_mm_cmpeq_epi32(f, vb), _mm_cmpeq_epi32(t, vc)))) << 4 * k;
-        ca |= (unsigned)_mm_movemask_ps(_mm_castsi128_ps(_mm_and_si128(_mm_cmpeq_epi32(f, vc), _mm_cmpeq_epi32(t, va)))) << 4 * k;
-    }
+#define EDGE_EQ(k, x, y) _mm_and_si128(_mm_cmpeq_epi32(e->from.v[k], x), _mm_cmpeq_epi32(e->to.v[k], y))
+    ab = mask16(EDGE_EQ(0, va, vb), EDGE_EQ(1, va, vb), EDGE_EQ(2, va, vb), EDGE_EQ(3, va, vb));
+    bc = mask16(EDGE_EQ(0, vb, vc), EDGE_EQ(1, vb, vc), EDGE_EQ(2, vb, vc), EDGE_EQ(3, vb, vc));
+    ca = mask16(EDGE_EQ(0, vc, va), EDGE_EQ(1, vc, va), EDGE_EQ(2, vc, va), EDGE_EQ(3, vc, va));
+#undef EDGE_EQ
 #else
     ab = lanes_match(&e->from, a) & lanes_match(&e->to, b);
     bc = lanes_match(&e->from, b) & lanes_match(&e->to, c);
