@@ -110,6 +110,48 @@ static unsigned brick_shifts(const lod *c, const uint32_t b[3], uint8_t s[8])
     return have;
 }
 
+/* The stride grid's coordinates per axis (at most ISO_TREE_BLOCK + 1, as sample offsets)
+ * and their counts, read by grid_range_as. */
+typedef struct stride_grid {
+    size_t at[3][ISO_TREE_BLOCK + 1];
+    int n[3];
+} stride_grid;
+
+/* The lowest and highest sample of grid g, 0 if one is NaN. With a constant type the
+ * sample's switch folds away, and integer samples skip the NaN test. */
+static inline __attribute__((always_inline)) int grid_range_as(const void *data, iso_voxel_type type,
+                                                               const stride_grid *g, double *lo, double *hi)
+{
+    double low = INFINITY, high = -INFINITY;
+    for (int z = 0; z < g->n[2]; z++)
+        for (int y = 0; y < g->n[1]; y++)
+            for (int x = 0; x < g->n[0]; x++) {
+                double v = iso_vol_sample_as(data, type, g->at[2][z] + g->at[1][y] + g->at[0][x]);
+                if ((type == ISO_F32 || type == ISO_F64) && v != v)
+                    return 0;
+                low = v < low ? v : low;
+                high = v > high ? v : high;
+            }
+    *lo = low;
+    *hi = high;
+    return 1;
+}
+
+static int grid_range(const iso_volume *vol, const stride_grid *g, double *lo, double *hi)
+{
+    switch (vol->type) {
+    case ISO_U8: return grid_range_as(vol->data, ISO_U8, g, lo, hi);
+    case ISO_I8: return grid_range_as(vol->data, ISO_I8, g, lo, hi);
+    case ISO_U16: return grid_range_as(vol->data, ISO_U16, g, lo, hi);
+    case ISO_I16: return grid_range_as(vol->data, ISO_I16, g, lo, hi);
+    case ISO_U32: return grid_range_as(vol->data, ISO_U32, g, lo, hi);
+    case ISO_I32: return grid_range_as(vol->data, ISO_I32, g, lo, hi);
+    case ISO_F32: return grid_range_as(vol->data, ISO_F32, g, lo, hi);
+    case ISO_F64: return grid_range_as(vol->data, ISO_F64, g, lo, hi);
+    }
+    return 0;
+}
+
 /* 1 if the level crosses no cell of the box lo..hi (inclusive samples) at `stride`, whose
  * fit error there is `error`: the stride grid's samples (the last per axis at hi, as the
  * levels are built) all lie farther than the error from the level, on one side. The fit
@@ -117,27 +159,19 @@ static unsigned brick_shifts(const lod *c, const uint32_t b[3], uint8_t s[8])
  * box (Lemma 1, tree.h), so every fine sample of it is on that side too, none of them read. */
 static int box_clear_of_level(const lod *c, const uint32_t lo[3], const uint32_t hi[3], uint32_t stride, double error)
 {
-    /* The stride grid's coordinates per axis (at most ISO_TREE_BLOCK + 1), as offsets. */
-    size_t at[3][ISO_TREE_BLOCK + 1], step[3] = {1, c->dims[0], (size_t)c->dims[0] * c->dims[1]};
-    int n[3];
+    stride_grid g;
+    size_t step[3] = {1, c->dims[0], (size_t)c->dims[0] * c->dims[1]};
     for (int d = 0; d < 3; d++) {
-        n[d] = 0;
+        g.n[d] = 0;
         for (uint32_t v = lo[d];; v = v + stride < hi[d] ? v + stride : hi[d]) {
-            at[d][n[d]++] = v * step[d];
+            g.at[d][g.n[d]++] = v * step[d];
             if (v == hi[d])
                 break;
         }
     }
-    double low = INFINITY, high = -INFINITY;
-    for (int z = 0; z < n[2]; z++)
-        for (int y = 0; y < n[1]; y++)
-            for (int x = 0; x < n[0]; x++) {
-                double v = iso_vol_sample(c->vol, at[2][z] + at[1][y] + at[0][x]);
-                if (v != v)
-                    return 0;
-                low = v < low ? v : low;
-                high = v > high ? v : high;
-            }
+    double low, high;
+    if (!grid_range(c->vol, &g, &low, &high))
+        return 0;
     return low - error > c->level || high + error < c->level;
 }
 
