@@ -126,6 +126,38 @@ static inline unsigned popcount16(unsigned x)
     return (x + (x >> 8)) & 0x1fu;
 }
 
+/* Step 3's packed bits of a group at 2 or 4 bits a value (each capped at the all-ones
+ * sentinel, first value in the high bits); returns the end of the 4 or 8 bytes written. */
+static inline unsigned char *pack_group(unsigned char *data, const unsigned char *g, int bits)
+{
+#if MESHOPT_SSE2
+    /* Neighbours joined in 16-bit lanes (the first shifted up), then for 2 bits the pairs
+     * so made in 32-bit lanes, then the lanes narrowed to bytes. */
+    __m128i x = _mm_min_epu8(_mm_loadu_si128((const __m128i *)g), _mm_set1_epi8((char)((1 << bits) - 1)));
+    __m128i low16 = _mm_set1_epi16(0xff);
+    if (bits == 4) {
+        __m128i t = _mm_and_si128(_mm_or_si128(_mm_slli_epi16(x, 4), _mm_srli_epi16(x, 8)), low16);
+        _mm_storel_epi64((__m128i *)(void *)data, _mm_packus_epi16(t, t));
+        return data + 8;
+    }
+    __m128i t = _mm_and_si128(_mm_or_si128(_mm_slli_epi16(x, 2), _mm_srli_epi16(x, 8)), low16);
+    __m128i u = _mm_and_si128(_mm_or_si128(_mm_slli_epi32(t, 4), _mm_srli_epi32(t, 16)), _mm_set1_epi32(0xff));
+    __m128i w = _mm_packs_epi32(u, u);
+    uint32_t four = (uint32_t)_mm_cvtsi128_si32(_mm_packus_epi16(w, w));
+    memcpy(data, &four, 4);
+    return data + 4;
+#else
+    unsigned sentinel = (1u << bits) - 1;
+    for (int j = 0; j < GROUP; j += 8 / bits) {
+        unsigned byte = 0;
+        for (int k = 0; k < 8 / bits; k++)
+            byte = byte << bits | (g[j + k] < sentinel ? g[j + k] : sentinel);
+        *data++ = (unsigned char)byte;
+    }
+    return data;
+#endif
+}
+
 /* Steps 2 and 3 for one byte's deltas (count a multiple of 16). */
 static unsigned char *encode_bytes(unsigned char *data, const unsigned char *deltas, size_t count)
 {
@@ -151,14 +183,8 @@ static unsigned char *encode_bytes(unsigned char *data, const unsigned char *del
             memcpy(data, g, GROUP);
             data += GROUP;
         } else if (width) {
-            int bits = width == 1 ? 2 : 4, per_byte = 8 / bits;
-            unsigned sentinel = (1u << bits) - 1, whole = width == 1 ? over2 : over4;
-            for (int j = 0; j < GROUP; j += per_byte) {
-                unsigned byte = 0;
-                for (int k = 0; k < per_byte; k++)
-                    byte = byte << bits | (g[j + k] < sentinel ? g[j + k] : sentinel);
-                *data++ = (unsigned char)byte;
-            }
+            unsigned whole = width == 1 ? over2 : over4;
+            data = pack_group(data, g, width == 1 ? 2 : 4);
             for (; whole; whole &= whole - 1)
                 *data++ = g[__builtin_ctz(whole)];
         }
