@@ -1,8 +1,23 @@
 /* coarse.c: PASS 3 of the tolerance path (lod.h): a brick's coarse units (the brick at
  * stride 8, or its coarse blocks at their strides) cell after cell, regular cells by
- * marching cubes (mc.h) and transition cells (face squares, loops, centres, fans) where a
- * cell meets finer lattice sets; with the brick's sample cache and the vertex map that
- * makes a crossing shared by cells once. */
+ * marching cubes (mc.h) and transition cells where a cell meets finer lattice sets; with
+ * the brick's sample cache and the vertex map that makes a crossing shared by cells once.
+ * lod.c's extract() calls iso_coarse_brick per brick after PASS 2.
+ *
+ * Per brick (iso_coarse_brick, last in the file; callees come before their callers):
+ *   1. classify: the brick's samples above the level as bit rows (classify_whole), its
+ *      values cached on first use (sample);
+ *   2. units: the brick whole at stride 8, or block after block at its stride
+ *      (march_unit); a unit whose samples all lie on one side is skipped (box_mixed);
+ *   3. strides: once per brick, when its first mixed unit needs them, the stride of every
+ *      lattice set of its closed box (brick_around), which tells a regular cell from a
+ *      transition cell (unit_uniform, cell_is_regular);
+ *   4. cells: a regular cell by marching cubes (regular_cell); a transition cell
+ *      (transition_cell) by its face squares (face_segments, region_segments,
+ *      split_side, polygon_segments: mc.h's face rule), then its loops, each with a
+ *      centre on the level (place_centre, centre_root), fanned (fan_loops).
+ *   Every crossing is looked up by lattice segment (crossing, then the vertex map in
+ *   make_crossing), taking PASS 2's vertex on a data edge where it made one. */
 #include "lod_context.h"
 
 #include <math.h>

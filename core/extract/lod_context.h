@@ -44,6 +44,8 @@ typedef struct lod {
     size_t active_count;
     const iso_march_part *fine;   /* PASS 2's stride-1 blocks, marched by march.c */
     iso_mesh *mesh;
+    /* From here on PASS 3's (coarse.c) but error and cells, which PASS 2 starts; PASS 3
+     * grows map, segments and loop, and extract() frees them. */
     vertex_map map;
     double error;                 /* largest |f(v) - level| measured */
     size_t cells;
