@@ -110,11 +110,10 @@ static unsigned brick_shifts(const lod *c, const uint32_t b[3], uint8_t s[8])
     return have;
 }
 
-/* The stride grid's coordinates per axis (at most ISO_TREE_BLOCK + 1, as sample offsets)
- * and their counts, read by grid_range_as. */
+/* A box's stride grid (its samples lo, lo + stride, ... below hi, then hi, per axis, as
+ * the levels are built), as sample offsets: lo and hi per axis times the axis's step. */
 typedef struct stride_grid {
-    size_t at[3][ISO_TREE_BLOCK + 1];
-    int n[3];
+    size_t lo[3], hi[3], stride[3];
 } stride_grid;
 
 /* The lowest and highest sample of grid g, 0 if one is NaN. With a constant type the
@@ -123,15 +122,25 @@ static inline __attribute__((always_inline)) int grid_range_as(const void *data,
                                                                const stride_grid *g, double *lo, double *hi)
 {
     double low = INFINITY, high = -INFINITY;
-    for (int z = 0; z < g->n[2]; z++)
-        for (int y = 0; y < g->n[1]; y++)
-            for (int x = 0; x < g->n[0]; x++) {
-                double v = iso_vol_sample_as(data, type, g->at[2][z] + g->at[1][y] + g->at[0][x]);
+    for (size_t z = g->lo[2];; z = z + g->stride[2] < g->hi[2] ? z + g->stride[2] : g->hi[2]) {
+        for (size_t y = g->lo[1];; y = y + g->stride[1] < g->hi[1] ? y + g->stride[1] : g->hi[1]) {
+            size_t row = z + y;
+            for (size_t x = g->lo[0];; x += g->stride[0]) {
+                x = x < g->hi[0] ? x : g->hi[0];
+                double v = iso_vol_sample_as(data, type, row + x);
                 if ((type == ISO_F32 || type == ISO_F64) && v != v)
                     return 0;
                 low = v < low ? v : low;
                 high = v > high ? v : high;
+                if (x == g->hi[0])
+                    break;
             }
+            if (y == g->hi[1])
+                break;
+        }
+        if (z == g->hi[2])
+            break;
+    }
     *lo = low;
     *hi = high;
     return 1;
@@ -153,21 +162,18 @@ static int grid_range(const iso_volume *vol, const stride_grid *g, double *lo, d
 }
 
 /* 1 if the level crosses no cell of the box lo..hi (inclusive samples) at `stride`, whose
- * fit error there is `error`: the stride grid's samples (the last per axis at hi, as the
- * levels are built) all lie farther than the error from the level, on one side. The fit
- * through them stays within their range and f within the error of the fit over the whole
- * box (Lemma 1, tree.h), so every fine sample of it is on that side too, none of them read. */
+ * fit error there is `error`: the stride grid's samples all lie farther than the error
+ * from the level, on one side. The fit through them stays within their range and f within
+ * the error of the fit over the whole box (Lemma 1, tree.h), so every fine sample of it is
+ * on that side too, none of them read. */
 static int box_clear_of_level(const lod *c, const uint32_t lo[3], const uint32_t hi[3], uint32_t stride, double error)
 {
     stride_grid g;
     size_t step[3] = {1, c->dims[0], (size_t)c->dims[0] * c->dims[1]};
     for (int d = 0; d < 3; d++) {
-        g.n[d] = 0;
-        for (uint32_t v = lo[d];; v = v + stride < hi[d] ? v + stride : hi[d]) {
-            g.at[d][g.n[d]++] = v * step[d];
-            if (v == hi[d])
-                break;
-        }
+        g.lo[d] = lo[d] * step[d];
+        g.hi[d] = hi[d] * step[d];
+        g.stride[d] = stride * step[d];
     }
     double low, high;
     if (!grid_range(c->vol, &g, &low, &high))
