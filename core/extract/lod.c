@@ -98,15 +98,17 @@ static unsigned brick_shifts(const lod *c, const uint32_t b[3], uint8_t s[8])
 {
     uint32_t first[3], m[3];
     brick_blocks(c, b, first, m);
-    size_t base = block_index(c, first), row = c->blocks[0], plane = row * c->blocks[1];
-    unsigned have = 0;
-    for (unsigned k = 0; k < 8; k++) {
-        unsigned x = k & 1, y = k >> 1 & 1, z = k >> 2;
-        if (x < m[0] && y < m[1] && z < m[2]) {
-            s[k] = c->shift[base + x + y * row + z * plane];
-            have |= 1u << k;
-        }
-    }
+    static const unsigned low_half[3] = {0x55, 0x33, 0x0F}; /* the blocks at x, y, z = 0 */
+    const uint8_t *at = c->shift + block_index(c, first);
+    size_t row = c->blocks[0], plane = row * c->blocks[1], off[8] = {0, 1, row, row + 1};
+    unsigned have = 0xFF;
+    for (int d = 0; d < 3; d++)
+        have &= m[d] < BLOCKS_PER_BRICK ? low_half[d] : 0xFF;
+    for (unsigned k = 4; k < 8; k++)
+        off[k] = off[k - 4] + plane;
+    for (unsigned k = 0; k < 8; k++)
+        if (have >> k & 1)
+            s[k] = at[off[k]];
     return have;
 }
 
@@ -189,14 +191,17 @@ static int coarse_blocks_clear(const lod *c, size_t at, const uint32_t b[3], con
 {
     if (s[0] == ISO_TREE_LEVELS)
         return 0;
+    uint32_t low[2][3], high[2][3]; /* per axis, the lower and the upper block's samples */
+    for (int h = 0; h < 2; h++)
+        for (int d = 0; d < 3; d++) {
+            low[h][d] = (BLOCKS_PER_BRICK * b[d] + (uint32_t)h) * ISO_TREE_BLOCK;
+            high[h][d] = low[h][d] + ISO_TREE_BLOCK < c->dims[d] - 1 ? low[h][d] + ISO_TREE_BLOCK : c->dims[d] - 1;
+        }
     for (unsigned k = 0; k < 8; k++) {
         if (!(have >> k & 1) || !s[k])
             continue;
-        uint32_t lo[3], hi[3];
-        for (int d = 0; d < 3; d++) {
-            lo[d] = (BLOCKS_PER_BRICK * b[d] + (k >> d & 1)) * ISO_TREE_BLOCK;
-            hi[d] = lo[d] + ISO_TREE_BLOCK < c->dims[d] - 1 ? lo[d] + ISO_TREE_BLOCK : c->dims[d] - 1;
-        }
+        uint32_t lo[3] = {low[k & 1][0], low[k >> 1 & 1][1], low[k >> 2][2]};
+        uint32_t hi[3] = {high[k & 1][0], high[k >> 1 & 1][1], high[k >> 2][2]};
         if (!box_clear_of_level(c, lo, hi, 1u << s[k], iso_tree_block_error(c->tree, at, (int)k, s[k])))
             return 0;
     }
