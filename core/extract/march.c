@@ -1077,7 +1077,10 @@ static size_t number_marked(const march_job *job, int32_t *slot, uint32_t *order
         for (uint32_t j = 0; j < g->count[1]; j++)
             for (uint32_t i = 0; i < g->count[0]; i++, at++) {
                 uint32_t b[3] = {i, j, k};
-                slot[at] = marks_of(job, b, level, lower) ? (int32_t)n : -1;
+                /* marks_of's first test, inline: most bricks stop at it. */
+                int near = job->marked[at] || (g->min[at] <= level && g->max[at] > level);
+                int taken = near && marks_of(job, b, level, lower);
+                slot[at] = taken ? (int32_t)n : -1;
                 if (slot[at] >= 0)
                     order[n++] = (uint32_t)at;
             }
