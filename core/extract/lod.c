@@ -25,8 +25,8 @@ static void brick_at(const lod *c, size_t at, uint32_t b[3])
     b[2] = (uint32_t)(at / c->count[0] / c->count[1]);
 }
 
-/* Lists the bricks the level crosses, once: the passes below walk those only (5% of the
- * bricks of a sparse volume). */
+/* Lists the bricks the level crosses, once: the passes below walk those only, a surface
+ * crossing a small share of a scan's bricks. */
 static void list_active(lod *c)
 {
     size_t total = iso_bricks_total(&c->tree->bricks), n = 0;

@@ -775,9 +775,6 @@ static int vertex_of(const march_job *job, const uint32_t p[3], int axis, uint32
     return 1;
 }
 
-/* fill_shared_ids where the brick or a neighbour is not wholly marked: edge by edge, each
- * crossing edge of its box that a neighbour owns, from the owner (which kept it if a
- * marked block of this brick holds it, the only ones its cells use). */
 /* The ids of the crossing edges m of row (y, z) along axis a of the brick at lo, each
  * from its owner (vertex_of). */
 static inline void shared_ids_looked_up(const march_job *job, const size_t lo[3], id_table *table, unsigned m, int a,
@@ -792,6 +789,9 @@ static inline void shared_ids_looked_up(const march_job *job, const size_t lo[3]
     }
 }
 
+/* fill_shared_ids where the brick or a neighbour is not wholly marked: each crossing
+ * edge of its box that a neighbour owns, from the owner (which kept it if a
+ * marked block of this brick holds it, the only ones its cells use). */
 static void fill_shared_ids_partial(const march_job *job, const active_brick *ab, id_table *table)
 {
     const uint8_t *n = ab->n, *o = ab->owned;
