@@ -2,10 +2,11 @@
  * (see encode.h).
  *
  * The buffer may be cut into pieces, each with its own strategy, and a Huffman-only piece
- * into parts of whole blocks; each part is proto_deflate on its own (raw deflate, the parts
- * but the last ending in a sync flush, so that they join byte-aligned into one stream, as
- * pigz does), the threads taking the costliest left first; then the header, the joined
- * stream, and the trailer (the CRC-32 and length of the whole input, combined).
+ * into parts of whole blocks; each part is deflated on its own (proto_deflate_run: raw
+ * deflate, the parts but the last ending in a sync flush, so that they join byte-aligned
+ * into one stream, as pigz does), the threads taking the costliest left first; then the
+ * header, the joined stream, and the trailer (the CRC-32 and length of the whole input,
+ * combined).
  *
  * Both strategies are coded here as RFC 1951 dynamic blocks, one per BLOCK_BYTES of input
  * (a table per 64 KB follows the vertex streams' changes, positions then normals, for
