@@ -877,3 +877,15 @@ int iso_coarse_brick(lod *c, const uint32_t b[3], iso_error *err)
             }
     return 0;
 }
+
+void iso_coarse_free(lod *c)
+{
+    free(c->map.keys);
+    free(c->map.ids);
+    free(c->segments);
+    free(c->loop);
+    c->map.keys = NULL;
+    c->map.ids = NULL;
+    c->segments = NULL;
+    c->loop = NULL;
+}

@@ -339,10 +339,7 @@ static int extract(const iso_tree *tree, const iso_extract_params *params, const
     iso_march_part_free(fine);
     free(c.shift);
     free(c.active);
-    free(c.map.keys);
-    free(c.map.ids);
-    free(c.segments);
-    free(c.loop);
+    iso_coarse_free(&c);
     if (rc)
         iso_mesh_free(mesh);
     return rc;

@@ -45,7 +45,7 @@ typedef struct lod {
     const iso_march_part *fine;   /* PASS 2's stride-1 blocks, marched by march.c */
     iso_mesh *mesh;
     /* From here on PASS 3's (coarse.c) but error and cells, which PASS 2 starts; PASS 3
-     * grows map, segments and loop, and extract() frees them. */
+     * grows map, segments and loop, and iso_coarse_free frees them. */
     vertex_map map;
     double error;                 /* largest |f(v) - level| measured */
     size_t cells;
@@ -98,5 +98,7 @@ static inline void brick_blocks(const lod *c, const uint32_t b[3], uint32_t firs
  * the crossings PASS 2 made (c->fine) used where it made them. Returns 0, ISO_E_NOMEM,
  * ISO_E_LIMIT or ISO_E_INTERNAL, with err set. */
 int iso_coarse_brick(lod *c, const uint32_t b[3], iso_error *err);
+/* Frees what PASS 3 grew in c over its bricks (the vertex map, the segments, the loop). */
+void iso_coarse_free(lod *c);
 
 #endif
