@@ -264,12 +264,14 @@ static void quantize_normals(const iso_mesh *mesh, const uint32_t *order, int bi
     }
 }
 
-/* Pass 2 for one view: its compressed bytes at v->packed (v->bound bytes there). */
+/* Pass 2 for one view: its compressed bytes at v->packed (v->bound bytes there), padded
+ * with zeros to 4 as the BIN chunk holds them (the codec's bound leaves 4 bytes of room). */
 static void encode_view(view *v)
 {
     v->packed_length = v->triangles ? proto_meshopt_encode_indices(v->packed, v->bound, v->data, v->count)
                                     : proto_meshopt_encode_vertices(v->packed, v->bound, v->data, v->count, v->stride);
     assert(v->packed_length > 0); /* the bounds are the codecs' own */
+    memset(v->packed + v->packed_length, 0, proto_glb_pad4(v->packed_length) - v->packed_length);
 }
 
 /* Pass 0: order[new] = the old vertex, and the indices in the new numbers into
@@ -349,13 +351,6 @@ typedef struct pack_job {
     iso_error err;
 } pack_job;
 
-/* A stream's packed bytes padded with zeros to 4, as the BIN chunk holds them (the codec's
- * bound leaves 4 bytes of room). */
-static void pad_view(view *v)
-{
-    memset(v->packed + v->packed_length, 0, proto_glb_pad4(v->packed_length) - v->packed_length);
-}
-
 /* A padded stream's gzip part, when gzipping: the whole of a vertex view; the index view's
  * header and codes (a header byte, a code byte per triangle) or the rest. */
 static void deflate_view(pack_job *job, int view_index, int part)
@@ -385,7 +380,6 @@ static int run_task(pack_job *job, int task, iso_error *err)
         return 0;
     case TASK_INDEX:
         encode_view(&q->views[VIEW_INDEX]);
-        pad_view(&q->views[VIEW_INDEX]);
         return 0;
     case TASK_INDEX_CODES_GZIP:
         deflate_view(job, VIEW_INDEX, PART_INDEX_CODES);
@@ -404,7 +398,6 @@ static int run_task(pack_job *job, int task, iso_error *err)
         position_grid(mesh, job->opt->position_bits, q);
         quantize_positions(mesh, job->order, q, job->positions);
         encode_view(&q->views[VIEW_POSITION]);
-        pad_view(&q->views[VIEW_POSITION]);
         return 0;
     case TASK_POSITION_GZIP:
         deflate_view(job, VIEW_POSITION, PART_POSITIONS);
@@ -418,7 +411,6 @@ static int run_task(pack_job *job, int task, iso_error *err)
             return iso_error_set(err, ISO_E_ARGUMENT, "mesh has a non-finite normal");
         quantize_normals(mesh, job->order, job->opt->normal_bits, job->normals);
         encode_view(&q->views[VIEW_NORMAL]);
-        pad_view(&q->views[VIEW_NORMAL]);
         deflate_view(job, VIEW_NORMAL, PART_NORMALS);
         return 0;
     }
