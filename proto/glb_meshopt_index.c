@@ -1,19 +1,23 @@
-/* glb_meshopt_index.c: meshoptimizer's index codec, version 0 (Giesen's and Stokes's FIFO
- * coding as meshopt_encodeIndexBuffer writes it; the format three.js's MeshoptDecoder and
- * meshopt_decodeIndexBuffer read). Each triangle is looked up among the last 16 edges,
- * else its corners among the last 16 vertices. The library scans those FIFOs one entry at
- * a time; here each FIFO lives in four SSE2 registers, newest first, shifted as entries
- * are pushed (a plain array elsewhere), so one lookup compares all 16 entries at once and
- * the age of the newest match is the lowest set bit of a mask. The bytes are the
- * library's, checked against it in test_proto_encode.
+/* glb_meshopt_index.c: meshoptimizer's index codec, version 1 (Giesen's and Stokes's FIFO
+ * coding as meshopt_encodeIndexBuffer writes it after meshopt_encodeIndexVersion(1); the
+ * format EXT_meshopt_compression's TRIANGLES mode names, header 0xe1, which three.js's
+ * MeshoptDecoder and meshopt_decodeIndexBuffer read). Each triangle is looked up among the
+ * last 16 edges, else its corners among the last 16 vertices. The library scans those
+ * FIFOs one entry at a time; here each FIFO lives in four SSE2 registers, newest first,
+ * shifted as entries are pushed (a plain array elsewhere), so one lookup compares all 16
+ * entries at once and the age of the newest match is the lowest set bit of a mask. The
+ * bytes are the library's, checked against it in test_proto_encode.
  *
  * Per triangle, in order:
  *   1. edge lookup: the newest FIFO edge equal to (a,b), (b,c) or (c,a), at ages 0..14;
- *   2. a hit codes the edge's age and the third corner (a vertex FIFO age, the next new
- *      vertex, or a free index delta-coded as a zigzag varint) and pushes two edges;
- *   3. a miss rotates the triangle to start at the next new vertex, codes its corners
- *      (the pair of the second and third through the fixed 16-entry table when it can)
- *      and pushes all three edges;
+ *   2. a hit codes the edge's age and the third corner: a vertex FIFO age 1..12, the next
+ *      new vertex, the last free index minus or plus one (version 1's codes 13 and 14: a
+ *      strip's free corners often step by one), or a free index delta-coded as a zigzag
+ *      varint; it pushes two edges;
+ *   3. a miss rotates the triangle to start at the next new vertex; a triangle (0,1,2)
+ *      after vertex 0 restarts the numbering (version 1's reset: the vertex FIFO empties);
+ *      it codes the corners (the pair of the second and third through the fixed 16-entry
+ *      table when it can) and pushes all three edges;
  * then the fixed table closes the stream (the decoder reads it, and it pads the data). */
 #include "glb_meshopt_codec.h"
 
@@ -25,8 +29,14 @@
 #endif
 
 enum {
-    INDEX_HEADER = 0xe0, /* version 0 */
-    FIFO_SIZE = 16
+    INDEX_HEADER = 0xe1, /* version 1 */
+    FIFO_SIZE = 16,
+    /* Version 1: a hit's third corner codes as a vertex FIFO age below 13 (13 and 14
+     * code the last free index -1 and +1). */
+    FIFO_AGE_END = 13,
+    CODE_LAST_MINUS_ONE = 13,
+    CODE_LAST_PLUS_ONE = 14,
+    CODE_FREE = 15
 };
 
 /* The table the library codes a miss's second and third corners with (its last two
@@ -221,11 +231,17 @@ size_t proto_meshopt_encode_indices(unsigned char *buf, size_t size, const uint3
             int r = fer & 3;
             uint32_t a = t[r], b = t[(r + 1) % 3], c = t[(r + 2) % 3];
             int fc = vertex_age(&vf, c);
-            int fec = fc >= 1 && fc < 15 ? fc : c == next ? (next++, 0) : 15;
+            int fec = fc >= 1 && fc < FIFO_AGE_END ? fc : c == next ? (next++, 0) : CODE_FREE;
+            if (fec == CODE_FREE) {
+                if (c + 1 == last)
+                    fec = CODE_LAST_MINUS_ONE, last = c;
+                else if (c == last + 1)
+                    fec = CODE_LAST_PLUS_ONE, last = c;
+                else
+                    data = put_index(data, c, last), last = c;
+            }
             *code++ = (unsigned char)((fer >> 2) << 4 | fec);
-            if (fec == 15)
-                data = put_index(data, c, last), last = c;
-            if (fec == 0 || fec == 15)
+            if (fec == 0 || fec >= CODE_LAST_MINUS_ONE)
                 lanes_push1(&vf, c);
             /* the library pushes (c,b), then (a,c) */
             lanes_push2(&ef.from, a, c);
@@ -233,28 +249,36 @@ size_t proto_meshopt_encode_indices(unsigned char *buf, size_t size, const uint3
         } else { /* step 3 */
             int r = t[1] == next ? 1 : t[2] == next ? 2 : 0;
             uint32_t a = t[r], b = t[(r + 1) % 3], c = t[(r + 2) % 3];
+            /* A reset (0,1,2 once vertex 0 is past) empties the vertex FIFO and codes as
+             * the table's entry 0 written out: 0xfe, then aux 0x00. */
+            int fea = CODE_FREE, reset = 0;
+            if (a == next) {
+                fea = 0, next++;
+            } else if (a == 0 && b == 1 && c == 2) {
+                fea = 0, next = 1, reset = 1;
+                lanes_fill(&vf);
+            }
             int fb = vertex_age(&vf, b), fc = vertex_age(&vf, c);
-            int fea = a == next ? (next++, 0) : 15;
-            int feb = fb >= 0 && fb < 14 ? fb + 1 : b == next ? (next++, 0) : 15;
-            int fec = fc >= 0 && fc < 14 ? fc + 1 : c == next ? (next++, 0) : 15;
+            int feb = fb >= 0 && fb < 14 ? fb + 1 : b == next ? (next++, 0) : CODE_FREE;
+            int fec = fc >= 0 && fc < 14 ? fc + 1 : c == next ? (next++, 0) : CODE_FREE;
             unsigned char aux = (unsigned char)(feb << 4 | fec);
-            if (fea == 0 && aux_slot[aux] < 14) {
+            if (fea == 0 && aux_slot[aux] < 14 && !reset) {
                 *code++ = (unsigned char)(0xf0 | aux_slot[aux]);
             } else {
                 *code++ = (unsigned char)(0xf0 | 14 | fea);
                 *data++ = aux;
             }
-            if (fea == 15)
+            if (fea == CODE_FREE)
                 data = put_index(data, a, last), last = a;
-            if (feb == 15)
+            if (feb == CODE_FREE)
                 data = put_index(data, b, last), last = b;
-            if (fec == 15)
+            if (fec == CODE_FREE)
                 data = put_index(data, c, last), last = c;
-            if (fea == 0 || fea == 15)
+            if (fea == 0 || fea == CODE_FREE)
                 lanes_push1(&vf, a);
-            if (feb == 0 || feb == 15)
+            if (feb == 0 || feb == CODE_FREE)
                 lanes_push1(&vf, b);
-            if (fec == 0 || fec == 15)
+            if (fec == 0 || fec == CODE_FREE)
                 lanes_push1(&vf, c);
             /* the library pushes (b,a), (c,b), then (a,c) */
             lanes_push3(&ef.from, a, c, b);

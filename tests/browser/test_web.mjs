@@ -7,6 +7,8 @@ import { createRequire } from 'node:module';
 import { tmpdir } from 'node:os';
 import { join, resolve } from 'node:path';
 
+import { meshoptIndexHeaders } from '../support/glb.mjs';
+
 const require = createRequire(resolve('web/node_modules') + '/');
 const { chromium } = require('playwright-core');
 
@@ -252,13 +254,16 @@ async function main() {
       `responses ${count} -> ${meshes.length}, triangles ${triangles} -> ${newTriangles}`);
 
     // 3. The fast codec (the default): glb-meshopt through GLTFLoader + MeshoptDecoder draws
-    // the same mesh as Draco (the same triangle count) at the same level.
+    // the same mesh as Draco (the same triangle count) at the same level, from an index
+    // stream of codec version 1 (header 0xe1, as EXT_meshopt_compression requires).
     await page.goto(`${base}?volume=${volume.id}&${wanted}`);
     const fast = await page.waitForResponse((r) => r.url().includes('format=glb-meshopt') && r.url().includes(`level=${volume.level}&tolerance=1&`), { timeout: 60000 });
     await page.waitForFunction((t) => document.getElementById('stat-triangles')?.textContent.replace(/,/g, '') === t,
       triangles, { timeout: 60000 });
+    const headers = meshoptIndexHeaders(new Uint8Array(await fast.body()));
     report('meshopt_codec_draws', fast.headers()['x-iso-triangles'] === triangles && (await page.textContent('#stat-codec')) === 'meshopt' &&
-      await drawnShare(page) > 0.02, `meshopt ${fast.headers()['x-iso-triangles']} triangles, draco ${triangles}`);
+      await drawnShare(page) > 0.02 && headers.length === 1 && headers[0] === 0xe1,
+      `meshopt ${fast.headers()['x-iso-triangles']} triangles, draco ${triangles}, index headers ${headers}`);
 
     // 4. The detail control: one voxel (position 60) asks the final mesh with distance= in
     // mm; the server's answer is within it, comes from its chain with fewer triangles than

@@ -1312,11 +1312,11 @@ static void check_glb_meshopt(const iso_mesh *m, int qp, int qn)
     check_glb_meshopt_run(m, &opt, 1, buf, size);
     proto_gzip_piece pieces[PROTO_GZIP_PIECES_MAX];
     int count = proto_glb_meshopt_gzip_pieces(buf, size, pieces);
-    /* The vertex streams, the index stream's header (its first byte, 0xe0 | version) and
-     * a code per triangle, its data. */
+    /* The vertex streams, the index stream's header (its first byte: 0xe1, version 1, as
+     * EXT_meshopt_compression's TRIANGLES mode requires) and a code per triangle, its data. */
     CHECK_EQ(count, !m->triangle_count ? 1 : 3);
     if (count == 3) {
-        CHECK(pieces[0].end < size && (buf[pieces[0].end] & 0xf0) == 0xe0);
+        CHECK(pieces[0].end < size && buf[pieces[0].end] == 0xe1);
         CHECK_EQ(pieces[1].end - pieces[0].end, 1 + m->triangle_count);
         CHECK(pieces[1].end < size && pieces[2].end == size);
         CHECK(pieces[0].huffman && !pieces[1].huffman && pieces[2].huffman);
@@ -1519,7 +1519,7 @@ static void test_glb_meshopt_round_trip(void)
 
 /* Pieces of any sizes (empty ones too), either strategy, one to four, on one or two
  * threads: one gzip member that inflates to the input. The meshopt split names the index
- * view's first byte (the index codec's header, 0xe0 | version), and nothing in bytes that
+ * view's first byte (the index codec's header, 0xe1), and nothing in bytes that
  * are not a meshopt glb. */
 static void test_gzip_pieces(void)
 {
@@ -1591,7 +1591,7 @@ static void test_gzip_pieces(void)
     CHECK_OK(proto_encode_glb_meshopt(&m, NULL, &glb, &size, &err), &err);
     if (glb) {
         CHECK_EQ(proto_glb_meshopt_gzip_pieces(glb, size, pieces), 3);
-        CHECKF((glb[pieces[0].end] & 0xf0) == 0xe0, "index view starts with %#x", glb[pieces[0].end]);
+        CHECKF(glb[pieces[0].end] == 0xe1, "index view starts with %#x", glb[pieces[0].end]);
         /* The index view is the BIN chunk's last: it runs to the end but for its padding. */
         size_t encoded = meshopt_encodeIndexBufferBound(3 * m.triangle_count, m.vertex_count);
         CHECK(size - pieces[0].end <= encoded + 3);
@@ -1602,40 +1602,93 @@ static void test_gzip_pieces(void)
     iso_mesh_free(&m);
 }
 
-/* proto_meshopt_encode_indices against meshoptimizer's own encoder (version 0): the same
- * bytes for the torus (edge FIFO hits), triangle soups of near and far indices (misses,
- * free indices of one to five varint bytes, fans that reuse a vertex past the FIFO's 16),
- * degenerate and repeated triangles, and no triangles; and 0 for a buffer too small. */
+/* proto_meshopt_encode_indices against meshoptimizer's own encoder at version 1 (the
+ * version EXT_meshopt_compression names): the same bytes for the torus (edge FIFO hits),
+ * triangle soups of near and far indices (misses, free indices of one to five varint
+ * bytes, fans that reuse a vertex past the FIFO's 16, vertices at FIFO ages 13 and 14,
+ * which version 1 codes as free), strips whose free corners step by one up and down
+ * (version 1's codes 13 and 14), meshes numbered from 0 one after another (version 1's
+ * reset), degenerate and repeated triangles, and no triangles; 0 for a buffer too small;
+ * and the stream decodes back to the same triangles (each may start at another corner). */
 static void check_index_codec(const uint32_t *idx, size_t count, size_t vertices, const char *what)
 {
     size_t bound = meshopt_encodeIndexBufferBound(count, vertices);
     unsigned char *want = malloc(bound), *got = malloc(bound);
-    CHECK(want && got);
-    if (want && got) {
+    uint32_t *back = malloc((count ? count : 1) * sizeof *back);
+    CHECK(want && got && back);
+    if (want && got && back) {
         size_t n = meshopt_encodeIndexBuffer(want, bound, idx, count);
         size_t m = proto_meshopt_encode_indices(got, bound, idx, count);
         CHECKF(n > 0 && m == n && !memcmp(want, got, n), "%s: %zu bytes, the library's %zu", what, m, n);
+        CHECKF(m > 0 && got[0] == 0xe1, "%s: header %#x", what, m ? got[0] : 0);
         CHECK_EQ(proto_meshopt_encode_indices(got, count / 3 + 16, idx, count), 0);
+        CHECK_EQ(meshopt_decodeIndexBuffer(back, count, sizeof *back, want, n), 0);
+        size_t wrong = 0;
+        for (size_t t = 0; t < count; t += 3) {
+            int same = 0;
+            for (int r = 0; r < 3; r++)
+                same |= back[t] == idx[t + r] && back[t + 1] == idx[t + (r + 1) % 3] &&
+                        back[t + 2] == idx[t + (r + 2) % 3];
+            wrong += !same;
+        }
+        CHECKF(wrong == 0, "%s: %zu triangles decode wrong", what, wrong);
     }
     free(want);
     free(got);
+    free(back);
+}
+
+/* Renumbers idx by first use (what the glb sends): its first triangle becomes (0,1,2). */
+static void number_by_first_use(uint32_t *idx, size_t count, size_t vertices)
+{
+    uint32_t *number = malloc(vertices * sizeof *number), next = 0;
+    CHECK(number != NULL);
+    if (!number)
+        return;
+    memset(number, 0xff, vertices * sizeof *number);
+    for (size_t i = 0; i < count; i++) {
+        if (number[idx[i]] == UINT32_MAX)
+            number[idx[i]] = next++;
+        idx[i] = number[idx[i]];
+    }
+    free(number);
+}
+
+/* A strip of `triangles` over free indices from `first` stepping by `step` (+1 or -1): each
+ * triangle shares an edge with the one before, its new corner the last free index +- 1. */
+static void make_strip(uint32_t *idx, size_t triangles, uint32_t first, int step)
+{
+    for (size_t t = 0; t < triangles; t++) {
+        uint32_t v = first + (uint32_t)((int)t * step);
+        uint32_t u = v + (uint32_t)step, w = v + (uint32_t)(2 * step);
+        if (t % 2 == 0)
+            idx[3 * t] = v, idx[3 * t + 1] = u, idx[3 * t + 2] = w;
+        else
+            idx[3 * t] = u, idx[3 * t + 1] = v, idx[3 * t + 2] = w;
+    }
 }
 
 static void test_meshopt_index_codec(void)
 {
-    meshopt_encodeIndexVersion(0);
+    meshopt_encodeIndexVersion(1);
     iso_mesh m;
     make_torus(&m, 350, 200, 0);
     check_index_codec(m.indices, 3 * m.triangle_count, m.vertex_count, "torus");
     /* The torus's triangles in reverse, and every third one rotated: other corners start. */
     size_t count = 3 * m.triangle_count;
-    uint32_t *idx = malloc(count * sizeof *idx);
+    uint32_t *idx = malloc(2 * count * sizeof *idx);
     CHECK(idx != NULL);
     if (idx) {
         for (size_t t = 0; t < m.triangle_count; t++)
             for (int c = 0; c < 3; c++)
                 idx[3 * t + c] = m.indices[3 * (m.triangle_count - 1 - t) + (c + t) % 3];
         check_index_codec(idx, count, m.vertex_count, "torus reversed and rotated");
+        /* Numbered by first use, twice in a row: the second copy starts with a reset. */
+        memcpy(idx, m.indices, count * sizeof *idx);
+        number_by_first_use(idx, count, m.vertex_count);
+        memcpy(idx + count, idx, count * sizeof *idx);
+        CHECK(idx[0] == 0 && idx[1] == 1 && idx[2] == 2);
+        check_index_codec(idx, 2 * count, m.vertex_count, "torus by first use, twice");
     }
     iso_mesh_free(&m);
     free(idx);
@@ -1644,6 +1697,16 @@ static void test_meshopt_index_codec(void)
     CHECK(idx != NULL);
     if (!idx)
         return;
+    /* Strips over free indices, up and down, from far and near: codes 13 and 14, and a
+     * 0,1,2 triangle in the middle of another mesh (a reset only once vertex 0 is past). */
+    make_strip(idx, 500, 1000000, 1);
+    make_strip(idx + 1500, 500, 5000000, -1);
+    make_strip(idx + 3000, 500, 0, 1);
+    make_strip(idx + 4500, 500, 700, -1);
+    idx[6000] = 0, idx[6001] = 1, idx[6002] = 2;
+    make_strip(idx + 6003, 499, 4000, 1);
+    idx[7500] = 1, idx[7501] = 2, idx[7502] = 0; /* the same triangle rotated: a reset too */
+    check_index_codec(idx, 7503, 5000002, "strips and resets");
     const uint32_t spans[] = {8, 20, 40, 300, 70000, 1u << 30};
     for (int s = 0; s < 6; s++) {
         uint32_t base = 0;
@@ -1661,6 +1724,8 @@ static void test_meshopt_index_codec(void)
                 idx[3 * t] = idx[3 * t - 2], idx[3 * t + 1] = idx[3 * t - 3];
             if (t % 5 == 3 && t >= 20) /* a fan around a vertex 20 triangles back */
                 idx[3 * t] = idx[3 * t - 60];
+            if (t % 11 == 4 && t >= 5) /* a vertex 13 or 14 pushes back */
+                idx[3 * t + 2] = idx[3 * t - 13 - t % 2];
         }
         char what[64];
         snprintf(what, sizeof what, "soup of span %u", spans[s]);
