@@ -39,6 +39,62 @@ void srv_progress(void *label, double fraction)
     fflush(stderr);
 }
 
+const char srv_volume_help[] =
+    "VOLUME is a file (.nrrd, .nhdr, .nii, .nii.gz, .mhd, .mha, raw samples with a NAME.json sidecar),\n"
+    "a DICOM series (a directory, DIR#SeriesInstanceUID, or a multi-frame FILE.dcm),\n"
+    "or field:NAME[:WxHxD] (sphere, torus, ml, constant, spike, ijk).\n";
+
+int srv_next_arg(const srv_command *cmd, int argc, char **argv, int *i, const char **value)
+{
+    *value = NULL;
+    if (*i >= argc)
+        return SRV_ARG_END;
+    const char *a = argv[(*i)++];
+    if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
+        srv_usage(cmd, stdout);
+        return SRV_ARG_HELP;
+    }
+    if (a[0] != '-' || !a[1]) {
+        *value = a;
+        return SRV_ARG_OPERAND;
+    }
+    for (size_t k = 0; k < cmd->option_count; k++) {
+        const srv_option *o = &cmd->options[k];
+        if (strcmp(a, o->name))
+            continue;
+        if (o->value && *i >= argc) {
+            srv_fail("%s: %s needs a value (%s)", cmd->name, a, o->value);
+            return SRV_ARG_ERROR;
+        }
+        if (o->value)
+            *value = argv[(*i)++];
+        return (int)k;
+    }
+    srv_fail("%s: unknown option '%s' (isoserve %s --help lists them)", cmd->name, a, cmd->name);
+    return SRV_ARG_ERROR;
+}
+
+void srv_usage(const srv_command *cmd, FILE *to)
+{
+    const char help[] = "-h, --help";
+    int width = (int)sizeof help - 1;
+    char left[96];
+    for (size_t k = 0; k < cmd->option_count; k++) {
+        const srv_option *o = &cmd->options[k];
+        int n = snprintf(left, sizeof left, "%s%s%s", o->name, o->value ? " " : "", o->value ? o->value : "");
+        width = n > width ? n : width;
+    }
+    fprintf(to, "usage: isoserve %s %s\n\n%s\n\noptions:\n", cmd->name, cmd->synopsis, cmd->summary);
+    for (size_t k = 0; k < cmd->option_count; k++) {
+        const srv_option *o = &cmd->options[k];
+        snprintf(left, sizeof left, "%s%s%s", o->name, o->value ? " " : "", o->value ? o->value : "");
+        fprintf(to, "  %-*s  %s\n", width, left, o->help);
+    }
+    fprintf(to, "  %-*s  %s\n", width, help, "this text");
+    if (cmd->takes_volume)
+        fprintf(to, "\n%s", srv_volume_help);
+}
+
 int srv_parse_number(const char *text, double *out)
 {
     char *end;

@@ -4,6 +4,7 @@
 #define SRV_CLI_H
 
 #include <stddef.h>
+#include <stdio.h>
 
 #include "extract/extract.h"
 #include "hierarchy/tree.h"
@@ -25,6 +26,43 @@ typedef struct srv_open_options {
     int want_tree;
     int threads;           /* for the hierarchy build; 0 = all cores */
 } srv_open_options;
+
+/* A command's options, one table read by both its parser (srv_next_arg) and its usage
+ * text (srv_usage): an option the parser takes is in the usage, and nothing else is. */
+typedef struct srv_option {
+    const char *name;    /* "--level", "-o" */
+    const char *value;   /* the value's placeholder ("L", "FILE"); NULL for a flag */
+    const char *help;    /* what it does, one line */
+} srv_option;
+
+typedef struct srv_command {
+    const char *name;        /* "extract" */
+    const char *synopsis;    /* what follows the name: "VOLUME --level L [options]" */
+    const char *summary;     /* what the command does, one sentence */
+    const srv_option *options;
+    size_t option_count;
+    int takes_volume;        /* 1: its operand is a VOLUME (the usage says what one is) */
+    int (*run)(int argc, char **argv);
+} srv_command;
+
+/* What srv_next_arg found besides an option (whose index in the table it returns). */
+enum {
+    SRV_ARG_END = -1,     /* no more arguments */
+    SRV_ARG_OPERAND = -2, /* an argument that is no option, in *value */
+    SRV_ARG_HELP = -3,    /* -h or --help: the usage went to stdout; exit 0 */
+    SRV_ARG_ERROR = -4    /* an unknown option or a missing value: said on stderr; exit 1 */
+};
+
+/* The next argument of argv from *i on (start at 0): an option of cmd's table (its index;
+ * its value, the next argument whatever it looks like, in *value) or one of SRV_ARG_*. */
+int srv_next_arg(const srv_command *cmd, int argc, char **argv, int *i, const char **value);
+/* The command's usage: synopsis, summary, one line per option, what a VOLUME is. */
+void srv_usage(const srv_command *cmd, FILE *to);
+/* What a VOLUME argument may be, for the usage texts. */
+extern const char srv_volume_help[];
+
+extern const srv_command srv_info_command, srv_build_command, srv_extract_command,
+    srv_bench_command, srv_serve_command;
 
 /* "--threads N": N in 1..256 into *threads; 0, or prints the problem and returns 1. */
 int srv_parse_threads(const char *command, const char *text, int *threads);
@@ -55,10 +93,5 @@ int srv_fail(const char *fmt, ...)
 /* Progress for long steps: drawn on stderr only when it is a terminal. */
 void srv_progress(void *label, double fraction);
 
-int srv_cmd_info(int argc, char **argv);
-int srv_cmd_build(int argc, char **argv);
-int srv_cmd_extract(int argc, char **argv);
-int srv_cmd_bench(int argc, char **argv);
-int srv_cmd_serve(int argc, char **argv);
 
 #endif

@@ -289,50 +289,73 @@ static int full_scan(const srv_subject *s, double level, int repeat, int baselin
     return 0;
 }
 
-int srv_cmd_bench(int argc, char **argv)
+enum {
+    BENCH_LEVEL, BENCH_TOLERANCES, BENCH_JSON, BENCH_REPEAT, BENCH_BUILD_REPEAT, BENCH_THREADS, BENCH_NO_BASELINES,
+    BENCH_DISTANCES, BENCH_RESAMPLE, BENCH_OPTIONS
+};
+static const srv_option bench_options[BENCH_OPTIONS] = {
+    [BENCH_LEVEL] = {"--level", "L", "the iso-level (required)"},
+    [BENCH_TOLERANCES] = {"--tolerances", "LIST", "values, N% of the value range or preview, comma-separated"},
+    [BENCH_JSON] = {"--json", "FILE", "also write the results as JSON"},
+    [BENCH_REPEAT] = {"--repeat", "N", "runs per measurement, the best kept, 1..1000 (default 3)"},
+    [BENCH_BUILD_REPEAT] = {"--build-repeat", "N", "builds timed beyond the first, 0..100 (default 1)"},
+    [BENCH_THREADS] = {"--threads", "N", "threads of the build and of exact extraction (default: all cores)"},
+    [BENCH_NO_BASELINES] = {"--no-baselines", NULL, "skip the full-scan and unpruned runs"},
+    [BENCH_DISTANCES] = {"--distances", NULL, "add each tolerance's distance to the exact surface"},
+    [BENCH_RESAMPLE] = {"--resample", "WxHxD", "box-filter the volume to these dims first (or N for NxNxN)"},
+};
+
+static int srv_cmd_bench(int argc, char **argv);
+const srv_command srv_bench_command = {
+    "bench", "VOLUME --level L [options]",
+    "Times the build and extraction at each tolerance against the full scan, and prints a table.",
+    bench_options, BENCH_OPTIONS, 1, srv_cmd_bench};
+
+static int srv_cmd_bench(int argc, char **argv)
 {
     srv_open_options opt = {.want_tree = 1};
     double level = 0, *tolerances = NULL;
     size_t count = 0;
-    int have_level = 0, repeat = 3, baselines = 1, distances = 0, build_repeat = 1;
-    const char *json_path = NULL, *tol_text = "0,6,10,15,25,50,75,100,200,300,400,500";
+    int have_level = 0, repeat = 3, baselines = 1, distances = 0, build_repeat = 1, at = 0, arg;
+    const char *json_path = NULL, *tol_text = "0,6,10,15,25,50,75,100,200,300,400,500", *value;
     srv_keep_freed_memory(); /* the server's allocator, as bench_peer tunes VTK's */
-    for (int i = 0; i < argc; i++) {
-        const char *a = argv[i], *value = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--level") && value) {
+    while ((arg = srv_next_arg(&srv_bench_command, argc, argv, &at, &value)) != SRV_ARG_END) {
+        switch (arg) {
+        case SRV_ARG_HELP: return 0;
+        case SRV_ARG_ERROR: return 1;
+        case BENCH_LEVEL:
             if (srv_parse_number(value, &level))
                 return srv_fail("bench: --level '%s' is not a finite number", value);
             have_level = 1;
-            i++;
-        } else if (!strcmp(a, "--tolerances") && value)
-            tol_text = argv[++i];
-        else if (!strcmp(a, "--json") && value)
-            json_path = argv[++i];
-        else if (!strcmp(a, "--repeat") && value) {
-            repeat = atoi(argv[++i]);
+            break;
+        case BENCH_TOLERANCES: tol_text = value; break;
+        case BENCH_JSON: json_path = value; break;
+        case BENCH_REPEAT:
+            repeat = atoi(value);
             if (repeat < 1 || repeat > 1000)
                 return srv_fail("bench: --repeat must be 1..1000");
-        } else if (!strcmp(a, "--build-repeat") && value) {
-            build_repeat = atoi(argv[++i]);
+            break;
+        case BENCH_BUILD_REPEAT:
+            build_repeat = atoi(value);
             if (build_repeat < 0 || build_repeat > 100)
                 return srv_fail("bench: --build-repeat must be 0..100");
-        } else if (!strcmp(a, "--resample") && value)
-            opt.resample = argv[++i];
-        else if (!strcmp(a, "--threads") && value) {
-            if (srv_parse_threads("bench", argv[++i], &opt.threads))
+            break;
+        case BENCH_RESAMPLE: opt.resample = value; break;
+        case BENCH_THREADS:
+            if (srv_parse_threads("bench", value, &opt.threads))
                 return 1;
-        } else if (!strcmp(a, "--no-baselines"))
-            baselines = 0;
-        else if (!strcmp(a, "--distances"))
-            distances = 1;
-        else if (a[0] == '-' || opt.path)
-            return srv_fail("bench: unexpected argument '%s'", a);
-        else
-            opt.path = a;
+            break;
+        case BENCH_NO_BASELINES: baselines = 0; break;
+        case BENCH_DISTANCES: distances = 1; break;
+        default: /* SRV_ARG_OPERAND */
+            if (opt.path)
+                return srv_fail("bench: unexpected argument '%s' (one VOLUME)", value);
+            opt.path = value;
+        }
     }
     if (!opt.path || !have_level)
-        return srv_fail("bench: usage: isoserve bench VOLUME --level L [--tolerances 0,5%%,preview,...] "
-                        "[--threads N] [--no-baselines] [--distances] [--build-repeat N]");
+        return srv_fail("bench: usage: isoserve bench %s (isoserve bench --help lists the options)",
+                        srv_bench_command.synopsis);
     srv_subject s;
     if (srv_open(&opt, &s))
         return 1;

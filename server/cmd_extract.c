@@ -89,70 +89,102 @@ static json_t *chain_json(const proto_pipeline_result *res)
                      "built", levels ? levels : json_null());
 }
 
-int srv_cmd_extract(int argc, char **argv)
+enum {
+    EX_LEVEL, EX_TOLERANCE, EX_OUT, EX_JSON, EX_NORMALS, EX_CAP, EX_BUDGET, EX_NO_SIMPLIFY, EX_SIMPLIFY,
+    EX_DISTANCE, EX_THREADS, EX_HIERARCHY, EX_RESAMPLE, EX_INDEX_SPACE, EX_FULL_SCAN, EX_OPTIONS
+};
+static const srv_option extract_options[EX_OPTIONS] = {
+    [EX_LEVEL] = {"--level", "L", "the iso-level, in the volume's values (required)"},
+    [EX_TOLERANCE] = {"--tolerance", "T", "the error bound in values, >= 0 (default 0: the exact surface)"},
+    [EX_OUT] = {"-o", "OUT", "write the mesh: .ply, .stl, .obj, .drc, .glb or .meshopt.glb"},
+    [EX_JSON] = {"--json", NULL, "print the counts, times, error bound, area and watertightness as JSON"},
+    [EX_NORMALS] = {"--normals", "ORDER", "none, trilinear, triquadratic or tricubic (default)"},
+    [EX_CAP] = {"--cap", NULL, "close the surface at the volume's border (a printable mesh)"},
+    [EX_BUDGET] = {"--budget", "N", "at most N triangles: the finest faithful tolerance, else simplified"},
+    [EX_NO_SIMPLIFY] = {"--no-simplify", NULL, "with --budget: climb the whole tolerance ladder instead"},
+    [EX_SIMPLIFY] = {"--simplify", "N", "simplify the mesh to N triangles (meshoptimizer)"},
+    [EX_DISTANCE] = {"--distance", "D", "the coarsest simplification of the surface within D mm of it (p99)"},
+    [EX_THREADS] = {"--threads", "N", "threads of the build and of exact extraction (default: all cores)"},
+    [EX_HIERARCHY] = {"--hierarchy", "FILE", "read the hierarchy from a file `isoserve build` wrote"},
+    [EX_RESAMPLE] = {"--resample", "WxHxD", "box-filter the volume to these dims first (or N for NxNxN)"},
+    [EX_INDEX_SPACE] = {"--index-space", NULL, "positions in voxel indices, not world millimetres"},
+    [EX_FULL_SCAN] = {"--full-scan", NULL, "march every cell, without the hierarchy (the baseline)"},
+};
+
+static int srv_cmd_extract(int argc, char **argv);
+const srv_command srv_extract_command = {
+    "extract", "VOLUME --level L [options]",
+    "One iso-surface, with its proven error bound, to a file and/or a JSON report.", extract_options,
+    EX_OPTIONS, 1, srv_cmd_extract};
+
+/* A whole number of triangles from 1 into *n; 0, or reported. */
+static int parse_triangles(const char *option, const char *value, double *n)
+{
+    if (srv_parse_number(value, n) || *n < 1 || *n > 4294967295.0 || *n != floor(*n))
+        return srv_fail("extract: %s '%s' must be a whole number of triangles from 1", option, value);
+    return 0;
+}
+
+static int srv_cmd_extract(int argc, char **argv)
 {
     srv_open_options opt = {.want_tree = 1};
     iso_extract_params params = {0};
-    const char *out = NULL;
+    const char *out = NULL, *value;
     int as_json = 0, have_level = 0, full_scan = 0, normals = 4; /* tricubic by default */
-    int no_simplify = 0;
+    int no_simplify = 0, i = 0, arg;
     double budget = 0, simplify = 0; /* triangles; 0: none */
     double distance = -1;            /* position units; < 0: none */
-    for (int i = 0; i < argc; i++) {
-        const char *a = argv[i], *value = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--json"))
-            as_json = 1;
-        else if (!strcmp(a, "--index-space"))
-            params.space = ISO_SPACE_INDEX;
-        else if (!strcmp(a, "--full-scan"))
-            full_scan = 1;
-        else if (!strcmp(a, "--cap"))
-            params.cap = 1;
-        else if (!strcmp(a, "--no-simplify"))
-            no_simplify = 1;
-        else if ((!strcmp(a, "--budget") || !strcmp(a, "--simplify")) && value) {
-            double *n = !strcmp(a, "--budget") ? &budget : &simplify;
-            if (srv_parse_number(value, n) || *n < 1 || *n > 4294967295.0 || *n != floor(*n))
-                return srv_fail("extract: %s '%s' must be a whole number of triangles from 1", a, value);
-            i++;
-        }
-        else if (!strcmp(a, "--distance") && value) {
+    while ((arg = srv_next_arg(&srv_extract_command, argc, argv, &i, &value)) != SRV_ARG_END) {
+        switch (arg) {
+        case SRV_ARG_HELP: return 0;
+        case SRV_ARG_ERROR: return 1;
+        case EX_JSON: as_json = 1; break;
+        case EX_INDEX_SPACE: params.space = ISO_SPACE_INDEX; break;
+        case EX_FULL_SCAN: full_scan = 1; break;
+        case EX_CAP: params.cap = 1; break;
+        case EX_NO_SIMPLIFY: no_simplify = 1; break;
+        case EX_BUDGET:
+            if (parse_triangles("--budget", value, &budget))
+                return 1;
+            break;
+        case EX_SIMPLIFY:
+            if (parse_triangles("--simplify", value, &simplify))
+                return 1;
+            break;
+        case EX_DISTANCE:
             if (srv_parse_number(value, &distance) || distance < 0)
                 return srv_fail("extract: --distance '%s' must be a finite number >= 0", value);
-            i++;
-        } else if (!strcmp(a, "--threads") && value) {
-            if (srv_parse_threads("extract", argv[++i], &params.threads))
+            break;
+        case EX_THREADS:
+            if (srv_parse_threads("extract", value, &params.threads))
                 return 1;
             opt.threads = params.threads;
-        }
-        else if (!strcmp(a, "--level") && value) {
+            break;
+        case EX_LEVEL:
             if (srv_parse_number(value, &params.level))
                 return srv_fail("extract: --level '%s' is not a finite number", value);
             have_level = 1;
-            i++;
-        } else if (!strcmp(a, "--tolerance") && value) {
+            break;
+        case EX_TOLERANCE:
             if (srv_parse_number(value, &params.tolerance) || params.tolerance < 0)
                 return srv_fail("extract: --tolerance '%s' must be a finite number >= 0", value);
-            i++;
-        } else if (!strcmp(a, "--normals") && value) {
+            break;
+        case EX_NORMALS:
             if ((normals = iso_normals_order_from_name(value)) < 0)
                 return srv_fail("extract: --normals '%s': expected none, trilinear, triquadratic or tricubic", value);
-            i++;
-        } else if (!strcmp(a, "-o") && value)
-            out = argv[++i];
-        else if (!strcmp(a, "--hierarchy") && value)
-            opt.hierarchy = argv[++i];
-        else if (!strcmp(a, "--resample") && value)
-            opt.resample = argv[++i];
-        else if (a[0] == '-' || opt.path)
-            return srv_fail("extract: unexpected argument '%s'", a);
-        else
-            opt.path = a;
+            break;
+        case EX_OUT: out = value; break;
+        case EX_HIERARCHY: opt.hierarchy = value; break;
+        case EX_RESAMPLE: opt.resample = value; break;
+        default: /* SRV_ARG_OPERAND */
+            if (opt.path)
+                return srv_fail("extract: unexpected argument '%s' (one VOLUME)", value);
+            opt.path = value;
+        }
     }
     if (!opt.path || !have_level)
-        return srv_fail("extract: usage: isoserve extract VOLUME --level L [--tolerance T] [--cap] [--threads N] "
-                        "[--budget N [--no-simplify]] [--simplify N] [--distance D] "
-                        "[--normals none|trilinear|triquadratic|tricubic] [-o OUT.ply|.stl|.obj|.drc|.glb|.meshopt.glb] [--json]");
+        return srv_fail("extract: usage: isoserve extract %s (isoserve extract --help lists the options)",
+                        srv_extract_command.synopsis);
     if (full_scan && (params.cap || budget))
         return srv_fail("extract: %s needs the hierarchy; drop --full-scan", params.cap ? "--cap" : "--budget");
     if (budget && simplify)

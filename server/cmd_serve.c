@@ -128,30 +128,57 @@ static int set_option(serve_options *o, const char *a, const char *v, int from_e
     return 0;
 }
 
-/* Every option of serve; each may come from ISOSERVE_<NAME> (see the file's comment). */
-static const char *const option_names[] = {
-    "--catalog", "--volumes", "--cache-dir", "--web-root", "--listen", "--threads", "--queue",
-    "--cache-mb", "--drain-seconds", "--max-connections", "--max-volume-mb", "--cors-origin",
-    "--shard", "--shard-peers", "--replica-name", "--token-file", "--connection-timeout",
-    "--max-triangles", "--max-resident-mb"};
+/* Every option of serve, each with a value; each may also come from ISOSERVE_<NAME> (see
+ * the file's comment). set_option applies them by name. */
+static const srv_option serve_options_table[] = {
+    {"--catalog", "FILE", "the volumes to serve, a JSON catalog (docs/api.md)"},
+    {"--volumes", "DIR", "serve every volume in DIR instead, ids from the file names"},
+    {"--listen", "HOST:PORT", "where to listen (default 127.0.0.1:8080; port 0: any free port)"},
+    {"--cache-dir", "DIR", "keep hierarchy files (and fetched DICOM series) here"},
+    {"--web-root", "DIR", "the web client's files (default: web beside the executable)"},
+    {"--threads", "N", "mesh workers, 1..256 (default: all cores)"},
+    {"--queue", "N", "requests waiting for a worker before 503 (default 64)"},
+    {"--cache-mb", "N", "the mesh cache's size in MB (default 256)"},
+    {"--cors-origin", "ORIGIN", "allow this browser origin (repeatable, at most 16)"},
+    {"--drain-seconds", "S", "on SIGTERM, how long requests in flight may finish (default 10)"},
+    {"--max-connections", "N", "open connections at most (default 256)"},
+    {"--connection-timeout", "S", "close a connection idle this long (default 30)"},
+    {"--max-volume-mb", "N", "refuse volumes whose samples exceed this (default 8192)"},
+    {"--max-resident-mb", "N", "evict least recently used volumes above this (needs --cache-dir; 0: no limit)"},
+    {"--max-triangles", "N", "refuse meshes above this many triangles (422)"},
+    {"--token-file", "FILE", "require this bearer token (the file's first line)"},
+    {"--shard", "K/N", "this replica preloads shard K of N (with --shard-peers)"},
+    {"--shard-peers", "HOST:PORT,...", "the N replicas, in shard order"},
+    {"--replica-name", "NAME", "this replica's name in X-Iso-Replica"},
+};
+#define SERVE_OPTIONS (sizeof serve_options_table / sizeof serve_options_table[0])
+
+static int srv_cmd_serve(int argc, char **argv);
+const srv_command srv_serve_command = {
+    "serve", "[options]",
+    "The HTTP daemon: preloads the catalog's volumes and their hierarchies and answers mesh requests.\n"
+    "Each option may also come from the environment: ISOSERVE_<OPTION>, e.g. ISOSERVE_CACHE_DIR.",
+    serve_options_table, SERVE_OPTIONS, 0, srv_cmd_serve};
 
 static int options_from_env(serve_options *o)
 {
-    for (size_t i = 0; i < sizeof option_names / sizeof option_names[0]; i++) {
+    for (size_t i = 0; i < SERVE_OPTIONS; i++) {
+        const char *name = serve_options_table[i].name;
         char var[64] = "ISOSERVE_";
         size_t n = strlen(var);
-        for (const char *p = option_names[i] + 2; *p && n + 1 < sizeof var; p++)
+        for (const char *p = name + 2; *p && n + 1 < sizeof var; p++)
             var[n++] = *p == '-' ? '_' : (char)(*p - 'a' + 'A');
         var[n] = '\0';
         const char *v = getenv(var);
         /* Empty or blank is unset: compose files default unset variables to " " (see
          * docker/compose.yaml). */
-        if (v && v[strspn(v, " \t")] && set_option(o, option_names[i], v, 1))
+        if (v && v[strspn(v, " \t")] && set_option(o, name, v, 1))
             return srv_fail("(from the environment variable %s)", var);
     }
     return 0;
 }
 
+/* 0, 1 (reported), or -1 when --help printed the usage. */
 static int parse_options(int argc, char **argv, serve_options *o)
 {
     long cores = sysconf(_SC_NPROCESSORS_ONLN);
@@ -161,10 +188,16 @@ static int parse_options(int argc, char **argv, serve_options *o)
                          .connection_timeout = 30};
     if (options_from_env(o))
         return 1;
-    for (int i = 0; i < argc; i += 2) {
-        if (i + 1 >= argc)
-            return srv_fail("serve: %s needs a value (or is not an option)", argv[i]);
-        if (set_option(o, argv[i], argv[i + 1], 0))
+    int i = 0, arg;
+    const char *value;
+    while ((arg = srv_next_arg(&srv_serve_command, argc, argv, &i, &value)) != SRV_ARG_END) {
+        if (arg == SRV_ARG_HELP)
+            return -1;
+        if (arg == SRV_ARG_ERROR)
+            return 1;
+        if (arg == SRV_ARG_OPERAND)
+            return srv_fail("serve: unexpected argument '%s' (serve takes options only)", value);
+        if (set_option(o, serve_options_table[arg].name, value, 0))
             return 1;
     }
     if (o->catalog && o->volumes)
@@ -373,11 +406,12 @@ done:
     return status;
 }
 
-int srv_cmd_serve(int argc, char **argv)
+static int srv_cmd_serve(int argc, char **argv)
 {
     serve_options o;
-    if (parse_options(argc, argv, &o))
-        return 1;
+    int parsed = parse_options(argc, argv, &o);
+    if (parsed)
+        return parsed < 0 ? 0 : 1; /* -1: --help answered */
     /* Block the stop signals before any thread starts, so that every thread inherits the
      * mask and only serve()'s sigwait takes them; a peer closing early must not kill us. */
     sigset_t stop_signals;

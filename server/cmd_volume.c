@@ -18,19 +18,33 @@ static json_t *volume_json(const srv_subject *s)
                      "has_nan", v->has_nan);
 }
 
-int srv_cmd_info(int argc, char **argv)
+enum { INFO_JSON, INFO_RESAMPLE, INFO_OPTIONS };
+static const srv_option info_options[INFO_OPTIONS] = {
+    [INFO_JSON] = {"--json", NULL, "print what /v1/volumes says of the volume, as JSON"},
+    [INFO_RESAMPLE] = {"--resample", "WxHxD", "box-filter the volume to these dims first (or N for NxNxN)"},
+};
+
+static int srv_cmd_info(int argc, char **argv);
+const srv_command srv_info_command = {
+    "info", "VOLUME [options]", "What a volume is: dims, voxel type, geometry, value range, suggested levels.",
+    info_options, INFO_OPTIONS, 1, srv_cmd_info};
+
+static int srv_cmd_info(int argc, char **argv)
 {
     srv_open_options opt = {0};
-    int as_json = 0;
-    for (int i = 0; i < argc; i++) {
-        if (!strcmp(argv[i], "--json"))
+    int as_json = 0, i = 0, arg;
+    const char *value;
+    while ((arg = srv_next_arg(&srv_info_command, argc, argv, &i, &value)) != SRV_ARG_END) {
+        if (arg == SRV_ARG_HELP || arg == SRV_ARG_ERROR)
+            return arg == SRV_ARG_ERROR;
+        if (arg == INFO_JSON)
             as_json = 1;
-        else if (!strcmp(argv[i], "--resample") && i + 1 < argc)
-            opt.resample = argv[++i];
-        else if (argv[i][0] == '-' || opt.path)
-            return srv_fail("info: unexpected argument '%s'", argv[i]);
+        else if (arg == INFO_RESAMPLE)
+            opt.resample = value;
+        else if (opt.path)
+            return srv_fail("info: unexpected argument '%s' (one VOLUME)", value);
         else
-            opt.path = argv[i];
+            opt.path = value;
     }
     if (!opt.path)
         return srv_fail("info: which VOLUME?");
@@ -55,25 +69,41 @@ int srv_cmd_info(int argc, char **argv)
     return 0;
 }
 
-int srv_cmd_build(int argc, char **argv)
+enum { BUILD_OUT, BUILD_RESAMPLE, BUILD_THREADS, BUILD_OPTIONS };
+static const srv_option build_options[BUILD_OPTIONS] = {
+    [BUILD_OUT] = {"-o", "FILE.isotree", "where to write the hierarchy (required)"},
+    [BUILD_RESAMPLE] = {"--resample", "WxHxD", "box-filter the volume to these dims first (or N for NxNxN)"},
+    [BUILD_THREADS] = {"--threads", "N", "threads of the build, 1..256 (default: all cores)"},
+};
+
+static int srv_cmd_build(int argc, char **argv);
+const srv_command srv_build_command = {
+    "build", "VOLUME -o FILE.isotree [options]",
+    "Builds the volume's hierarchy into a file that `extract --hierarchy` and the server's cache read back.",
+    build_options, BUILD_OPTIONS, 1, srv_cmd_build};
+
+static int srv_cmd_build(int argc, char **argv)
 {
     srv_open_options opt = {.want_tree = 1};
-    const char *out = NULL;
-    for (int i = 0; i < argc; i++) {
-        if (!strcmp(argv[i], "-o") && i + 1 < argc)
-            out = argv[++i];
-        else if (!strcmp(argv[i], "--resample") && i + 1 < argc)
-            opt.resample = argv[++i];
-        else if (!strcmp(argv[i], "--threads") && i + 1 < argc) {
-            if (srv_parse_threads("build", argv[++i], &opt.threads))
+    const char *out = NULL, *value;
+    int i = 0, arg;
+    while ((arg = srv_next_arg(&srv_build_command, argc, argv, &i, &value)) != SRV_ARG_END) {
+        if (arg == SRV_ARG_HELP || arg == SRV_ARG_ERROR)
+            return arg == SRV_ARG_ERROR;
+        if (arg == BUILD_OUT)
+            out = value;
+        else if (arg == BUILD_RESAMPLE)
+            opt.resample = value;
+        else if (arg == BUILD_THREADS) {
+            if (srv_parse_threads("build", value, &opt.threads))
                 return 1;
-        } else if (argv[i][0] == '-' || opt.path)
-            return srv_fail("build: unexpected argument '%s'", argv[i]);
+        } else if (opt.path)
+            return srv_fail("build: unexpected argument '%s' (one VOLUME)", value);
         else
-            opt.path = argv[i];
+            opt.path = value;
     }
     if (!opt.path || !out)
-        return srv_fail("build: usage: isoserve build VOLUME -o FILE");
+        return srv_fail("build: usage: isoserve build %s", srv_build_command.synopsis);
     srv_subject s;
     if (srv_open(&opt, &s))
         return 1;
