@@ -66,7 +66,7 @@ static json_t *volume_object(const proto_volume_doc *doc, int detail)
         json_array_append_new(levels, json_real(doc->levels[i]));
     if (!vol) {
         json_t *summary = json_pack("{s:s, s:s, s:s, s:o}", "id", doc->id,
-                                    "name", doc->name ? doc->name : doc->id,
+                                    "name", doc->name && *doc->name ? doc->name : doc->id,
                                     "modality", doc->modality ? doc->modality : "",
                                     "suggested_levels", levels);
         if (summary && doc->shard)
@@ -74,7 +74,7 @@ static json_t *volume_object(const proto_volume_doc *doc, int detail)
         return summary;
     }
     json_t *o = json_pack("{s:s, s:s, s:s, s:[III], s:o, s:o, s:o, s:s, s:[ff], s:o, s:s}",
-                          "id", doc->id, "name", doc->name ? doc->name : doc->id,
+                          "id", doc->id, "name", doc->name && *doc->name ? doc->name : doc->id,
                           "modality", doc->modality ? doc->modality : "",
                           "dims", (json_int_t)vol->dims[0], (json_int_t)vol->dims[1],
                           (json_int_t)vol->dims[2],

@@ -362,9 +362,7 @@ int srv_catalog_read(const char *file, srv_catalog *out, iso_error *err)
 
 /* ---------------------------------------------------------------- directories */
 
-/* The id of a file: its name without the last extension, and without one more when the
- * last was a compression suffix ("brain.nii.gz" -> "brain"). */
-static void id_of(const char *file_name, char *id, size_t size)
+void srv_catalog_id_of(const char *file_name, char *id, size_t size)
 {
     snprintf(id, size, "%s", file_name);
     char *dot = strrchr(id, '.');
@@ -401,7 +399,7 @@ int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err)
         snprintf(path, size, "%s/%s", dir, ent->d_name);
         struct stat st;
         char id[256];
-        id_of(ent->d_name, id, sizeof id);
+        srv_catalog_id_of(ent->d_name, id, sizeof id);
         int series = !stat(path, &st) && S_ISDIR(st.st_mode) && iso_dicom_dir_has_files(path);
         if (stat(path, &st) || !(S_ISREG(st.st_mode) || series) || !iso_load_recognises(path))
             ; /* not a volume of its own */

@@ -48,6 +48,10 @@ int srv_catalog_id_valid(const char *id);
  * is not such JSON is an error. */
 int srv_catalog_read(const char *file, srv_catalog *out, iso_error *err);
 
+/* The id srv_catalog_scan gives a file: its name without the last extension, and without
+ * one more when the last was a compression suffix ("brain.nii.gz" -> "brain"). */
+void srv_catalog_id_of(const char *file_name, char *id, size_t size);
+
 /* Every loadable file of dir (not hidden, not the data file of a detached header) becomes
  * a volume whose id is its file name without its extension(s): "head.nhdr" -> "head",
  * "brain.nii.gz" -> "brain"; so does every subdirectory holding DICOM files (a series,

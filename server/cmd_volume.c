@@ -5,17 +5,47 @@
 #include <string.h>
 
 #include "cli.h"
+#include "collection.h"
 
-static json_t *volume_json(const srv_subject *s)
+/* The id `serve --volumes` would give the volume (catalog.h), its characters outside
+ * [A-Za-z0-9._-] made '-' (a field: or DIR#UID argument has some). */
+static void id_of_path(const char *path, char id[SRV_ID_MAX + 1])
 {
-    const iso_volume *v = s->vol;
-    return json_pack("{s:s, s:[I,I,I], s:s, s:[f,f,f], s:[f,f,f], s:f, s:f, s:f, s:I, s:b}",
-                     "volume", s->name, "dims", (json_int_t)v->dims[0], (json_int_t)v->dims[1],
-                     (json_int_t)v->dims[2], "type", iso_vol_type_name(v->type), "spacing",
-                     v->spacing[0], v->spacing[1], v->spacing[2], "origin", v->origin[0],
-                     v->origin[1], v->origin[2], "min", v->value_min, "max", v->value_max, "mean",
-                     v->value_mean, "bytes", (json_int_t)(iso_vol_count(v) * iso_vol_type_size(v->type)),
-                     "has_nan", v->has_nan);
+    const char *slash = strrchr(path, '/');
+    const char *base = slash && slash[1] ? slash + 1 : path;
+    char whole[4096];
+    srv_catalog_id_of(base, whole, sizeof whole);
+    size_t n = strnlen(whole, SRV_ID_MAX);
+    memcpy(id, whole, n);
+    id[n] = '\0';
+    for (char *c = id; *c; c++)
+        if (!strchr("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789._-", *c))
+            *c = '-';
+}
+
+/* The volume's entry of /v1/volumes when served with `serve --volumes` (the same code builds
+ * it: srv_volume_describe, srv_volume_doc), plus what only the command line tells: the path,
+ * the samples' bytes, their mean and whether any is NaN. NULL when memory runs out. */
+static char *info_json(const srv_subject *s)
+{
+    srv_catalog_entry entry = {.name = "", .modality = ""};
+    id_of_path(s->name, entry.id);
+    srv_volume v = {.entry = &entry, .vol = s->vol};
+    srv_volume_describe(&v, iso_tree_volume_crc(s->vol));
+    proto_volume_doc doc = srv_volume_doc(&v, NULL);
+    char *text = proto_json_volume(&doc, 0);
+    json_t *o = text ? json_loads(text, 0, NULL) : NULL;
+    free(text);
+    const iso_volume *vol = s->vol;
+    if (o && json_object_update_new(o, json_pack("{s:s, s:I, s:f, s:b}", "path", s->name, "bytes",
+                                                 (json_int_t)(iso_vol_count(vol) * iso_vol_type_size(vol->type)),
+                                                 "value_mean", vol->value_mean, "has_nan", vol->has_nan))) {
+        json_decref(o);
+        return NULL;
+    }
+    text = o ? json_dumps(o, JSON_COMPACT | JSON_REAL_PRECISION(17)) : NULL;
+    json_decref(o);
+    return text;
 }
 
 enum { INFO_JSON, INFO_RESAMPLE, INFO_OPTIONS };
@@ -51,10 +81,13 @@ static int srv_cmd_info(int argc, char **argv)
     srv_subject s;
     if (srv_open(&opt, &s))
         return 1;
-    json_t *doc = volume_json(&s);
+    int status = 0;
     if (as_json) {
-        char *text = json_dumps(doc, JSON_COMPACT);
-        puts(text);
+        char *text = info_json(&s);
+        if (text)
+            puts(text);
+        else
+            status = srv_fail("%s: out of memory writing the report", s.name);
         free(text);
     } else {
         const iso_volume *v = s.vol;
@@ -64,9 +97,8 @@ static int srv_cmd_info(int argc, char **argv)
                v->spacing[0], v->spacing[1], v->spacing[2], v->origin[0], v->origin[1],
                v->origin[2], v->value_min, v->value_max, v->value_mean, v->has_nan ? ", has NaN samples" : "");
     }
-    json_decref(doc);
     srv_close(&s);
-    return 0;
+    return status;
 }
 
 enum { BUILD_OUT, BUILD_RESAMPLE, BUILD_THREADS, BUILD_OPTIONS };

@@ -129,6 +129,36 @@ static uint32_t geometry_hash(const iso_volume *vol)
     return h;
 }
 
+void srv_volume_describe(srv_volume *v, uint32_t volume_crc)
+{
+    const srv_catalog_entry *e = v->entry;
+    snprintf(v->version, sizeof v->version, "%08x%08x-%d", (unsigned)volume_crc, (unsigned)geometry_hash(v->vol),
+             SRV_MESH_ALGORITHM_VERSION);
+    iso_hist_compute(v->vol, SRV_HISTOGRAM_BINS, v->histogram);
+    if (e->level_count) {
+        memcpy(v->levels, e->levels, e->level_count * sizeof *v->levels);
+        v->level_count = e->level_count;
+    } else {
+        v->level_count = iso_hist_suggest_levels(v->histogram, SRV_HISTOGRAM_BINS, v->vol->value_min,
+                                                 v->vol->value_max, v->levels, SRV_LEVELS_MAX);
+    }
+}
+
+proto_volume_doc srv_volume_doc(const srv_volume *v, const char *shard)
+{
+    proto_volume_doc doc = {
+        .shard = shard, .id = v->entry->id, .name = v->entry->name, .modality = v->entry->modality,
+        .version = v->version, .vol = v->vol, .levels = v->levels, .level_count = v->level_count,
+        .histogram = v->histogram, .histogram_bins = SRV_HISTOGRAM_BINS};
+    if (v->tree) {
+        doc.hierarchy_nodes = v->tree->node_count;
+        doc.hierarchy_bytes = iso_tree_memory(v->tree);
+        doc.hierarchy_ms = v->tree->build_ms;
+        doc.hierarchy_from_file = v->tree_from_file;
+    }
+    return doc;
+}
+
 /* The hierarchy from the cache dir if it is there, valid and not older than the volume's
  * file; otherwise built and written back. Returns 0 or the build's ISO_E_* code, err
  * saying why (also reported on stderr). */
@@ -201,17 +231,7 @@ static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload
         return rc;
     }
     v->bytes = iso_vol_count(v->vol) * iso_vol_type_size(v->vol->type) + iso_tree_memory(v->tree);
-    snprintf(v->version, sizeof v->version, "%08x%08x-%d", (unsigned)v->tree->volume_crc,
-             (unsigned)geometry_hash(v->vol), SRV_MESH_ALGORITHM_VERSION);
-    iso_hist_compute(v->vol, SRV_HISTOGRAM_BINS, v->histogram);
-    if (e->level_count) {
-        memcpy(v->levels, e->levels, e->level_count * sizeof *v->levels);
-        v->level_count = e->level_count;
-    } else {
-        v->level_count = iso_hist_suggest_levels(v->histogram, SRV_HISTOGRAM_BINS,
-                                                 v->vol->value_min, v->vol->value_max,
-                                                 v->levels, SRV_LEVELS_MAX);
-    }
+    srv_volume_describe(v, v->tree->volume_crc);
     fprintf(stderr, "isoserve: [%zu/%zu] %s: %zux%zux%zu %s, hierarchy %s in %.0f ms (%zu KB)\n",
             index + 1, total, e->id, v->vol->dims[0], v->vol->dims[1], v->vol->dims[2],
             iso_vol_type_name(v->vol->type), v->tree_from_file ? "read" : "built",

@@ -22,6 +22,7 @@
 #include <stdint.h>
 
 #include "catalog.h"
+#include "document.h"
 #include "hierarchy/tree.h"
 #include "volume/volume.h"
 
@@ -134,5 +135,14 @@ void srv_collection_unlock(srv_collection *c);
  * Returns the seconds until it is tried again (at least 1), 0 when it will not be. */
 unsigned srv_collection_failure(srv_collection *c, const char *id, char *why, size_t size);
 void srv_collection_free(srv_collection *c);
+
+/* What the API says of a volume beside its samples, set when it is loaded and by `isoserve
+ * info` for the same file, so that the two agree: its version (the ETag base: samples
+ * through volume_crc, the hierarchy's iso_tree_volume_crc, geometry and the mesh algorithm),
+ * its histogram and its suggested levels (the catalog's, else Otsu's). */
+void srv_volume_describe(srv_volume *v, uint32_t volume_crc);
+/* The document /v1/volumes and /v1/volumes/{id} give of v (document.h), the hierarchy's
+ * figures when v->tree is set. shard: the replica that preloads it, or NULL. */
+proto_volume_doc srv_volume_doc(const srv_volume *v, const char *shard);
 
 #endif

@@ -192,13 +192,7 @@ static enum MHD_Result fail(srv_server *s, struct MHD_Connection *c, srv_request
 static proto_volume_doc doc_of(const srv_server *s, const srv_volume *v)
 {
     const srv_shard_ring *ring = s->config.shard_ring;
-    return (proto_volume_doc){
-        .shard = ring ? ring->peers[srv_shard_owner(ring, v->entry->id)] : NULL,
-        .id = v->entry->id, .name = v->entry->name, .modality = v->entry->modality,
-        .version = v->version, .vol = v->vol, .levels = v->levels, .level_count = v->level_count,
-        .histogram = v->histogram, .histogram_bins = SRV_HISTOGRAM_BINS,
-        .hierarchy_nodes = v->tree->node_count, .hierarchy_bytes = iso_tree_memory(v->tree),
-        .hierarchy_ms = v->tree->build_ms, .hierarchy_from_file = v->tree_from_file};
+    return srv_volume_doc(v, ring ? ring->peers[srv_shard_owner(ring, v->entry->id)] : NULL);
 }
 
 /* A page of /v1/volumes: ?limit=N (1..SRV_PAGE_MAX) and ?after=ID (the last id of the

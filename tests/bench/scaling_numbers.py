@@ -43,7 +43,7 @@ def measure(path, level, tmp):
     out = run(["build", path, "-o", tree])
     m = re.search(r"(\d+) nodes, (\d+) bytes .* built in ([\d.]+) ms", out)
     voxels = info["dims"][0] * info["dims"][1] * info["dims"][2]
-    row = {"dims": "x".join(map(str, info["dims"])), "type": info["type"], "voxels": voxels,
+    row = {"dims": "x".join(map(str, info["dims"])), "type": info["value_type"], "voxels": voxels,
            "volume_bytes": info["bytes"], "tree_bytes": int(m.group(2)),
            "file_bytes": os.path.getsize(tree), "build_ms": float(m.group(3)), "meshes": []}
     for t in TOLERANCES:

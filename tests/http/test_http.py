@@ -879,11 +879,18 @@ def volumes_dir(tmp, blob):
     json.dump({"dims": [3, 3, 3], "type": "uint8"}, open(os.path.join(d, "side.raw.json"), "w"))
     s = Server(["--volumes", d, "--web-root", tmp])
     try:
-        ids = [v["id"] for v in json.loads(s.get("/v1/volumes").body)["volumes"]]
+        listed = json.loads(s.get("/v1/volumes").body)["volumes"]
+        ids = [v["id"] for v in listed]
         assert ids == ["blob", "detached", "side"], ids
         assert "broken.nrrd" in s.log() and "skipped" in s.log()
     finally:
         s.stop()
+    # `isoserve info --json` gives each volume's entry as /v1/volumes does, field for field.
+    for entry, name in zip(listed, ["blob.nrrd", "detached.nhdr", "side.raw"]):
+        info = json.loads(subprocess.run([BIN, "info", os.path.join(d, name), "--json"], check=True,
+                                         capture_output=True, text=True).stdout)
+        assert {k: info.get(k) for k in entry} == entry, (entry, info)
+        assert len(entry) >= 11 and entry["suggested_levels"], entry
 
 
 def cors_origins(tmp, catalog):
