@@ -111,7 +111,7 @@ static int add(srv_catalog *catalog, const char *id, const char *path, const cha
     memset(e, 0, sizeof *e);
     snprintf(e->id, sizeof e->id, "%s", id);
     e->path = strdup(path);
-    e->name = strdup(name ? name : id);
+    e->name = strdup(name ? name : "");
     e->modality = strdup(modality ? modality : "");
     if (!e->path || !e->name || !e->modality) {
         free(e->path);

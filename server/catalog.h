@@ -21,7 +21,8 @@ typedef struct srv_catalog_entry {
     char *dicomweb_study;     /* ... its study UID ("": looked up by QIDO-RS) */
     char *dicomweb_series;    /* ... its series UID */
     char *dicomweb_credentials; /* ... a credentials file (dicomweb.h), or NULL */
-    char *name;               /* for people; the id when the catalog gives none */
+    char *name;               /* for people; "" when the catalog gives none (then the
+                                 volume's own description, else the id, is shown) */
     char *modality;           /* "CT", "MR", "phantom", ... or "" */
     double levels[SRV_LEVELS_MAX];
     size_t level_count;       /* 0: suggest levels from the histogram */

@@ -146,8 +146,12 @@ void srv_volume_describe(srv_volume *v, uint32_t volume_crc)
 
 proto_volume_doc srv_volume_doc(const srv_volume *v, const char *shard)
 {
+    /* The catalog's name and modality where it gives them, else the volume's own (a DICOM
+     * series' description and modality), else the id and "" (document.c). */
+    const srv_catalog_entry *e = v->entry;
     proto_volume_doc doc = {
-        .shard = shard, .id = v->entry->id, .name = v->entry->name, .modality = v->entry->modality,
+        .shard = shard, .id = e->id, .name = e->name && *e->name ? e->name : v->vol->description,
+        .modality = e->modality && *e->modality ? e->modality : v->vol->modality,
         .version = v->version, .vol = v->vol, .levels = v->levels, .level_count = v->level_count,
         .histogram = v->histogram, .histogram_bins = SRV_HISTOGRAM_BINS};
     if (v->tree) {

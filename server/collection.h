@@ -142,7 +142,9 @@ void srv_collection_free(srv_collection *c);
  * its histogram and its suggested levels (the catalog's, else Otsu's). */
 void srv_volume_describe(srv_volume *v, uint32_t volume_crc);
 /* The document /v1/volumes and /v1/volumes/{id} give of v (document.h), the hierarchy's
- * figures when v->tree is set. shard: the replica that preloads it, or NULL. */
+ * figures when v->tree is set: name and modality the catalog's where it gives them, else
+ * the volume's own (a DICOM series' SeriesDescription and Modality). shard: the replica
+ * that preloads it, or NULL. */
 proto_volume_doc srv_volume_doc(const srv_volume *v, const char *shard);
 
 #endif

@@ -348,6 +348,10 @@ static int gather_frames(series *s, iso_error *err)
             d->along = dot(d->pos, s->normal);
             d->slope = h->frame[f].slope;
             d->intercept = h->frame[f].intercept;
+            if (!isfinite(d->slope) || d->slope == 0 || !isfinite(d->intercept))
+                return iso_error_set(err, ISO_E_FORMAT, "%s: frame %u: RescaleSlope %g and RescaleIntercept %g: "
+                                     "expected finite numbers and a slope other than 0",
+                                     s->files[i].path, f + 1, d->slope, d->intercept);
         }
     }
     return 0;
@@ -476,32 +480,6 @@ static unsigned bits_stored(const iso_gdcm_header *h)
     return h->bits_stored && h->bits_stored <= h->bits_allocated ? h->bits_stored : h->bits_allocated;
 }
 
-/* The voxel type that holds every rescaled value of the stored bit range (see io.h). */
-static iso_voxel_type output_type(const series *s)
-{
-    const iso_gdcm_header *h = &s->files[0].h;
-    unsigned b = bits_stored(h);
-    double lo = h->pixel_signed ? -ldexp(1, (int)b - 1) : 0;
-    double hi = h->pixel_signed ? ldexp(1, (int)b - 1) - 1 : ldexp(1, (int)b) - 1;
-    double min = INFINITY, max = -INFINITY;
-    int identity = 1, integral = 1;
-    for (size_t k = 0; k < s->frame_count; k++) {
-        const dframe *d = &s->frames[k];
-        identity &= d->slope == 1 && d->intercept == 0;
-        integral &= d->slope == floor(d->slope) && d->intercept == floor(d->intercept) && d->slope != 0;
-        double a = d->slope * lo + d->intercept, c = d->slope * hi + d->intercept;
-        min = fmin(min, fmin(a, c));
-        max = fmax(max, fmax(a, c));
-    }
-    if (identity)
-        return stored_type(h);
-    if (integral && min >= -32768 && max <= 32767)
-        return ISO_I16;
-    if (integral && min >= -2147483648.0 && max <= 2147483647.0)
-        return ISO_I32;
-    return ISO_F32;
-}
-
 /* Sample i of a decoded frame as stored: only the low BitsStored bits count (the rest
  * may hold overlays), sign-extended for signed pixels. */
 static long long raw_sample(const void *frame, iso_voxel_type type, size_t i, unsigned bits)
@@ -519,21 +497,18 @@ static long long raw_sample(const void *frame, iso_voxel_type type, size_t i, un
     return (long long)u;
 }
 
-/* Places decoded frame f of a file into slice k of vol, rescaled. */
-static void place_frame(iso_volume *vol, size_t k, const void *frame, const iso_gdcm_header *h,
-                        const dframe *d)
+/* Places decoded frame f of a file into slice k of vol as stored (vol has the stored
+ * type): the rescale comes after every frame is in (rescale). */
+static void place_frame(iso_volume *vol, size_t k, const void *frame, const iso_gdcm_header *h)
 {
-    iso_voxel_type source = stored_type(h);
     size_t n = vol->dims[0] * vol->dims[1];
     unsigned bits = bits_stored(h);
-    if (vol->type == source && bits == h->bits_allocated) {
-        memcpy((char *)vol->data + k * n * iso_vol_type_size(source), frame, n * iso_vol_type_size(source));
+    if (bits == h->bits_allocated) {
+        memcpy((char *)vol->data + k * n * iso_vol_type_size(vol->type), frame, n * iso_vol_type_size(vol->type));
         return;
     }
-    for (size_t i = 0; i < n; i++) {
-        double v = d->slope * (double)raw_sample(frame, source, i, bits) + d->intercept;
-        iso_vol_set(vol, i % vol->dims[0], i / vol->dims[0], k, v);
-    }
+    for (size_t i = 0; i < n; i++)
+        iso_vol_set(vol, i % vol->dims[0], i / vol->dims[0], k, (double)raw_sample(frame, vol->type, i, bits));
 }
 
 /* Decodes each file once and places its frames where sorting put them. */
@@ -558,12 +533,43 @@ static int read_samples(const series *s, iso_volume *vol, const iso_load_options
         }
         for (size_t k = 0; k < s->frame_count; k++)
             if (s->frames[k].file == f)
-                place_frame(vol, k, (const char *)buf + s->frames[k].index * frame_bytes, &file->h, &s->frames[k]);
+                place_frame(vol, k, (const char *)buf + s->frames[k].index * frame_bytes, &file->h);
         free(buf);
         if (opt && opt->progress)
             opt->progress(opt->progress_context, 0.5 + 0.5 * (double)(f + 1) / (double)s->count);
     }
     return 0;
+}
+
+/* The stored samples in vol (one slice per sorted frame) to their rescaled values, in the
+ * narrowest type that holds them (volume.h). */
+static int rescale(const series *s, iso_volume *vol, uint64_t max_bytes, iso_error *err)
+{
+    size_t n = s->frame_count;
+    double *slope = malloc(2 * n * sizeof *slope);
+    if (!slope)
+        return iso_error_set(err, ISO_E_NOMEM, "%s: out of memory", s->spec);
+    double *intercept = slope + n;
+    for (size_t k = 0; k < n; k++) {
+        slope[k] = s->frames[k].slope;
+        intercept[k] = s->frames[k].intercept;
+    }
+    iso_error why = {0};
+    int rc = iso_vol_rescale(vol, slope, intercept, max_bytes, &why);
+    if (rc)
+        rc = iso_error_set(err, rc, "%s: %s", s->spec, why.message);
+    free(slope);
+    return rc;
+}
+
+/* Copies text into a volume's field: printable ASCII only (DICOM strings may come in other
+ * character sets, and a document is UTF-8), others as '?'. */
+static void copy_label(char *out, size_t size, const char *text)
+{
+    size_t n = 0;
+    for (; text[n] && n + 1 < size; n++)
+        out[n] = text[n] >= 0x20 && text[n] < 0x7f ? text[n] : '?';
+    out[n] = '\0';
 }
 
 /* ---------------------------------------------------------------- the loader */
@@ -587,19 +593,20 @@ static int build_volume(series *s, const iso_load_options *opt, iso_volume **out
     iso_volume probe = {.dims = {dims[0], dims[1], dims[2]}};
     if ((rc = set_geometry(s, &probe, err)))
         return rc;
-    uint64_t bytes;
+    uint64_t bytes, max_bytes = opt && opt->max_bytes ? opt->max_bytes : ISO_VOL_DEFAULT_MAX_BYTES;
     iso_error size_err;
-    iso_voxel_type type = output_type(s);
-    if (iso_vol_check_size(dims, type, opt && opt->max_bytes ? opt->max_bytes : ISO_VOL_DEFAULT_MAX_BYTES,
-                           &bytes, &size_err))
+    iso_voxel_type type = stored_type(h);
+    if (iso_vol_check_size(dims, type, max_bytes, &bytes, &size_err))
         return iso_error_set(err, ISO_E_LIMIT, "%s: %s", s->spec, size_err.message);
-    iso_volume *vol = iso_vol_create(dims, type, opt ? opt->max_bytes : 0, err);
+    iso_volume *vol = iso_vol_create(dims, type, max_bytes, err);
     if (!vol)
         return err ? err->code : ISO_E_NOMEM;
     memcpy(vol->spacing, probe.spacing, sizeof vol->spacing);
     memcpy(vol->origin, probe.origin, sizeof vol->origin);
     memcpy(vol->direction, probe.direction, sizeof vol->direction);
-    if ((rc = read_samples(s, vol, opt, err))) {
+    copy_label(vol->modality, sizeof vol->modality, h->modality);
+    copy_label(vol->description, sizeof vol->description, h->series_description);
+    if ((rc = read_samples(s, vol, opt, err)) || (rc = rescale(s, vol, max_bytes, err))) {
         iso_vol_destroy(vol);
         return rc;
     }

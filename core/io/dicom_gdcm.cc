@@ -214,6 +214,8 @@ int read_header(const char *path, unsigned max_frames, iso_gdcm_header *h, char 
         return ISO_GDCM_BAD;
     }
     read_copy(f, ds, gdcm::Tag(0x0020, 0x000e), h->series_uid, sizeof h->series_uid);
+    read_copy(f, ds, gdcm::Tag(0x0008, 0x0060), h->modality, sizeof h->modality);
+    read_copy(f, ds, gdcm::Tag(0x0008, 0x103e), h->series_description, sizeof h->series_description);
     std::snprintf(h->transfer_syntax, sizeof h->transfer_syntax, "%s",
                   reader.GetFile().GetHeader().GetDataSetTransferSyntax().GetString());
     h->frame = static_cast<iso_gdcm_frame *>(std::calloc(h->frames, sizeof *h->frame));

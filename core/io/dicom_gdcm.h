@@ -24,6 +24,8 @@ typedef struct iso_gdcm_frame {
 typedef struct iso_gdcm_header {
     char series_uid[80];     /* SeriesInstanceUID, "" if absent */
     char transfer_syntax[80];
+    char modality[17];       /* Modality (0008,0060), "" if absent */
+    char series_description[65]; /* SeriesDescription (0008,103E), "" if absent */
     unsigned rows, columns, frames;
     unsigned bits_allocated, bits_stored, pixel_signed, samples_per_pixel;
     double pixel_spacing[2]; /* PixelSpacing: between rows, between columns; 0 if absent */

@@ -30,7 +30,10 @@ typedef struct iso_load_options {
 /* Loads `path` (a file, a DICOM series directory "DIR[#SeriesInstanceUID]" (io.h), or
  * "field:NAME[:WxHxD]" for an analytic field, see io.h).
  * opt may be NULL. On success *out owns a new volume with its stats computed; on failure
- * *out is NULL and err names the file and the problem. Safe on untrusted files. */
+ * *out is NULL and err names the file and the problem. A volume whose file rescales its
+ * stored values (DICOM, NIfTI's scl_slope) comes in the narrowest voxel type that holds the
+ * values present (iso_vol_rescale); others in the type the file stores. Safe on untrusted
+ * files. */
 int iso_load(const char *path, const iso_load_options *opt, iso_volume **out, iso_error *err);
 
 /* 1 if some loader recognises `path` as a volume of its own (a detached NRRD's data file

@@ -67,22 +67,29 @@ static int check_header(const char *path, const nifti_image *nim, const iso_load
     return 0;
 }
 
-/* Copies (or rescales) the library's samples into vol. */
-static void copy_samples(const nifti_image *nim, iso_volume *vol, iso_voxel_type source)
+/* scl_slope and scl_inter applied to vol's samples (copied as stored): integers into the
+ * narrowest type that holds the values present (volume.h), floats in place. */
+static int rescale(const char *path, const nifti_image *nim, iso_volume *vol, uint64_t max_bytes, iso_error *err)
 {
-    size_t n = iso_vol_count(vol);
-    if (vol->type == source) {
-        memcpy(vol->data, nim->data, n * iso_vol_type_size(source));
-        return;
+    if (iso_vol_type_is_float(vol->type)) {
+        size_t n = iso_vol_count(vol);
+        for (size_t at = 0; at < n; at++)
+            iso_vol_set(vol, at % vol->dims[0], at / vol->dims[0] % vol->dims[1], at / (vol->dims[0] * vol->dims[1]),
+                        nim->scl_slope * iso_vol_sample(vol, at) + nim->scl_inter);
+        return 0;
     }
-    /* Rescaled: read each sample in its own type through a temporary volume view. */
-    iso_volume view = *vol;
-    view.type = source;
-    view.data = nim->data;
+    double *slope = malloc(2 * vol->dims[2] * sizeof *slope);
+    if (!slope)
+        return iso_error_set(err, ISO_E_NOMEM, "%s: out of memory", path);
+    double *intercept = slope + vol->dims[2];
     for (size_t k = 0; k < vol->dims[2]; k++)
-        for (size_t j = 0; j < vol->dims[1]; j++)
-            for (size_t i = 0; i < vol->dims[0]; i++)
-                iso_vol_set(vol, i, j, k, nim->scl_slope * iso_vol_get(&view, i, j, k) + nim->scl_inter);
+        slope[k] = nim->scl_slope, intercept[k] = nim->scl_inter;
+    iso_error why = {0};
+    int rc = iso_vol_rescale(vol, slope, intercept, max_bytes, &why);
+    if (rc)
+        rc = iso_error_set(err, rc, "%s: %s", path, why.message);
+    free(slope);
+    return rc;
 }
 
 /* The sform if set, else the qform; RAS to LPS by negating the x and y rows. */
@@ -126,9 +133,9 @@ static int load_locked(const char *path, const iso_load_options *opt, iso_volume
     iso_voxel_type source = ISO_U8, type;
     size_t dims[3];
     int rc = check_header(path, nim, opt, &source, dims, err);
-    int rescale = nim->scl_slope != 0 && isfinite(nim->scl_slope) && isfinite(nim->scl_inter) &&
-                  (nim->scl_slope != 1 || nim->scl_inter != 0);
-    type = !rescale ? source : (source == ISO_F64 || source == ISO_I32 || source == ISO_U32) ? ISO_F64 : ISO_F32;
+    int rescaled = nim->scl_slope != 0 && isfinite(nim->scl_slope) && isfinite(nim->scl_inter) &&
+                   (nim->scl_slope != 1 || nim->scl_inter != 0);
+    type = source;
     if (!rc && nifti_image_load(nim) != 0)
         rc = iso_error_set(err, ISO_E_TRUNCATED, "%s: the samples cannot be read (file shorter than its header says?)", path);
     iso_volume *vol = NULL;
@@ -139,7 +146,9 @@ static int load_locked(const char *path, const iso_load_options *opt, iso_volume
     if (!rc)
         rc = set_geometry(path, nim, vol, err);
     if (!rc)
-        copy_samples(nim, vol, source);
+        memcpy(vol->data, nim->data, iso_vol_count(vol) * iso_vol_type_size(source));
+    if (!rc && rescaled)
+        rc = rescale(path, nim, vol, opt ? opt->max_bytes : 0, err);
     nifti_image_free(nim);
     if (rc) {
         iso_vol_destroy(vol);

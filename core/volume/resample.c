@@ -1,6 +1,8 @@
 /* resample.c: box-filter resampling of a volume to new dimensions (see volume.h). */
 #include "volume.h"
 
+#include <string.h>
+
 #include <math.h>
 #include <stdlib.h>
 
@@ -29,6 +31,8 @@ iso_volume *iso_resample(const iso_volume *vol, const size_t dims[3], iso_error 
         for (int c = 0; c < 3; c++)
             out->direction[d][c] = vol->direction[d][c];
     }
+    memcpy(out->modality, vol->modality, sizeof out->modality);
+    memcpy(out->description, vol->description, sizeof out->description);
     float *dst = out->data;
     for (size_t z = 0; z < dims[2]; z++)
         for (size_t y = 0; y < dims[1]; y++)

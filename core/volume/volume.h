@@ -40,6 +40,8 @@ typedef struct iso_volume {
     double direction[3][3];  /* direction[r][c]: row r of the matrix, column c is axis c */
     double value_min, value_max, value_mean; /* over all samples, set by iso_vol_update_stats */
     int has_nan;             /* float volumes: 1 if any sample is NaN (see iso_vol_update_stats) */
+    char modality[17];       /* what the file says acquired it ("CT", "MR"; DICOM's Modality), or "" */
+    char description[65];    /* the file's own words for it (DICOM's SeriesDescription), or "" */
 } iso_volume;
 
 /* Default cap on the bytes of one volume's samples: 8 GiB. */
@@ -53,6 +55,31 @@ const char *iso_vol_type_name(iso_voxel_type type);
 int iso_vol_type_parse(const char *name, iso_voxel_type *type);
 /* 1 for ISO_F32 and ISO_F64. */
 int iso_vol_type_is_float(iso_voxel_type type);
+
+/* The narrowest voxel type (narrow.c). Loaders that rescale stored values keep the volume
+ * in the narrowest type that holds every value present, never losing one: CT in Hounsfield
+ * units is int16, whatever bit range its files store. */
+
+/* The narrowest type holding every value in [min, max] exactly when all are integers
+ * (integral): the smallest integer type, the source's own first at its size, then unsigned,
+ * then signed; float64 past 32 bits. Not integral: the source when it is a float type, else
+ * float32. */
+iso_voxel_type iso_vol_narrowest_type(double min, double max, int integral, iso_voxel_type source);
+/* Converts vol's samples in place to `to`, with value = slope[k] * sample + intercept[k] on
+ * slice k when slope is given (both NULL or both dims[2] long). The caller knows every new
+ * value fits `to` (iso_vol_narrowest_type). A wider type grows the buffer (max_bytes as in
+ * iso_vol_create; 0 = default), a narrower one shrinks it. Returns 0, ISO_E_LIMIT or
+ * ISO_E_NOMEM (vol unchanged). Statistics are left to the caller. */
+int iso_vol_retype(iso_volume *vol, iso_voxel_type to, const double *slope, const double *intercept,
+                   uint64_t max_bytes, iso_error *err);
+/* Rescales vol's stored integer samples, value = slope[k] * stored + intercept[k] on slice k
+ * (DICOM's RescaleSlope and RescaleIntercept, NIfTI's scl_slope and scl_inter; each slope
+ * finite and not 0), into the narrowest type that holds the values present: integers into
+ * the smallest integer type (vol's own first at its size), others into float32 when it
+ * keeps every two distinct stored values apart, else float64. Returns 0, ISO_E_LIMIT or
+ * ISO_E_NOMEM (vol unchanged). O(N): one pass to find the range, one to convert. */
+int iso_vol_rescale(iso_volume *vol, const double *slope, const double *intercept, uint64_t max_bytes,
+                    iso_error *err);
 
 /* Checks dims (each >= 2) and that the sample bytes fit in max_bytes without overflow;
  * on success stores the byte count in *bytes. Safe on untrusted sizes. */

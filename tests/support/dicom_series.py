@@ -7,9 +7,19 @@
         scanners do) instead of as they are; --oblique: rows along +y, columns along -z,
         slices along -x (a sagittal stack), else the identity axes. Prints one line per
         slice, "k FILE", in slice order.
-    dicom_series.py phantom OUTDIR [--rle]
+    dicom_series.py phantom OUTDIR [--rle] [--bits=16]
         the same from a synthetic 40x36x24 CT phantom (a sphere of 1000 HU in -1000 HU
-        around a cylinder of 300 HU): for tests that run without ../shared.
+        around a cylinder of 300 HU), stored with --hu: for tests that run without
+        ../shared; --bits=16: 16 stored bits although 12 would do (as many scanners write).
+    dicom_series.py ct OUTDIR --bits=B [--signed] [--intercept=I] [--slope=S] [--scale=K] [--offset=O]
+        the phantom's values times K plus O (defaults 1, 0) as a series of B stored bits (12
+        or 16, in 16 allocated; the bits above B set, as overlays may), signed or unsigned,
+        stored = (value - I) / S (defaults 0 and 1, which must give whole numbers that
+        fit); Modality CT, SeriesDescription "ct B-bit ...".
+    dicom_series.py ct-raw OUT.raw [--scale=K] [--offset=O]
+        the ct series' values (float64 little endian, x fastest), to compare with.
+    dicom_series.py batch FILE
+        each line of FILE as the arguments of one call (one process for many series).
     dicom_series.py phantom-raw OUT.raw
         the phantom's samples (int16 little endian, x fastest), to compare with.
     dicom_series.py enhanced OUT.dcm
@@ -98,8 +108,10 @@ def set_pixels(ds, frames, rle):
     ds.is_little_endian, ds.is_implicit_VR = True, False
 
 
-def write_series(data, spacing, out, rle=False, hu=False, oblique=False, seed=1, uid=None):
-    """One file per slice of data ([z, y, x]); prints "k FILE" per slice in slice order."""
+def write_series(data, spacing, out, rle=False, hu=False, oblique=False, seed=1, uid=None, bits=None,
+                 stored=None, description="isoserve test series"):
+    """One file per slice of data ([z, y, x]); prints "k FILE" per slice in slice order.
+    stored: (bits, signed, intercept, slope) to write data's values through a rescale."""
     os.makedirs(out, exist_ok=True)
     uid = uid or generate_uid(ROOT)
     rng = random.Random(seed)
@@ -111,16 +123,29 @@ def write_series(data, spacing, out, rle=False, hu=False, oblique=False, seed=1,
     for k in range(nz):
         ds = base_dataset(CTImageStorage, uid, data.shape[1], data.shape[2])
         ds.Modality = "CT"
+        ds.SeriesDescription = description
         ds.InstanceNumber = numbers[k]
         ds.ImageOrientationPatient = [float(v) for v in row + col]
         ds.ImagePositionPatient = [float(v) for v in (np.array([10.0, -20.0, 30.0]) + k * spacing[2] * normal)]
         ds.PixelSpacing = [spacing[1], spacing[0]]
         ds.SliceThickness = spacing[2]
         slice_ = data[k]
-        if hu:  # 12 stored bits when they hold the values, as most CT scanners write
+        if stored:
+            nbits, signed, intercept, slope = stored
+            raw = (slice_.astype(np.float64) - intercept) / slope
+            lo, hi = (-(1 << (nbits - 1)), (1 << (nbits - 1)) - 1) if signed else (0, (1 << nbits) - 1)
+            assert (raw == np.round(raw)).all() and raw.min() >= lo and raw.max() <= hi, (raw.min(), raw.max())
+            ds.PixelRepresentation = int(signed)
+            ds.BitsStored, ds.HighBit = nbits, nbits - 1
+            ds.RescaleIntercept, ds.RescaleSlope = intercept, slope
+            # bits above BitsStored hold garbage, as overlays may: a reader must mask them
+            slice_ = (raw.astype(np.int64) & ((1 << nbits) - 1) | (0xa000 if nbits == 12 else 0)).astype("<u2")
+            if signed:
+                slice_ = slice_.view("<i2")
+        elif hu:  # 12 stored bits when they hold the values, as most CT scanners write
             ds.PixelRepresentation = 0
             ds.RescaleIntercept, ds.RescaleSlope = -1024, 1
-            if int(data.max()) + 1024 < 4096:
+            if int(data.max()) + 1024 < 4096 and bits != 16:
                 ds.BitsStored, ds.HighBit = 12, 11
             slice_ = (slice_.astype(np.int32) + 1024).astype("<u2")
         else:
@@ -194,18 +219,36 @@ def main(argv):
     seed = next((int(a.split("=")[1]) for a in flags if a.startswith("--seed=")), 1)
     uid = next((a.split("=", 1)[1] for a in flags if a.startswith("--uid=")), None)
     kind = args[0]
+
+    def number(name, default):
+        return next((float(a.split("=", 1)[1]) for a in flags if a.startswith(f"--{name}=")), default)
+
     if kind == "nrrd":
         data, spacing = read_nrrd(args[1])
         write_series(data, spacing, args[2], "--rle" in flags, "--hu" in flags, "--oblique" in flags, seed, uid)
     elif kind == "phantom":
         data, spacing = phantom()
-        write_series(data, spacing, args[1], "--rle" in flags, True, False, seed, uid)
+        write_series(data, spacing, args[1], "--rle" in flags, True, False, seed, uid, bits=number("bits", None))
+    elif kind == "ct":
+        data, spacing = phantom()
+        offset, nbits, signed = number("offset", 0), int(number("bits", 16)), "--signed" in flags
+        intercept, slope = number("intercept", 0), number("slope", 1)
+        description = "ct %d-bit %s, intercept %g, slope %g" % (nbits, "signed" if signed else "unsigned",
+                                                                intercept, slope)
+        write_series(data * number("scale", 1) + offset, spacing, args[1], False, False, False, seed, uid,
+                     stored=(nbits, signed, intercept, slope), description=description)
+    elif kind == "ct-raw":
+        (phantom()[0] * number("scale", 1) + number("offset", 0)).astype("<f8").tofile(args[1])
     elif kind == "phantom-raw":
         phantom()[0].astype("<i2").tofile(args[1])
     elif kind == "enhanced":
         write_enhanced(args[1])
     elif kind == "restack":
         restack(args[1], args[2], int(args[3]))
+    elif kind == "batch":
+        for line in open(args[1]):
+            if line.split():
+                main(line.split())
     elif kind == "pixels":
         pixels(args[1], args[2])
     else:

@@ -193,7 +193,8 @@ static void test_ct_slice_in_hu(void)
     iso_volume *v = load(tmp("ct"));
     if (!v)
         return;
-    CHECK_EQ(v->type, ISO_I32); /* 16 signed stored bits - 1024 do not fit i16 */
+    /* 16 signed stored bits - 1024 would not fit int16; the values present do. */
+    CHECK_EQ(v->type, ISO_I16);
     iso_volume slice0 = *v;
     slice0.dims[2] = 1;
     check_against_raw(&slice0, tmp("ct.raw"), 0);
@@ -253,6 +254,58 @@ static void test_phantom_rle(void)
         fclose(f);
     free(want);
     iso_vol_destroy(v);
+}
+
+/* Series of 12 and 16 stored bits, signed and unsigned, with and without a rescale: each
+ * comes back in the narrowest type that holds the values present, every value exact, with
+ * the instances' Modality and SeriesDescription. The third is the shape of most scanners'
+ * CT (16 unsigned stored bits, intercept -1024), int16 although its stored range is not. */
+static void test_rescaled_series_types(void)
+{
+    static const struct {
+        const char *args, *values; /* the series, and its values: the phantom's HU scaled */
+        iso_voxel_type type;
+    } cases[] = {
+        {"--bits=12 --intercept=-1024", "", ISO_I16},
+        {"--bits=12 --signed", "", ISO_I16},
+        {"--bits=16 --intercept=-1024", "", ISO_I16},
+        {"--bits=16 --signed --intercept=-1024", "", ISO_I16},
+        {"--bits=16 --signed", "", ISO_I16},
+        {"--bits=12 --offset=1000", "--offset=1000", ISO_U16},
+        {"--bits=16 --offset=33000 --intercept=-1024", "--offset=33000", ISO_U16},
+        {"--bits=16 --scale=0.1 --offset=100", "--scale=0.1 --offset=100", ISO_U8},
+        {"--bits=16 --signed --scale=0.1 --intercept=-50", "--scale=0.1", ISO_I8},
+        {"--bits=12 --signed --scale=40 --slope=40", "--scale=40", ISO_I32},
+        {"--bits=16 --offset=0.5 --intercept=-1024.5 --slope=0.5", "--offset=0.5", ISO_F32},
+    };
+    const size_t count = sizeof cases / sizeof cases[0];
+    if (!have_pydicom())
+        return;
+    FILE *batch = fopen(tmp("rescaled.batch"), "w"); /* one helper process writes them all */
+    CHECK(batch != NULL);
+    if (!batch)
+        return;
+    for (size_t c = 0; c < count; c++) {
+        fprintf(batch, "ct %s/rescaled%zu %s\n", check_temp_dir(), c, cases[c].args);
+        fprintf(batch, "ct-raw %s/rescaled%zu.raw %s\n", check_temp_dir(), c, cases[c].values);
+    }
+    fclose(batch);
+    CHECK_EQ(helper(NULL, "batch %s", tmp("rescaled.batch")), 0);
+    for (size_t c = 0; c < count; c++) {
+        char dir[64], raw[64], description[128] = "";
+        snprintf(dir, sizeof dir, "rescaled%zu", c);
+        snprintf(raw, sizeof raw, "rescaled%zu.raw", c);
+        iso_volume *v = load(tmp(dir));
+        if (!v)
+            continue;
+        CHECKF(v->type == cases[c].type, "%s: %s, not %s", cases[c].args, iso_vol_type_name(v->type),
+               iso_vol_type_name(cases[c].type));
+        check_against_raw(v, tmp(raw), 0);
+        CHECK(!strcmp(v->modality, "CT"));
+        snprintf(description, sizeof description, "ct %s-bit", strstr(cases[c].args, "=16") ? "16" : "12");
+        CHECKF(!strncmp(v->description, description, strlen(description)), "description '%s'", v->description);
+        iso_vol_destroy(v);
+    }
 }
 
 static void copy_file(const char *from, const char *to, long keep)
@@ -438,6 +491,7 @@ int main(void)
     CHECK_RUN(test_rtdose_multiframe);
     CHECK_RUN(test_mr_transfer_syntaxes);
     CHECK_RUN(test_ct_slice_in_hu);
+    CHECK_RUN(test_rescaled_series_types);
     CHECK_RUN(test_enhanced_multiframe);
     CHECK_RUN(test_phantom_rle);
     CHECK_RUN(test_hostile_series);
