@@ -8,11 +8,21 @@
 // Volumes: CThead, ch2 (ch2bet) and ch2better from ../shared/volumes (ISO_SHARED_VOLUMES);
 // without them Debian's ch2bet NIfTI alone. ISO_BENCH_REPEAT sets the loads per cell
 // (default 3; the median is reported); ISO_BENCH_ONLY=drag runs the dragging alone.
-import { spawn } from 'node:child_process';
+import { execSync, spawn } from 'node:child_process';
 import { existsSync, mkdirSync, mkdtempSync, rmSync, writeFileSync } from 'node:fs';
 import { createRequire } from 'node:module';
-import { tmpdir } from 'node:os';
+import { cpus, loadavg, tmpdir } from 'node:os';
 import { join, resolve } from 'node:path';
+
+// What the JSON starts with (as tests/bench/provenance.py writes it for the Python benches).
+function provenance() {
+  let commit = 'unknown';
+  try {
+    commit = execSync('git rev-parse --short=12 HEAD', { encoding: 'utf8' }).trim();
+    if (execSync('git status --porcelain --untracked-files=no', { encoding: 'utf8' }).trim()) commit += '-dirty';
+  } catch { /* not a git checkout */ }
+  return { date: new Date().toISOString().replace(/\.\d+Z$/, 'Z'), commit, load_average: loadavg(), cores: cpus().length };
+}
 
 const require = createRequire(resolve('web/node_modules') + '/');
 const { chromium } = require('playwright-core');
@@ -177,7 +187,7 @@ async function main() {
   }
   printTables(results);
   mkdirSync('bench/results', { recursive: true });
-  writeFileSync('bench/results/browser.json', JSON.stringify(results, null, 1));
+  writeFileSync('bench/results/browser.json', JSON.stringify({ ...provenance(), ...results }, null, 1));
   console.log('wrote bench/results/browser.json');
 }
 

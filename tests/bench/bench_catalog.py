@@ -25,6 +25,8 @@ import sys
 import tempfile
 import time
 
+from provenance import provenance  # tests/bench/provenance.py, beside this file  # noqa: E402
+
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 sys.path.insert(0, os.path.join(ROOT, "tests", "support"))
 from ports import free_port  # noqa: E402 - found through the path just set
@@ -121,7 +123,7 @@ def main():
         print(f"| {text} | " + " | ".join(cells) + ratio + " |")
     os.makedirs(os.path.join(ROOT, "bench/results"), exist_ok=True)
     with open(os.path.join(ROOT, "bench/results/catalog.json"), "w") as f:
-        json.dump({"entries": a.entries, "shards": SHARDS, "results": results}, f, indent=1)
+        json.dump({**provenance(), "entries": a.entries, "shards": SHARDS, "results": results}, f, indent=1)
     mine = results["this build"]
     print(f"\nwhole catalog / one page: {mine['all_ms'] / mine['page_ms']:,.0f}x the time, "
           f"{mine['all_bytes'] / mine['page_bytes']:,.0f}x the bytes")

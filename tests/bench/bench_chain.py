@@ -26,7 +26,8 @@ import json
 import os
 import subprocess
 import sys
-import time
+
+from provenance import provenance  # tests/bench/provenance.py, beside this file  # noqa: E402
 
 BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", "build/isoserve"))
 BASE = os.environ.get("ISOSERVE_BIN_BASE")  # a second build to compare with, run first
@@ -141,7 +142,7 @@ def main():
             print_change(pair[0], pair[1])
     os.makedirs("bench/results", exist_ok=True)
     with open("bench/results/chain.json", "w") as f:
-        json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "rows": rows}, f, indent=1)
+        json.dump({**provenance(), "rows": rows}, f, indent=1)
     return 0
 
 

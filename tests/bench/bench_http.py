@@ -37,6 +37,8 @@ import sys
 import tempfile
 import time
 
+from provenance import provenance  # tests/bench/provenance.py, beside this file  # noqa: E402
+
 BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", "build/isoserve"))
 BASELINE = os.environ.get("ISO_BENCH_BASELINE_BIN")
 SHARED = os.environ.get("ISO_SHARED_VOLUMES", "../shared/volumes")
@@ -336,8 +338,7 @@ def main():
     print_split(split_rows)
     if os.environ.get("ISO_BENCH_ONLY") == "split":
         os.makedirs("bench/results", exist_ok=True)
-        json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "load_average": os.getloadavg(),
-                   "split": split_rows}, open("bench/results/http_split.json", "w"), indent=1)
+        json.dump({**provenance(), "split": split_rows}, open("bench/results/http_split.json", "w"), indent=1)
         return 0
     runs = [run(BIN, tmp, catalog, cases, True)]
     if BASELINE:
@@ -352,8 +353,7 @@ def main():
                   f"  bytes {a['cached']['bytes'] / b['cached']['bytes']:>5.2f}x")
     os.makedirs("bench/results", exist_ok=True)
     out = "bench/results/http.json"
-    json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "wrk_seconds": int(DURATION),
-               "load_average": os.getloadavg(), "split": split_rows, "runs": runs}, open(out, "w"), indent=1)
+    json.dump({**provenance(), "wrk_seconds": int(DURATION), "split": split_rows, "runs": runs}, open(out, "w"), indent=1)
     shutil.rmtree(tmp, ignore_errors=True)
     print(f"written {out}")
     return 0

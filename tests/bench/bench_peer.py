@@ -33,6 +33,8 @@ import sys
 import tempfile
 import time
 
+from provenance import provenance  # tests/bench/provenance.py, beside this file  # noqa: E402
+
 import numpy as np
 from vtkmodules.util import numpy_support
 import vtkmodules.all as vtk
@@ -373,7 +375,7 @@ def main():
     print_scaling(scale)
     out = os.environ.get("ISO_BENCH_OUT", "bench/results/peer.json")
     os.makedirs(os.path.dirname(out) or ".", exist_ok=True)
-    json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "repeat": REPEAT,
+    json.dump({**provenance(), "repeat": REPEAT,
                "write_bandwidth_bytes_per_s": bandwidth, "ladder": LADDER,
                "vtk": vtk.vtkVersion.GetVTKVersion(), "cases": cases, "scaling": scale},
               open(out, "w"), indent=1)

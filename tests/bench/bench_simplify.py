@@ -23,6 +23,8 @@ import sys
 import tempfile
 import time
 
+from provenance import provenance  # tests/bench/provenance.py, beside this file  # noqa: E402
+
 import numpy as np
 from vtkmodules.util import numpy_support
 import vtkmodules.all as vtk
@@ -144,8 +146,7 @@ def main():
     with tempfile.TemporaryDirectory(prefix="isoserve-simplify-") as tmp:
         for f, lvl, label in chosen:  # the JSON after every case: a long run keeps what it measured
             cases.append(run_case(f, lvl, label, tmp))
-            json.dump({"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-                       "sample_step_voxels": SAMPLE_STEP, "vtk": vtk.vtkVersion.GetVTKVersion(),
+            json.dump({**provenance(), "sample_step_voxels": SAMPLE_STEP, "vtk": vtk.vtkVersion.GetVTKVersion(),
                        "cases": cases}, open(out, "w"), indent=1)
     print("distances in voxels to the exact surface: symmetric mean, p99, max; then the")
     print("largest distance from an exact vertex to the candidate (what the candidate lost)")

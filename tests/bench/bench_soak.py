@@ -16,6 +16,8 @@ import tempfile
 import threading
 import time
 
+from provenance import provenance  # tests/bench/provenance.py, beside this file  # noqa: E402
+
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "http"))
 import test_http  # noqa: E402 - its Server class: a daemon on 127.0.0.1:0 stopped by PID
 
@@ -110,7 +112,7 @@ def main():
     report, problems = soak(seconds)
     if os.path.isdir("bench"):
         os.makedirs("bench/results", exist_ok=True)
-        json.dump(report, open("bench/results/soak.json", "w"), indent=1)
+        json.dump({**provenance(), **report}, open("bench/results/soak.json", "w"), indent=1)
     print("soak: " + ("ok" if not problems else "; ".join(problems)))
     return 1 if problems else 0
 
