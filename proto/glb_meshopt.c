@@ -321,7 +321,7 @@ static const unsigned task_needs[TASK_COUNT] = {
  * the normals, which the index side does not read, then the vertex views; each then takes
  * what is left. The gzip parts of the positions and the index are tasks of their own, so
  * that whichever share is done first takes them: with tricubic normals the index side
- * ends first and takes the positions' (docs/performance.md), with cheaper normals the other
+ * ends first and takes the positions', with cheaper normals the other
  * share takes the index's. */
 static const int task_order[2][TASK_COUNT] = {
     {TASK_NUMBER, TASK_INDEX, TASK_INDEX_CODES_GZIP, TASK_INDEX_DATA_GZIP, TASK_POSITION_GZIP, TASK_POSITIONS,

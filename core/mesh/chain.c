@@ -96,7 +96,7 @@ static int level_pinches(const iso_mesh *m, uint32_t *remap, size_t *used, iso_m
 /* Levels 1 and 2, three quarters of the chain's collapses, make those costing less than
  * half the level's expected last one in memory order (iso_collapser_coarse), which is
  * cheaper; later levels, small and decided by fewer collapses, keep cost order, which
- * their p99 depends on more (docs/performance.md, "The collapser's cost"). */
+ * their p99 depends on more (docs/performance.md, "Faithful chains"). */
 #define CHAIN_COARSE 0.5
 #define CHAIN_COARSE_LEVELS 2
 

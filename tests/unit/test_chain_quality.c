@@ -6,7 +6,7 @@
  * level but the coarsest, where its link condition refuses collapses on thin bone (about
  * half of the level's vertices have one refused) and the single call makes pinches
  * instead; there it must stay within a bound that says how far (docs/performance.md,
- * "The coarse levels against one call"). */
+ * "Faithful chains"). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
