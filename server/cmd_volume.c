@@ -96,6 +96,9 @@ static int srv_cmd_info(int argc, char **argv)
                s.name, v->dims[0], v->dims[1], v->dims[2], iso_vol_type_name(v->type),
                v->spacing[0], v->spacing[1], v->spacing[2], v->origin[0], v->origin[1],
                v->origin[2], v->value_min, v->value_max, v->value_mean, v->has_nan ? ", has NaN samples" : "");
+        if (v->modality[0] || v->description[0])
+            printf("  series   %s%s%s\n", v->modality, v->modality[0] && v->description[0] ? ", " : "",
+                   v->description);
     }
     srv_close(&s);
     return status;
