@@ -12,6 +12,7 @@ cd "$(dirname "$0")/../.."
 bin=${ISOSERVE_BIN:-build/isoserve}
 exec /usr/bin/python3 - "$bin" "${ISO_SAN_SUFFIX:-}" <<'PY'
 import glob, re, subprocess, sys
+from concurrent.futures import ThreadPoolExecutor
 
 BIN, SUFFIX = sys.argv[1], sys.argv[2]
 failures = 0
@@ -60,9 +61,10 @@ for cmd in commands:
     wrong = []
     own = [path for path, text in sources.items() if re.search(rf"\bsrv_{cmd}_command = {{", text)]
     probe = set(options).union(found["server/cli.c"], *(found[path] for path in own))
-    for name in sorted(probe):
-        args = [name] + (["1"] if options.get(name) else []) + ["--help"]
-        rc, out, err = run(cmd, *args)
+    names = sorted(probe)
+    with ThreadPoolExecutor(2) as pool:  # each run is mostly process start-up (ASan's too)
+        answers = list(pool.map(lambda n: run(cmd, n, *(["1"] if options.get(n) else []), "--help"), names))
+    for name, (rc, out, err) in zip(names, answers):
         unknown = f"unknown option '{name}'" in err
         if name in options and (unknown or (rc == 0 and not out.startswith("usage:"))):
             wrong.append(f"{name} listed but refused ({err.strip()[:120]})")
