@@ -69,28 +69,20 @@ typedef struct active_brick {
 
 #define MAX_THREADS ISO_PARALLEL_MAX_THREADS
 
-/* The level as each type compares against it. An integer sample is above the level
- * exactly when it is above the level's floor, so integer data is compared as integers,
- * and 8- and 16-bit rows 8 samples at a time where SSE2 is there (x86-64 always has it):
- * the inside bits were 12% of the exact path's instructions one double compare at a time. */
-typedef struct threshold {
-    double level;      /* floating types: above when sample > level; NaN never is */
-    int64_t floor;     /* integer types: above when sample > floor */
-#ifdef __SSE2__
-    __m128i bias;      /* 8- and 16-bit: added to samples (and floor) to compare as signed */
-    __m128i lanes;     /* floor + bias in every lane */
-#endif
-} threshold;
-
-/* Below the type's smallest value every sample is above; at or past its largest none is. */
-typedef enum { SOME_ABOVE, ALL_ABOVE, NONE_ABOVE } threshold_reach;
+/* The level as each type compares against it: march.h's iso_march_threshold. An integer
+ * sample is above the level exactly when it is above the level's floor, so integer data
+ * is compared as integers, and 8- and 16-bit rows 8 samples at a time where SSE2 is there
+ * (x86-64 always has it): the inside bits were 12% of the exact path's instructions one
+ * double compare at a time. Below the type's smallest value every sample is above; at or
+ * past its largest none is. */
+typedef iso_march_threshold threshold;
+enum { SOME_ABOVE = ISO_MARCH_SOME_ABOVE, ALL_ABOVE = ISO_MARCH_ALL_ABOVE, NONE_ABOVE = ISO_MARCH_NONE_ABOVE };
 
 typedef struct march_job {
     const iso_volume *vol;
     const iso_bricks *bricks;
     double level;
     threshold threshold;     /* the level as the voxel type compares it, made once */
-    threshold_reach reach;
     active_brick *active;
     size_t active_count;
     int32_t *slot;     /* per brick of the grid: its index in active, or -1 */
@@ -135,12 +127,13 @@ static void make_tables(void)
 /* ---- one brick's inside bits, per voxel type ---- */
 
 
-static threshold_reach make_threshold(iso_voxel_type type, double level, threshold *th)
+static void make_threshold(iso_voxel_type type, double level, threshold *th)
 {
     memset(th, 0, sizeof *th);
     th->level = level;
+    th->reach = SOME_ABOVE;
     if (type == ISO_F32 || type == ISO_F64)
-        return SOME_ABOVE;
+        return;
     int64_t lowest, highest;
     switch (type) {
     case ISO_U8: lowest = 0, highest = UINT8_MAX; break;
@@ -151,27 +144,52 @@ static threshold_reach make_threshold(iso_voxel_type type, double level, thresho
     default: lowest = INT32_MIN, highest = INT32_MAX; break;
     }
     double f = floor(level);
-    if (f < (double)lowest)
-        return ALL_ABOVE;
-    if (f >= (double)highest)
-        return NONE_ABOVE;
+    if (f < (double)lowest) {
+        th->reach = ALL_ABOVE;
+        return;
+    }
+    if (f >= (double)highest) {
+        th->reach = NONE_ABOVE;
+        return;
+    }
     th->floor = (int64_t)f;
 #ifdef __SSE2__
+    __m128i bias = _mm_setzero_si128(), lanes = _mm_setzero_si128();
     if (type == ISO_U8 || type == ISO_I8) {
-        int bias = type == ISO_U8 ? -128 : 0;
-        th->bias = _mm_set1_epi8((char)bias);
-        th->lanes = _mm_set1_epi8((char)(th->floor + bias));
+        int b = type == ISO_U8 ? -128 : 0;
+        bias = _mm_set1_epi8((char)b);
+        lanes = _mm_set1_epi8((char)(th->floor + b));
     } else if (type == ISO_U16 || type == ISO_I16) {
-        int bias = type == ISO_U16 ? -32768 : 0;
-        th->bias = _mm_set1_epi16((short)bias);
-        th->lanes = _mm_set1_epi16((short)(th->floor + bias));
+        int b = type == ISO_U16 ? -32768 : 0;
+        bias = _mm_set1_epi16((short)b);
+        lanes = _mm_set1_epi16((short)(th->floor + b));
     }
+    _mm_storeu_si128((__m128i *)(void *)th->bias, bias);
+    _mm_storeu_si128((__m128i *)(void *)th->lanes, lanes);
 #endif
-    return SOME_ABOVE;
+}
+
+/* The threshold as the row tests read it, in registers: built once per brick. */
+typedef struct row_test {
+    double level;
+    int64_t floor;
+#ifdef __SSE2__
+    __m128i bias, lanes;
+#endif
+} row_test;
+
+static inline row_test row_test_of(const threshold *th)
+{
+    row_test t = {.level = th->level, .floor = th->floor};
+#ifdef __SSE2__
+    t.bias = _mm_loadu_si128((const __m128i *)(const void *)th->bias);
+    t.lanes = _mm_loadu_si128((const __m128i *)(const void *)th->lanes);
+#endif
+    return t;
 }
 
 #define DEFINE_SCALAR_ROW(NAME, T, TEST)                              \
-    static inline unsigned NAME(const T *p, int n, const threshold *th) \
+    static inline unsigned NAME(const T *p, int n, const row_test *th) \
     {                                                                 \
         unsigned bits = 0;                                            \
         for (int x = 0; x < n; x++)                                   \
@@ -191,7 +209,7 @@ DEFINE_SCALAR_ROW(row_f64, double, p[x] > th->level)
 /* A full row of S samples: bits 0-7 from one vector compare, bit 8 alone. */
 #ifdef __SSE2__
 #define VECTOR_ROW(NAME, T, LOAD, COMPARE, PACK, SCALAR)                                   \
-    static inline unsigned NAME(const T *p, int n, const threshold *th)                    \
+    static inline unsigned NAME(const T *p, int n, const row_test *th)                     \
     {                                                                                      \
         if (n != S)                                                                        \
             return SCALAR(p, n, th);                                                       \
@@ -211,17 +229,42 @@ VECTOR_ROW(row_i16, int16_t, _mm_loadu_si128((const __m128i *)p), _mm_cmpgt_epi1
 #endif
 
 #define DEFINE_INSIDE_ROWS(NAME, T, ROW)                                                       \
-    static void NAME(const iso_volume *vol, const size_t lo[3], const uint8_t n[3],            \
+    static void NAME(const iso_volume *vol, const size_t lo[3], const uint8_t n[3], int step,  \
                      const threshold *th, uint16_t *rows)                                      \
     {                                                                                          \
-        const T *data = (const T *)vol->data;                                                  \
-        for (int z = 0; z < n[2]; z++)                                                         \
-            for (int y = 0; y < n[1]; y++) {                                                   \
-                const T *p = data + ((lo[2] + (size_t)z) * vol->dims[1] + lo[1] + (size_t)y) * \
-                                        vol->dims[0] + lo[0];                                  \
-                rows[z * S + y] = (uint16_t)ROW(p, n[0], th);                                  \
+        const row_test test = row_test_of(th);                                                 \
+        const size_t row_step = vol->dims[0] * (size_t)step, plane_step = vol->dims[1] * row_step; \
+        const T *plane = (const T *)vol->data + (lo[2] * vol->dims[1] + lo[1]) * vol->dims[0] + lo[0]; \
+        for (int z = 0; z < n[2]; z += step, plane += plane_step) {                            \
+            const T *p = plane;                                                                \
+            for (int y = 0; y < n[1]; y += step, p += row_step)                                \
+                rows[z * S + y] = (uint16_t)ROW(p, n[0], &test);                               \
+        }                                                                                      \
+    }
+
+/* The rows whose bit r = z * 9 + y is set in wanted[r / 64]. */
+#define DEFINE_LISTED_ROWS(NAME, T, ROW)                                                       \
+    static void NAME(const iso_volume *vol, const size_t lo[3], const uint8_t n[3], const uint64_t wanted[2], \
+                     const threshold *th, uint16_t *rows)                                      \
+    {                                                                                          \
+        const row_test test = row_test_of(th);                                                 \
+        const T *first = (const T *)vol->data + (lo[2] * vol->dims[1] + lo[1]) * vol->dims[0] + lo[0]; \
+        for (int word = 0; word < 2; word++)                                                   \
+            for (uint64_t m = wanted[word]; m; m &= m - 1) {                                   \
+                int r = 64 * word + __builtin_ctzll(m);                                        \
+                const T *p = first + ((size_t)(r / S) * vol->dims[1] + (size_t)(r % S)) * vol->dims[0]; \
+                rows[r] = (uint16_t)ROW(p, n[0], &test);                                       \
             }                                                                                  \
     }
+
+DEFINE_LISTED_ROWS(listed_u8, uint8_t, row_u8)
+DEFINE_LISTED_ROWS(listed_i8, int8_t, row_i8)
+DEFINE_LISTED_ROWS(listed_u16, uint16_t, row_u16)
+DEFINE_LISTED_ROWS(listed_i16, int16_t, row_i16)
+DEFINE_LISTED_ROWS(listed_u32, uint32_t, row_u32)
+DEFINE_LISTED_ROWS(listed_i32, int32_t, row_i32)
+DEFINE_LISTED_ROWS(listed_f32, float, row_f32)
+DEFINE_LISTED_ROWS(listed_f64, double, row_f64)
 
 DEFINE_INSIDE_ROWS(inside_u8, uint8_t, row_u8)
 DEFINE_INSIDE_ROWS(inside_i8, int8_t, row_i8)
@@ -232,35 +275,73 @@ DEFINE_INSIDE_ROWS(inside_i32, int32_t, row_i32)
 DEFINE_INSIDE_ROWS(inside_f32, float, row_f32)
 DEFINE_INSIDE_ROWS(inside_f64, double, row_f64)
 
-static void inside_rows(const march_job *job, const size_t lo[3], const uint8_t n[3], uint16_t *rows)
+static void inside_rows_every(const iso_volume *vol, const threshold *th, const size_t lo[3], const uint8_t n[3],
+                              int step, uint16_t *rows)
 {
-    const iso_volume *vol = job->vol;
-    const threshold *th = &job->threshold;
-    if (job->reach != SOME_ABOVE) {
-        uint16_t all = job->reach == ALL_ABOVE ? (uint16_t)((1u << n[0]) - 1) : 0;
-        for (int z = 0; z < n[2]; z++)
-            for (int y = 0; y < n[1]; y++)
+    if (th->reach != SOME_ABOVE) {
+        uint16_t all = th->reach == ALL_ABOVE ? (uint16_t)((1u << n[0]) - 1) : 0;
+        for (int z = 0; z < n[2]; z += step)
+            for (int y = 0; y < n[1]; y += step)
                 rows[z * S + y] = all;
         return;
     }
     switch (vol->type) {
-    case ISO_U8: inside_u8(vol, lo, n, th, rows); break;
-    case ISO_I8: inside_i8(vol, lo, n, th, rows); break;
-    case ISO_U16: inside_u16(vol, lo, n, th, rows); break;
-    case ISO_I16: inside_i16(vol, lo, n, th, rows); break;
-    case ISO_U32: inside_u32(vol, lo, n, th, rows); break;
-    case ISO_I32: inside_i32(vol, lo, n, th, rows); break;
-    case ISO_F32: inside_f32(vol, lo, n, th, rows); break;
-    case ISO_F64: inside_f64(vol, lo, n, th, rows); break;
+    case ISO_U8: inside_u8(vol, lo, n, step, th, rows); break;
+    case ISO_I8: inside_i8(vol, lo, n, step, th, rows); break;
+    case ISO_U16: inside_u16(vol, lo, n, step, th, rows); break;
+    case ISO_I16: inside_i16(vol, lo, n, step, th, rows); break;
+    case ISO_U32: inside_u32(vol, lo, n, step, th, rows); break;
+    case ISO_I32: inside_i32(vol, lo, n, step, th, rows); break;
+    case ISO_F32: inside_f32(vol, lo, n, step, th, rows); break;
+    case ISO_F64: inside_f64(vol, lo, n, step, th, rows); break;
+    }
+}
+
+static void inside_rows(const march_job *job, const size_t lo[3], const uint8_t n[3], uint16_t *rows)
+{
+    inside_rows_every(job->vol, &job->threshold, lo, n, 1, rows);
+}
+
+void iso_march_threshold_make(const iso_volume *vol, double level, iso_march_threshold *th)
+{
+    make_threshold(vol->type, level, th);
+}
+
+void iso_march_inside_rows_every(const iso_volume *vol, const iso_march_threshold *th, const size_t lo[3],
+                                 const uint8_t n[3], int step, uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES])
+{
+    inside_rows_every(vol, th, lo, n, step, rows);
+}
+
+void iso_march_inside_rows_listed(const iso_volume *vol, const iso_march_threshold *th, const size_t lo[3],
+                                  const uint8_t n[3], const uint64_t wanted[2],
+                                  uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES])
+{
+    if (th->reach != SOME_ABOVE) {
+        uint16_t all = th->reach == ALL_ABOVE ? (uint16_t)((1u << n[0]) - 1) : 0;
+        for (int word = 0; word < 2; word++)
+            for (uint64_t m = wanted[word]; m; m &= m - 1)
+                rows[64 * word + __builtin_ctzll(m)] = all;
+        return;
+    }
+    switch (vol->type) {
+    case ISO_U8: listed_u8(vol, lo, n, wanted, th, rows); break;
+    case ISO_I8: listed_i8(vol, lo, n, wanted, th, rows); break;
+    case ISO_U16: listed_u16(vol, lo, n, wanted, th, rows); break;
+    case ISO_I16: listed_i16(vol, lo, n, wanted, th, rows); break;
+    case ISO_U32: listed_u32(vol, lo, n, wanted, th, rows); break;
+    case ISO_I32: listed_i32(vol, lo, n, wanted, th, rows); break;
+    case ISO_F32: listed_f32(vol, lo, n, wanted, th, rows); break;
+    case ISO_F64: listed_f64(vol, lo, n, wanted, th, rows); break;
     }
 }
 
 void iso_march_inside_rows(const iso_volume *vol, double level, const size_t lo[3], const uint8_t n[3],
                            uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES])
 {
-    march_job job = {.vol = vol, .level = level};
-    job.reach = make_threshold(vol->type, level, &job.threshold);
-    inside_rows(&job, lo, n, rows);
+    threshold th;
+    make_threshold(vol->type, level, &th);
+    inside_rows_every(vol, &th, lo, n, 1, rows);
 }
 
 static void brick_origin(const active_brick *ab, size_t lo[3])
@@ -1190,7 +1271,7 @@ static int march(const iso_volume *vol, const iso_bricks *bricks, double level, 
     job->bricks = bricks;
     job->level = level;
     job->marked = marked;
-    job->reach = make_threshold(vol->type, level, &job->threshold);
+    make_threshold(vol->type, level, &job->threshold);
     job->mesh = mesh;
     job->world = world;
     job->axis_aligned = 1;

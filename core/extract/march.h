@@ -47,8 +47,27 @@ int iso_march_selected(const iso_volume *vol, const iso_bricks *bricks, double l
 int iso_march_part_vertex(const iso_march_part *part, const uint32_t p[3], int axis, uint32_t *id);
 void iso_march_part_free(iso_march_part *part);
 
+/* A level as the kernel compares a volume's samples against it (integers against the
+ * level's floor, 8 and 16 bits a row at a time): made once, read by any thread. */
+enum { ISO_MARCH_SOME_ABOVE, ISO_MARCH_ALL_ABOVE, ISO_MARCH_NONE_ABOVE };
+typedef struct iso_march_threshold {
+    double level;               /* floating types: above when sample > level; NaN never is */
+    int64_t floor;              /* integer types: above when sample > floor */
+    int reach;                  /* ISO_MARCH_*: a level outside the type's values */
+    uint64_t bias[2], lanes[2]; /* SSE2 lanes for 8- and 16-bit types (added to samples to
+                                 * compare as signed; floor + bias), laid out the same in any build */
+} iso_march_threshold;
+void iso_march_threshold_make(const iso_volume *vol, double level, iso_march_threshold *th);
+
 /* Bit x of rows[z * 9 + y]: sample lo + (x, y, z) is above level, for the n[] samples of
- * a brick's box (rows past n[1], n[2] untouched), as the kernel classifies them. */
+ * a brick's box (rows past n[1], n[2] untouched), as the kernel classifies them. The
+ * _every form fills only the rows whose y and z are multiples of step (all 9 bits). */
+void iso_march_inside_rows_every(const iso_volume *vol, const iso_march_threshold *th, const size_t lo[3],
+                                 const uint8_t n[3], int step, uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES]);
+/* The same for the rows r (= z * 9 + y) whose bit is set in wanted[r / 64]. */
+void iso_march_inside_rows_listed(const iso_volume *vol, const iso_march_threshold *th, const size_t lo[3],
+                                  const uint8_t n[3], const uint64_t wanted[2],
+                                  uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES]);
 void iso_march_inside_rows(const iso_volume *vol, double level, const size_t lo[3], const uint8_t n[3],
                            uint16_t rows[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES]);
 
