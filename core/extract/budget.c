@@ -15,6 +15,7 @@ static int run(const iso_tree *tree, const iso_extract_params *base, double tole
 {
     iso_extract_params p = *base;
     p.tolerance = tolerance;
+    p.coarsen = ISO_COARSEN_ALL; /* a budget wants the fewest triangles, not the fastest rung */
     size_t nodes = result->extractions ? stats->nodes_visited : 0;
     size_t cells = result->extractions ? stats->cells_visited : 0;
     result->extractions++;

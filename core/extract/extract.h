@@ -27,6 +27,15 @@
 #include "mesh/mesh.h"
 #include "hierarchy/tree.h"
 
+/* What a tolerance buys. The exact surface satisfies every tolerance, so extraction may
+ * answer with it wherever coarse units would cost more time than they save. */
+typedef enum iso_coarsen {
+    ISO_COARSEN_WHERE_FASTER = 0, /* coarse units only where the plan says they beat the
+                                   * exact kernel (lod.h); else the exact surface */
+    ISO_COARSEN_ALL = 1           /* every coarse unit the tolerance allows: the fewest
+                                   * triangles, whatever the time (budgets, Table 1) */
+} iso_coarsen;
+
 typedef struct iso_extract_params {
     double level;
     double tolerance;  /* >= 0, in the volume's value units */
@@ -36,6 +45,7 @@ typedef struct iso_extract_params {
     iso_space space;   /* output positions in world mm (default) or index space */
     int threads;       /* threads for the brick kernel and the walk below bricks
                         * (march.h); 0 = all cores. The mesh does not depend on it. */
+    iso_coarsen coarsen;/* above tolerance 0; the default answers fastest */
 } iso_extract_params;
 
 typedef struct iso_extract_stats {
@@ -52,6 +62,8 @@ typedef struct iso_extract_stats {
                              * crossings moved off a tie by ISO_MC_END_GAP, 0 otherwise */
     double fit_error;       /* max level error (tree.h) of the units marched coarse: how
                              * far the data strays from the grids the surface came from */
+    double coarse_share;    /* of the blocks the level may cross, the share marched at a
+                             * stride above 1 (0: the exact surface answered) */
 } iso_extract_stats;
 
 /* Extracts the iso-surface at params->level within params->tolerance into mesh (which is

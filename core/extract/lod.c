@@ -1,372 +1,293 @@
-/* lod.c: extraction within a tolerance, blocks and bricks on their own coarse grids joined
- * by transition cells (lod.h says how and why): PASS 1 (plan) and PASS 2 (fine) here,
- * PASS 3 (the coarse units) in coarse.c, run in that order by extract(). */
+/* lod.c: extraction within a tolerance (lod.h says how and why): the plan, made valid for
+ * the volume's shape, then lod_march.c's kernel on it. */
 #include "lod.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "lod_context.h"
+#include "lod_march.h"
 
-/* ---- PASS 1: plan ---- */
+typedef struct plan {
+    const iso_tree *tree;
+    double level;
+    double tolerance;   /* < 0: a given plan, every valid stride allowed */
+    uint32_t dims[3], bricks[3], blocks[3];
+    uint8_t *shift;
+} plan;
 
-static int brick_active(const lod *c, size_t at)
+static void plan_grid(plan *p, const iso_tree *tree, double level, double tolerance, uint8_t *shift)
 {
-    const iso_bricks *g = &c->tree->bricks;
-    return g->min[at] <= c->level && c->level < g->max[at];
-}
-
-/* Brick `at`'s coordinates in the brick grid. */
-static void brick_at(const lod *c, size_t at, uint32_t b[3])
-{
-    b[0] = (uint32_t)(at % c->count[0]);
-    b[1] = (uint32_t)(at / c->count[0] % c->count[1]);
-    b[2] = (uint32_t)(at / c->count[0] / c->count[1]);
-}
-
-/* Lists the bricks the level crosses, once: the passes below walk those only, a surface
- * crossing a small share of a scan's bricks. */
-static void list_active(lod *c)
-{
-    size_t total = iso_bricks_total(&c->tree->bricks), n = 0;
-    for (size_t at = 0; at < total; at++) {
-        c->active[n] = (uint32_t)at;
-        n += (size_t)brick_active(c, at);
-    }
-    c->active_count = n;
-}
-
-/* Every brick whose [min, max] holds the level: stride 8 whole if its level 3 error is
- * within the tolerance, else per block the coarsest of strides 4, 2 whose error is, or 1.
- * The other bricks' blocks get stride 8, which touches nothing (all their samples lie on
- * one side of the level). No sample is read. */
-static void plan(lod *c, double tolerance)
-{
-    const iso_tree *tree = c->tree;
-    memset(c->shift, ISO_TREE_LEVELS, (size_t)c->blocks[0] * c->blocks[1] * c->blocks[2]);
-    for (size_t n = 0; n < c->active_count; n++) {
-        size_t at = c->active[n];
-        if (iso_tree_level_error(tree, at) <= tolerance)
-            continue;
-        uint32_t b[3], first[3], m[3];
-        brick_at(c, at, b);
-        brick_blocks(c, b, first, m);
-        size_t base = block_index(c, first), row = c->blocks[0], plane = row * c->blocks[1];
-        for (uint32_t z = 0; z < m[2]; z++)
-            for (uint32_t y = 0; y < m[1]; y++)
-                for (uint32_t x = 0; x < m[0]; x++) {
-                    int l;
-                    for (l = ISO_TREE_BLOCK_LEVELS; l > 0; l--)
-                        if (iso_tree_block_error(tree, at, (int)(x | y << 1 | z << 2), l) <= tolerance)
-                            break;
-                    c->shift[base + x + y * row + z * plane] = (uint8_t)l;
-                }
-    }
-}
-
-/* A given plan, made valid: stride 8 only where every block of the brick has it (else 4). */
-static void plan_given(lod *c, const uint8_t *given)
-{
-    for (uint32_t k = 0; k < c->count[2]; k++)
-        for (uint32_t j = 0; j < c->count[1]; j++)
-            for (uint32_t i = 0; i < c->count[0]; i++) {
-                uint32_t b[3] = {i, j, k}, first[3], m[3];
-                brick_blocks(c, b, first, m);
-                int whole = 1;
-                for (uint32_t z = 0; z < m[2]; z++)
-                    for (uint32_t y = 0; y < m[1]; y++)
-                        for (uint32_t x = 0; x < m[0]; x++) {
-                            uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
-                            whole &= given[block_index(c, q)] >= ISO_TREE_LEVELS;
-                        }
-                for (uint32_t z = 0; z < m[2]; z++)
-                    for (uint32_t y = 0; y < m[1]; y++)
-                        for (uint32_t x = 0; x < m[0]; x++) {
-                            uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
-                            uint8_t l = given[block_index(c, q)];
-                            c->shift[block_index(c, q)] = whole ? ISO_TREE_LEVELS : l < ISO_TREE_LEVELS ? l : ISO_TREE_BLOCK_LEVELS;
-                        }
-            }
-}
-
-/* PASS 3, the coarse units, is coarse.c's (iso_coarse_brick). */
-
-/* Brick b's blocks' strides (log2) into s by march.h's bit k = x | y << 1 | z << 2 (its
- * block at x, y, z); returns the bits of the blocks it has. */
-static unsigned brick_shifts(const lod *c, const uint32_t b[3], uint8_t s[8])
-{
-    uint32_t first[3], m[3];
-    brick_blocks(c, b, first, m);
-    static const unsigned low_half[3] = {0x55, 0x33, 0x0F}; /* the blocks at x, y, z = 0 */
-    const uint8_t *at = c->shift + block_index(c, first);
-    size_t row = c->blocks[0], plane = row * c->blocks[1], off[8] = {0, 1, row, row + 1};
-    unsigned have = 0xFF;
-    for (int d = 0; d < 3; d++)
-        have &= m[d] < BLOCKS_PER_BRICK ? low_half[d] : 0xFF;
-    for (unsigned k = 4; k < 8; k++)
-        off[k] = off[k - 4] + plane;
-    for (unsigned k = 0; k < 8; k++)
-        if (have >> k & 1)
-            s[k] = at[off[k]];
-    return have;
-}
-
-/* A box's stride grid (its samples lo, lo + stride, ... below hi, then hi, per axis, as
- * the levels are built), as sample offsets: lo and hi per axis times the axis's step. */
-typedef struct stride_grid {
-    size_t lo[3], hi[3], stride[3];
-} stride_grid;
-
-/* The lowest and highest sample of grid g, 0 if one is NaN. With a constant type the
- * sample's switch folds away, and integer samples skip the NaN test. */
-static inline __attribute__((always_inline)) int grid_range_as(const void *data, iso_voxel_type type,
-                                                               const stride_grid *g, double *lo, double *hi)
-{
-    double low = INFINITY, high = -INFINITY;
-    for (size_t z = g->lo[2];; z = z + g->stride[2] < g->hi[2] ? z + g->stride[2] : g->hi[2]) {
-        for (size_t y = g->lo[1];; y = y + g->stride[1] < g->hi[1] ? y + g->stride[1] : g->hi[1]) {
-            size_t row = z + y;
-            for (size_t x = g->lo[0];; x += g->stride[0]) {
-                x = x < g->hi[0] ? x : g->hi[0];
-                double v = iso_vol_sample_as(data, type, row + x);
-                if ((type == ISO_F32 || type == ISO_F64) && v != v)
-                    return 0;
-                low = v < low ? v : low;
-                high = v > high ? v : high;
-                if (x == g->hi[0])
-                    break;
-            }
-            if (y == g->hi[1])
-                break;
-        }
-        if (z == g->hi[2])
-            break;
-    }
-    *lo = low;
-    *hi = high;
-    return 1;
-}
-
-static int grid_range(const iso_volume *vol, const stride_grid *g, double *lo, double *hi)
-{
-    switch (vol->type) {
-    case ISO_U8: return grid_range_as(vol->data, ISO_U8, g, lo, hi);
-    case ISO_I8: return grid_range_as(vol->data, ISO_I8, g, lo, hi);
-    case ISO_U16: return grid_range_as(vol->data, ISO_U16, g, lo, hi);
-    case ISO_I16: return grid_range_as(vol->data, ISO_I16, g, lo, hi);
-    case ISO_U32: return grid_range_as(vol->data, ISO_U32, g, lo, hi);
-    case ISO_I32: return grid_range_as(vol->data, ISO_I32, g, lo, hi);
-    case ISO_F32: return grid_range_as(vol->data, ISO_F32, g, lo, hi);
-    case ISO_F64: return grid_range_as(vol->data, ISO_F64, g, lo, hi);
-    }
-    return 0;
-}
-
-/* 1 if the level crosses no cell of the box lo..hi (inclusive samples) at `stride`, whose
- * fit error there is `error`: the stride grid's samples all lie farther than the error
- * from the level, on one side. The fit through them stays within their range and f within
- * the error of the fit over the whole box (Lemma 1, tree.h), so every fine sample of it is
- * on that side too, none of them read. */
-static int box_clear_of_level(const lod *c, const uint32_t lo[3], const uint32_t hi[3], uint32_t stride, double error)
-{
-    stride_grid g;
-    size_t step[3] = {1, c->dims[0], (size_t)c->dims[0] * c->dims[1]};
+    p->tree = tree;
+    p->level = level;
+    p->tolerance = tolerance;
+    p->shift = shift;
     for (int d = 0; d < 3; d++) {
-        g.lo[d] = lo[d] * step[d];
-        g.hi[d] = hi[d] * step[d];
-        g.stride[d] = stride * step[d];
+        p->dims[d] = (uint32_t)tree->vol->dims[d];
+        p->bricks[d] = tree->bricks.count[d];
+        p->blocks[d] = (p->dims[d] - 1 + ISO_TREE_BLOCK - 1) / ISO_TREE_BLOCK;
     }
-    double low, high;
-    if (!grid_range(c->vol, &g, &low, &high))
-        return 0;
-    return low - error > c->level || high + error < c->level;
 }
 
-/* 1 if the level crosses none of brick b's coarse blocks (strides s and blocks `have` from
- * brick_shifts; box_clear_of_level): marched at
- * stride 1 they would hold no crossing either. A brick at stride 8 whole is never clear:
- * it is only planned so when its min and max hold the level. */
-static int coarse_blocks_clear(const lod *c, size_t at, const uint32_t b[3], const uint8_t s[8], unsigned have)
+static size_t blocks_total(const plan *p)
 {
-    if (s[0] == ISO_TREE_LEVELS)
-        return 0;
-    uint32_t low[2][3], high[2][3]; /* per axis, the lower and the upper block's samples */
-    for (int h = 0; h < 2; h++)
-        for (int d = 0; d < 3; d++) {
-            low[h][d] = (BLOCKS_PER_BRICK * b[d] + (uint32_t)h) * ISO_TREE_BLOCK;
-            high[h][d] = low[h][d] + ISO_TREE_BLOCK < c->dims[d] - 1 ? low[h][d] + ISO_TREE_BLOCK : c->dims[d] - 1;
-        }
-    for (unsigned k = 0; k < 8; k++) {
-        if (!(have >> k & 1) || !s[k])
-            continue;
-        uint32_t lo[3] = {low[k & 1][0], low[k >> 1 & 1][1], low[k >> 2][2]};
-        uint32_t hi[3] = {high[k & 1][0], high[k >> 1 & 1][1], high[k >> 2][2]};
-        if (!box_clear_of_level(c, lo, hi, 1u << s[k], iso_tree_block_error(c->tree, at, (int)k, s[k])))
+    return (size_t)p->blocks[0] * p->blocks[1] * p->blocks[2];
+}
+
+static void block_at(const plan *p, size_t b, uint32_t q[3])
+{
+    q[0] = (uint32_t)(b % p->blocks[0]);
+    q[1] = (uint32_t)(b / p->blocks[0] % p->blocks[1]);
+    q[2] = (uint32_t)(b / p->blocks[0] / p->blocks[1]);
+}
+
+static size_t brick_of(const plan *p, const uint32_t q[3])
+{
+    return ((size_t)(q[2] / 2) * p->bricks[1] + q[1] / 2) * p->bricks[0] + q[0] / 2;
+}
+
+/* 1 if block q may take stride 2^l: its cells along every axis are a multiple of it (the
+ * volume's border clips the last blocks), and for l = 3 its brick is whole. */
+static int stride_valid(const plan *p, const uint32_t q[3], int l)
+{
+    for (int d = 0; d < 3; d++) {
+        uint32_t first = q[d] * ISO_TREE_BLOCK, cells = p->dims[d] - 1 - first;
+        if (l == ISO_TREE_LEVELS) {
+            if (p->dims[d] - 1 < (q[d] / 2 + 1) * ISO_BRICK_CELLS)
+                return 0;
+        } else if (cells < ISO_TREE_BLOCK && cells % (1u << l)) {
             return 0;
+        }
     }
     return 1;
 }
 
-/* PASS 1's last step: per brick, the blocks PASS 2 marches (march.h's marks) into marked,
- * and 1 returned if every brick the level crosses is marched whole, i.e. no block the
- * level crosses is coarse. An active brick's marks are its stride-1 blocks; with `prove`,
- * all of its blocks where its coarse blocks are provably clear of the level (smooth
- * regions beside the surface, which a plan coarsens however small the tolerance): at
- * stride 1 they hold no crossing either, so the kernel's surface is the same, its
- * unmasked rows make it, and PASS 3 passes the brick by. (A clear block beside a coarse
- * one the level crosses keeps its stride in the plan: the lattice sets they share keep
- * theirs.) Without min/max pruning the other bricks are marked whole too: they are read
- * and give nothing. */
-static int mark_fine(const lod *c, int prove, int no_minmax, uint8_t *marked)
+static double block_error(const plan *p, const uint32_t q[3], int l)
 {
-    int whole = 1;
-    memset(marked, no_minmax ? 0xFF : 0, iso_bricks_total(&c->tree->bricks));
-    for (size_t n = 0; n < c->active_count; n++) {
-        size_t at = c->active[n];
-        uint32_t b[3];
-        brick_at(c, at, b);
-        uint8_t s[8];
-        unsigned have = brick_shifts(c, b, s), fine = 0;
-        for (unsigned k = 0; k < 8; k++)
-            fine |= (unsigned)((have >> k & 1) && !s[k]) << k;
-        if (fine != have && prove && coarse_blocks_clear(c, at, b, s, have))
-            fine = have;
-        marked[at] = (uint8_t)(fine == have ? 0xFF : fine);
-        whole &= fine == have;
-    }
-    return whole;
+    size_t brick = brick_of(p, q);
+    if (l == ISO_TREE_LEVELS)
+        return iso_tree_level_error(p->tree, brick);
+    return iso_tree_block_error(p->tree, brick, (int)((q[0] & 1) | (q[1] & 1) << 1 | (q[2] & 1) << 2), l);
 }
 
-/* 1 if active brick `at` is marked whole (PASS 2 makes all of its surface). */
-static int brick_fine(const uint8_t *marked, size_t at)
+/* The coarsest stride <= most that block b may take: valid for its shape and, unless the
+ * plan was given, with its level error within the tolerance. */
+static int coarsest(void *context, size_t b, int most)
 {
-    return marked[at] == 0xFF;
-}
-
-/* PASS 2: the marked blocks (mark_fine), march.c's kernel on those, on the request's
- * threads. */
-static int march_fine(lod *c, const iso_extract_params *params, const uint8_t *marked, iso_march_part **fine,
-                      iso_error *err)
-{
-    iso_march_stats ms;
-    int rc = iso_march_selected(c->vol, &c->tree->bricks, c->level, marked, params->threads, c->mesh, &ms, fine, err);
-    if (rc)
-        return rc;
-    c->fine = *fine;
-    c->cells += ms.cells_visited;
-    c->error = ms.error_bound;
+    const plan *p = context;
+    uint32_t q[3];
+    block_at(p, b, q);
+    for (int l = most; l > 0; l--)
+        if (stride_valid(p, q, l) && (p->tolerance < 0 || block_error(p, q, l) <= p->tolerance))
+            return l;
     return 0;
 }
 
-/* The largest level error (tree.h) of brick b's coarse blocks, as planned. */
-static double brick_fit(const lod *c, size_t at, const uint32_t b[3])
+static int brick_active(const plan *p, size_t brick)
 {
-    uint32_t first[3], m[3];
-    brick_blocks(c, b, first, m);
-    if (c->shift[block_index(c, first)] == ISO_TREE_LEVELS)
-        return iso_tree_level_error(c->tree, at);
-    double worst = 0;
-    for (uint32_t z = 0; z < m[2]; z++)
-        for (uint32_t y = 0; y < m[1]; y++)
-            for (uint32_t x = 0; x < m[0]; x++) {
-                uint32_t q[3] = {first[0] + x, first[1] + y, first[2] + z};
-                unsigned l = c->shift[block_index(c, q)];
-                double e = l ? iso_tree_block_error(c->tree, at, (int)(x | y << 1 | z << 2), (int)l) : 0;
-                worst = e > worst ? e : worst;
+    const iso_bricks *g = &p->tree->bricks;
+    return g->min[brick] <= p->level && p->level < g->max[brick];
+}
+
+/* Calls visit(p, brick, first block, blocks per axis) for every brick the level crosses,
+ * in grid order. */
+#define FOR_ACTIVE_BRICKS(p, brick, first, m)                                                  \
+    for (uint32_t bz_ = 0; bz_ < (p)->bricks[2]; bz_++)                                        \
+        for (uint32_t by_ = 0; by_ < (p)->bricks[1]; by_++)                                    \
+            for (uint32_t bx_ = 0; bx_ < (p)->bricks[0]; bx_++)                                \
+                for (size_t brick = ((size_t)bz_ * (p)->bricks[1] + by_) * (p)->bricks[0] + bx_; \
+                     brick != SIZE_MAX && brick_active((p), brick); brick = SIZE_MAX)          \
+                    for (uint32_t first[3] = {2 * bx_, 2 * by_, 2 * bz_},                      \
+                                  m[3] = {(p)->blocks[0] - first[0] < 2 ? 1u : 2u,             \
+                                          (p)->blocks[1] - first[1] < 2 ? 1u : 2u,             \
+                                          (p)->blocks[2] - first[2] < 2 ? 1u : 2u},            \
+                                  once_ = 1;                                                    \
+                         once_; once_ = 0)
+
+static size_t block_of(const plan *p, const uint32_t first[3], unsigned k)
+{
+    return ((size_t)(first[2] + (k >> 2)) * p->blocks[1] + first[1] + (k >> 1 & 1)) * p->blocks[0] + first[0] + (k & 1);
+}
+
+static int has_block(const uint32_t m[3], unsigned k)
+{
+    return (k & 1) < m[0] && (k >> 1 & 1) < m[1] && (k >> 2) < m[2];
+}
+
+/* How much of the crossed bricks PASS 1 left coarse, a-priori (before the balance). */
+typedef struct plan_share {
+    size_t blocks;   /* blocks of the bricks the level may cross */
+    size_t coarse;   /* of those, at a stride above 1 */
+    size_t whole;    /* of those, in a brick at stride 8 */
+} plan_share;
+
+/* PASS 1: every brick whose [min, max] holds the level takes stride 8 whole if it may,
+ * else each of its blocks the coarsest of strides 4 and 2 it may, or 1; the other bricks
+ * stride 8, which touches nothing (their samples all lie on one side of the level). No
+ * sample is read. With a cap, blocks on the volume's border take stride 1, the cap's (and
+ * their brick leaves stride 8). */
+static plan_share plan_tolerance(plan *p, int cap)
+{
+    plan_share share = {0, 0, 0};
+    memset(p->shift, ISO_TREE_LEVELS, blocks_total(p));
+    FOR_ACTIVE_BRICKS(p, brick, first, m) {
+        int whole = m[0] == 2 && m[1] == 2 && m[2] == 2 && stride_valid(p, first, ISO_TREE_LEVELS) &&
+                    iso_tree_level_error(p->tree, brick) <= p->tolerance;
+        for (unsigned k = 0; k < 8 && cap && whole; k++) {
+            uint32_t q[3] = {first[0] + (k & 1), first[1] + (k >> 1 & 1), first[2] + (k >> 2)};
+            for (int d = 0; d < 3; d++)
+                whole &= q[d] != 0 && q[d] + 1 != p->blocks[d];
+        }
+        for (unsigned k = 0; k < 8; k++) {
+            if (!has_block(m, k))
+                continue;
+            size_t b = block_of(p, first, k);
+            if (!whole) {
+                p->shift[b] = (uint8_t)coarsest(p, b, ISO_TREE_BLOCK_LEVELS);
+                uint32_t q[3] = {first[0] + (k & 1), first[1] + (k >> 1 & 1), first[2] + (k >> 2)};
+                for (int d = 0; d < 3 && cap; d++)
+                    if (q[d] == 0 || q[d] + 1 == p->blocks[d])
+                        p->shift[b] = 0;
             }
+            share.blocks++;
+            share.coarse += p->shift[b] != 0;
+            share.whole += p->shift[b] == ISO_TREE_LEVELS;
+        }
+    }
+    return share;
+}
+
+/* Whether the coarse kernel beats the exact one on this plan. Per block it pays more than
+ * the exact kernel at strides 1 to 4 (transition cells, the balance, units gathered apart)
+ * and far less for a stride-8 brick (one cell for 512); measured on the bench cases
+ * (docs/performance.md), it is faster exactly where most crossed blocks lie in stride-8
+ * bricks. */
+static int coarse_pays(const plan_share *share)
+{
+    return share->coarse && (double)share->whole >= ISO_LOD_PAYS * (double)share->blocks;
+}
+
+/* The largest level error of the blocks marched coarse. */
+static double plan_fit(const plan *p)
+{
+    double worst = 0;
+    FOR_ACTIVE_BRICKS(p, brick, first, m) {
+        for (unsigned k = 0; k < 8; k++) {
+            if (!has_block(m, k))
+                continue;
+            size_t b = block_of(p, first, k);
+            if (!p->shift[b])
+                continue;
+            uint32_t q[3] = {first[0] + (k & 1), first[1] + (k >> 1 & 1), first[2] + (k >> 2)};
+            double e = block_error(p, q, p->shift[b]);
+            worst = e > worst ? e : worst;
+        }
+    }
     return worst;
 }
 
-/* The volume's and the grids' sizes, for the level. */
-static void lod_grid(lod *c, const iso_tree *tree, double level)
+/* A given plan made valid: stride 8 only where every block of a whole brick has it (else
+ * at most 4), and every stride one its block's shape allows. With a cap, the border at 1. */
+static void plan_given(plan *p, const uint8_t *given, int cap)
 {
-    c->tree = tree;
-    c->vol = tree->vol;
-    c->level = level;
-    for (int d = 0; d < 3; d++) {
-        c->dims[d] = (uint32_t)tree->vol->dims[d];
-        c->count[d] = tree->bricks.count[d];
-        c->blocks[d] = (c->dims[d] - 1 + ISO_TREE_BLOCK - 1) / ISO_TREE_BLOCK;
+    size_t total = blocks_total(p);
+    for (size_t b = 0; b < total; b++) {
+        uint32_t q[3];
+        block_at(p, b, q);
+        int l = given[b] > ISO_TREE_LEVELS ? ISO_TREE_LEVELS : given[b];
+        if (l == ISO_TREE_LEVELS) {
+            int whole = stride_valid(p, q, ISO_TREE_LEVELS);
+            for (int k = 0; k < 8 && whole; k++) {
+                uint32_t s[3] = {(q[0] & ~1u) + (k & 1), (q[1] & ~1u) + (k >> 1 & 1), (q[2] & ~1u) + (k >> 2)};
+                whole = s[0] < p->blocks[0] && s[1] < p->blocks[1] && s[2] < p->blocks[2] &&
+                        given[((size_t)s[2] * p->blocks[1] + s[1]) * p->blocks[0] + s[0]] >= ISO_TREE_LEVELS;
+            }
+            if (!whole)
+                l = ISO_TREE_BLOCK_LEVELS;
+        }
+        p->shift[b] = (uint8_t)(l == ISO_TREE_LEVELS ? l : coarsest(p, b, l));
+        for (int d = 0; d < 3 && cap; d++)
+            if (q[d] == 0 || q[d] + 1 == p->blocks[d])
+                p->shift[b] = 0;
+    }
+    for (size_t b = 0; b < total && cap; b++) {
+        uint32_t q[3];
+        block_at(p, b, q);
+        if (p->shift[b] != ISO_TREE_LEVELS)
+            continue;
+        for (int k = 0; k < 8; k++) {
+            uint32_t s[3] = {(q[0] & ~1u) + (k & 1), (q[1] & ~1u) + (k >> 1 & 1), (q[2] & ~1u) + (k >> 2)};
+            if (s[0] < p->blocks[0] && s[1] < p->blocks[1] && s[2] < p->blocks[2] &&
+                !p->shift[((size_t)s[2] * p->blocks[1] + s[1]) * p->blocks[0] + s[0]])
+                p->shift[b] = (uint8_t)coarsest(p, b, ISO_TREE_BLOCK_LEVELS);
+        }
     }
 }
 
-/* iso_lod_extract's work, with the plan given or (shift NULL) made; with exact not NULL,
- * a plan with no coarse brick sets *exact and extracts nothing. */
-static int extract(const iso_tree *tree, const iso_extract_params *params, const uint8_t *shift, int *exact,
-                   iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
+static int march(plan *p, const iso_extract_params *params, iso_mesh *mesh, iso_extract_stats *stats,
+                 iso_error *err)
 {
-    lod c = {.cap = params->cap, .mesh = mesh};
-    const iso_bricks *g = &tree->bricks;
-    lod_grid(&c, tree, params->level);
-    iso_mesh_clear(mesh);
-    size_t total = iso_bricks_total(g), blocks = (size_t)c.blocks[0] * c.blocks[1] * c.blocks[2];
-    c.shift = malloc(blocks + total + 1);
-    c.active = malloc((total + 1) * sizeof *c.active);
-    if (!c.shift || !c.active) {
-        free(c.shift);
-        free(c.active);
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
-    }
-    list_active(&c);
-    if (shift)
-        plan_given(&c, shift);
-    else
-        plan(&c, params->tolerance);
-    uint8_t *marked = c.shift + blocks;
-    int whole = mark_fine(&c, !shift, params->no_minmax, marked);
-    if (!shift && exact && (*exact = whole)) {
-        free(c.shift);
-        free(c.active);
-        return 0;
-    }
-    iso_march_part *fine = NULL;
-    int rc = march_fine(&c, params, marked, &fine, err);
-    stats->nodes_visited += params->no_minmax ? total : c.active_count;
-    for (size_t n = 0; n < c.active_count && !rc; n++) {
-        size_t at = c.active[n];
-        if (brick_fine(marked, at))
-            continue; /* marched by march_fine */
-        uint32_t b[3];
-        brick_at(&c, at, b);
-        stats->nodes_polygonized++;
-        double fit = brick_fit(&c, at, b);
-        stats->fit_error = fit > stats->fit_error ? fit : stats->fit_error;
-        rc = iso_coarse_brick(&c, b, err);
-    }
-    stats->cells_visited = c.cells;
-    stats->error_bound = c.error;
-    iso_march_part_free(fine);
-    free(c.shift);
-    free(c.active);
-    iso_coarse_free(&c);
+    iso_lod_march_params mp = {.tree = p->tree, .level = params->level, .visit_all = params->no_minmax,
+                               .threads = params->threads, .shift = p->shift, .refine = coarsest,
+                               .refine_context = p};
+    iso_lod_march_stats ms;
+    int rc = iso_lod_march(&mp, mesh, &ms, err);
     if (rc)
-        iso_mesh_free(mesh);
-    return rc;
+        return rc;
+    stats->nodes_visited += ms.bricks;
+    stats->cells_visited = ms.cells;
+    stats->nodes_polygonized = ms.coarse_bricks;
+    stats->coarse_share = ms.blocks ? (double)ms.coarse_blocks / (double)ms.blocks : 0;
+    stats->error_bound = ms.error_bound;
+    stats->fit_error = plan_fit(p);
+    return 0;
 }
 
 int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, int *exact, iso_mesh *mesh,
                     iso_extract_stats *stats, iso_error *err)
 {
+    plan p;
     *exact = 0;
-    return extract(tree, params, NULL, exact, mesh, stats, err);
+    size_t total = (size_t)((tree->vol->dims[0] + 2) / 4) * ((tree->vol->dims[1] + 2) / 4) * ((tree->vol->dims[2] + 2) / 4);
+    uint8_t *shift = malloc(total ? total : 1);
+    if (!shift)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    plan_grid(&p, tree, params->level, params->tolerance, shift);
+    plan_share share = plan_tolerance(&p, params->cap);
+    *exact = params->coarsen == ISO_COARSEN_ALL ? share.coarse == 0 : !coarse_pays(&share);
+    if (*exact) {
+        free(shift);
+        return 0;
+    }
+    iso_mesh_clear(mesh);
+    int rc = march(&p, params, mesh, stats, err);
+    free(shift);
+    return rc;
 }
 
 int iso_lod_extract_planned(const iso_tree *tree, const iso_extract_params *params, const uint8_t *shift,
-                            iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
+                            uint8_t *balanced, iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
 {
-    return extract(tree, params, shift, NULL, mesh, stats, err);
+    plan p;
+    size_t total = (size_t)((tree->vol->dims[0] + 2) / 4) * ((tree->vol->dims[1] + 2) / 4) * ((tree->vol->dims[2] + 2) / 4);
+    uint8_t *mine = malloc(total ? total : 1);
+    if (!mine)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
+    plan_grid(&p, tree, params->level, -1, mine);
+    plan_given(&p, shift, params->cap);
+    iso_mesh_clear(mesh);
+    int rc = march(&p, params, mesh, stats, err);
+    if (!rc && balanced)
+        memcpy(balanced, mine, total);
+    free(mine);
+    return rc;
 }
 
 int iso_lod_plan(const iso_tree *tree, double level, double tolerance, uint8_t *shift)
 {
-    lod c = {.shift = shift};
-    lod_grid(&c, tree, level);
-    c.active = malloc((iso_bricks_total(&tree->bricks) + 1) * sizeof *c.active);
-    if (!c.active)
-        return ISO_E_NOMEM;
-    list_active(&c);
-    plan(&c, tolerance);
-    free(c.active);
+    plan p;
+    plan_grid(&p, tree, level, tolerance, shift);
+    (void)plan_tolerance(&p, 0);
     return 0;
 }

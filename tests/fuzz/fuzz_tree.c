@@ -43,7 +43,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             abort(); /* checksums passed on a tree that is not the volume's: impossible by CRC */
         iso_mesh mesh;
         iso_mesh_init(&mesh);
-        iso_extract_params p = {.level = 4, .tolerance = 0.5};
+        iso_extract_params p = {.level = 4, .tolerance = 0.5, .coarsen = ISO_COARSEN_ALL};
         iso_extract_stats stats;
         if (iso_extract(tree, &p, &mesh, &stats, &err) != 0)
             abort();

@@ -77,6 +77,7 @@ static void test_ladder_answers_when_closer(void)
     iso_mesh_init(&faithful);
     iso_extract_params fp = xp;
     fp.tolerance = iso_budget_faithful_tolerance(vol, 0);
+    fp.coarsen = ISO_COARSEN_ALL; /* as the budget ladder asks */
     CHECK_OK(iso_extract(tree, &fp, &faithful, &st, &err), &err);
     CHECKF(faithful.triangle_count < exact.triangle_count * 95 / 100, "faithful %zu of %zu triangles",
            faithful.triangle_count, exact.triangle_count);

@@ -23,7 +23,8 @@
 static int extract(const iso_tree *tree, double level, double tolerance, iso_mesh *m,
                    iso_extract_stats *st)
 {
-    iso_extract_params p = {.level = level, .tolerance = tolerance, .space = ISO_SPACE_INDEX};
+    iso_extract_params p = {.level = level, .tolerance = tolerance, .space = ISO_SPACE_INDEX,
+                            .coarsen = ISO_COARSEN_ALL};
     iso_error err;
     int rc = iso_extract(tree, &p, m, st, &err);
     CHECKF(rc == 0, "iso_extract(%g, %g): %s", level, tolerance, err.message);
@@ -186,10 +187,11 @@ static void test_d2_spike_takes_log_steps(void)
         iso_extract_stats st;
         extract(tree, 0.5, 0.01, &m, &st);
         CHECK_EQ(st.triangles, 1);
-        /* The one active brick: the other seven blocks are constant (error 0, so the plan
-         * coarsens them) but provably clear of the level, so no block the level crosses is
-         * coarse and the exact kernel marches the brick whole. Nothing else. */
-        CHECK_EQ(st.cells_visited, 512);
+        /* The one active brick: its spike's block at stride 1 (64 cells); the other seven
+         * are constant (error 0, so the plan coarsens them), and the level crosses none
+         * of them nor any set they share with the spike's block, so they are read at their
+         * stride and pass by. Nothing else. */
+        CHECK_EQ(st.cells_visited, 64);
         CHECK_EQ(st.nodes_polygonized, 0);
         /* Each stored level visits the active child and its inactive sibling: 2 per
          * halving; then the brick itself and the 6 sub-boxes of >= 8 cells around the
@@ -206,10 +208,10 @@ static void test_d2_spike_takes_log_steps(void)
 
 static void test_d3_ijk_is_one_trilinear(void)
 {
-    iso_volume *vol = surface_make_volume(32, 32, 32, ISO_F32);
-    for (size_t k = 0; k < 32; k++)
-        for (size_t j = 0; j < 32; j++)
-            for (size_t i = 0; i < 32; i++)
+    iso_volume *vol = surface_make_volume(33, 33, 33, ISO_F32);
+    for (size_t k = 0; k < 33; k++)
+        for (size_t j = 0; j < 33; j++)
+            for (size_t i = 0; i < 33; i++)
                 iso_vol_set(vol, i, j, k, (double)(i * j * k));
     iso_vol_update_stats(vol);
     iso_tree *tree = surface_build(vol);
@@ -218,7 +220,7 @@ static void test_d3_ijk_is_one_trilinear(void)
     iso_mesh_init(&m);
     iso_extract_stats st;
     /* ijk is trilinear, so every brick's coarsest level fits it exactly: each active brick
-     * is one cell, 8 wide, or 7 at the far end of an axis. */
+     * (4 x 4 x 4 whole bricks) is one cell, 8 wide. */
     extract(tree, 3000, 1000, &m, &st);
     const iso_bricks *g = &tree->bricks;
     size_t active = 0;
@@ -431,7 +433,8 @@ static void test_tree_is_small(void)
 static void extract_threads(const iso_tree *tree, double level, double tolerance, int threads, iso_mesh *m,
                             iso_extract_stats *st)
 {
-    iso_extract_params p = {.level = level, .tolerance = tolerance, .space = ISO_SPACE_INDEX, .threads = threads};
+    iso_extract_params p = {.level = level, .tolerance = tolerance, .space = ISO_SPACE_INDEX, .threads = threads,
+                            .coarsen = ISO_COARSEN_ALL};
     iso_error err;
     CHECK_OK(iso_extract(tree, &p, m, st, &err), &err);
 }
@@ -740,7 +743,7 @@ static void test_tolerance_that_coarsens_nothing_is_exact(void)
         iso_extract_stats se, st;
         iso_error err;
         iso_extract_params p = {.level = level, .space = variant == 1 ? ISO_SPACE_WORLD : ISO_SPACE_INDEX,
-                                .cap = variant == 2, .threads = 1};
+                                .cap = variant == 2, .threads = 1, .coarsen = ISO_COARSEN_ALL};
         CHECK(iso_extract(tree, &p, &exact, &se, &err) == 0);
         p.tolerance = finest / 2;
         CHECK(iso_extract(tree, &p, &tol, &st, &err) == 0);
@@ -766,73 +769,102 @@ static void test_tolerance_that_coarsens_nothing_is_exact(void)
     iso_vol_destroy(vol);
 }
 
-/* A brick whose coarse blocks are all provably clear of the level is marched whole by the
- * kernel and passed by in the coarse pass (lod.c's mark_fine): the answer must be the one
- * the same plan gives with every coarse block marched at its stride
- * (iso_lod_extract_planned), byte for byte. Counts the bricks the shortcut took into
- * *shortcut. */
-static void check_clear_bricks_marched_whole(const iso_tree *tree, double level, double tolerance,
-                                             size_t *shortcut)
+static int same_mesh(const iso_mesh *a, const iso_mesh *b)
 {
-    const iso_volume *vol = tree->vol;
-    size_t blocks = 1;
-    for (int d = 0; d < 3; d++)
-        blocks *= (vol->dims[d] - 1 + ISO_TREE_BLOCK - 1) / ISO_TREE_BLOCK;
-    uint8_t *plan = malloc(blocks);
-    CHECK(plan != NULL);
-    CHECK(iso_lod_plan(tree, level, tolerance, plan) == 0);
-    iso_extract_params p = {.level = level, .tolerance = tolerance, .space = ISO_SPACE_INDEX, .threads = 1};
-    iso_mesh a, b;
-    iso_mesh_init(&a);
-    iso_mesh_init(&b);
-    iso_extract_stats sa, sb;
-    memset(&sb, 0, sizeof sb); /* iso_lod_extract_planned adds to its counts */
-    iso_error err;
-    CHECK_OK(iso_extract(tree, &p, &a, &sa, &err), &err);
-    CHECK_OK(iso_lod_extract_planned(tree, &p, plan, &b, &sb, &err), &err);
-    CHECKF(sa.nodes_polygonized > 0, "level %g tolerance %g: no coarse brick", level, tolerance);
-    CHECK_EQ(a.vertex_count, b.vertex_count);
-    CHECK_EQ(a.triangle_count, b.triangle_count);
-    CHECKF(a.vertex_count == b.vertex_count &&
-               memcmp(a.positions, b.positions, 3 * sizeof(float) * a.vertex_count) == 0,
-           "level %g tolerance %g: positions differ", level, tolerance);
-    CHECKF(a.triangle_count == b.triangle_count &&
-               memcmp(a.indices, b.indices, 3 * sizeof(uint32_t) * a.triangle_count) == 0,
-           "level %g tolerance %g: triangles differ", level, tolerance);
-    CHECK(sa.error_bound == sb.error_bound);
-    CHECK(sa.nodes_polygonized <= sb.nodes_polygonized);
-    *shortcut += sb.nodes_polygonized - sa.nodes_polygonized;
-    iso_mesh_free(&a);
-    iso_mesh_free(&b);
-    free(plan);
+    return a->vertex_count == b->vertex_count && a->triangle_count == b->triangle_count &&
+           memcmp(a->positions, b->positions, 3 * sizeof(float) * a->vertex_count) == 0 &&
+           memcmp(a->indices, b->indices, 3 * sizeof(uint32_t) * a->triangle_count) == 0;
 }
 
-static void test_clear_bricks_marched_whole(void)
+/* By default a tolerance buys time, never costs it: where most crossed blocks cannot lie in
+ * stride-8 bricks the exact surface answers, byte for byte; where nearly all do, the
+ * coarse units answer, as ISO_COARSEN_ALL would. ISO_COARSEN_ALL always coarsens. */
+static void test_tolerance_coarsens_only_where_it_pays(void)
+{
+    double r0;
+    iso_volume *vol = sphere_volume(66, &r0);
+    iso_tree *tree = surface_build(vol);
+    double level = 8; /* a sphere of radius 23.5, a brick or more from the border */
+    iso_mesh exact, fast, all;
+    iso_mesh_init(&exact);
+    iso_mesh_init(&fast);
+    iso_mesh_init(&all);
+    iso_extract_stats se, sf, sa;
+    iso_error err;
+    iso_extract_params p = {.level = level, .space = ISO_SPACE_INDEX};
+    CHECK_OK(iso_extract(tree, &p, &exact, &se, &err), &err);
+    CHECK_EQ(se.coarse_share, 0);
+    /* 0.05: strides 2 (error about 4 / (8 r)) but never 8; 2: stride 8 nearly everywhere. */
+    static const double tolerances[2] = {0.05, 2};
+    for (int t = 0; t < 2; t++) {
+        p.tolerance = tolerances[t];
+        p.coarsen = ISO_COARSEN_WHERE_FASTER;
+        CHECK_OK(iso_extract(tree, &p, &fast, &sf, &err), &err);
+        p.coarsen = ISO_COARSEN_ALL;
+        CHECK_OK(iso_extract(tree, &p, &all, &sa, &err), &err);
+        CHECKF(sa.coarse_share > 0 && all.triangle_count < exact.triangle_count,
+               "tolerance %g: every coarse unit gives %zu of %zu triangles, share %g", tolerances[t],
+               all.triangle_count, exact.triangle_count, sa.coarse_share);
+        CHECK(sa.error_bound <= tolerances[t]);
+        if (t == 0) {
+            CHECKF(same_mesh(&fast, &exact) && sf.coarse_share == 0,
+                   "tolerance %g: %zu triangles, share %g, not the exact surface", tolerances[t],
+                   fast.triangle_count, sf.coarse_share);
+        } else {
+            CHECKF(same_mesh(&fast, &all) && sf.coarse_share == sa.coarse_share && sa.coarse_share > 0.8,
+                   "tolerance %g: %zu triangles (all: %zu), share %g", tolerances[t], fast.triangle_count,
+                   all.triangle_count, sf.coarse_share);
+        }
+    }
+    iso_mesh_free(&exact);
+    iso_mesh_free(&fast);
+    iso_mesh_free(&all);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
+/* The tolerance path's mesh is the same bytes on 1, 2 and 3 threads: every brick numbers
+ * its crossings and lays out its triangles in grid order, whoever counts it. */
+static void check_threads_give_same_bytes(const iso_tree *tree, double level, double tolerance, int cap)
+{
+    iso_mesh one, other;
+    iso_mesh_init(&one);
+    iso_mesh_init(&other);
+    iso_extract_stats s1, sn;
+    iso_error err;
+    iso_extract_params p = {.level = level, .tolerance = tolerance, .cap = cap, .space = ISO_SPACE_INDEX, .threads = 1,
+                            .coarsen = ISO_COARSEN_ALL};
+    CHECK_OK(iso_extract(tree, &p, &one, &s1, &err), &err);
+    for (int threads = 2; threads <= 3; threads++) {
+        p.threads = threads;
+        CHECK_OK(iso_extract(tree, &p, &other, &sn, &err), &err);
+        CHECKF(same_mesh(&one, &other), "level %g tolerance %g cap %d: %d threads differ from 1", level, tolerance,
+               cap, threads);
+        CHECK(s1.error_bound == sn.error_bound && s1.cells_visited == sn.cells_visited);
+    }
+    iso_mesh_free(&one);
+    iso_mesh_free(&other);
+}
+
+static void test_tolerance_meshes_do_not_depend_on_threads(void)
 {
     double r0;
     iso_volume *vol = sphere_volume(40, &r0);
     iso_tree *tree = surface_build(vol);
-    size_t shortcut = 0;
-    /* 44 and 19 coarse bricks, 10 and 4 more clear of the level (7,758 triangles of 7,804
-     * at level 4); and rungs where no brick is clear. */
-    const double rungs[2][4] = {{4, 11, 0.5, 7.5}, {0.07, 0.15, 0.1, 0.5}};
+    const double rungs[4][2] = {{4, 11}, {4, 0.5}, {7.5, 3}, {0.07, 0.15}};
     for (int t = 0; t < 4; t++)
-        check_clear_bricks_marched_whole(tree, rungs[0][t], rungs[1][t], &shortcut);
-    CHECKF(shortcut == 14, "the sphere's rungs marched %zu clear bricks whole, not 14", shortcut);
+        for (int cap = 0; cap < 2; cap++)
+            check_threads_give_same_bytes(tree, rungs[t][0], rungs[t][1], cap);
     iso_tree_destroy(tree);
     iso_vol_destroy(vol);
     vol = surface_load_shared("CThead_256x256x113_u16be.nhdr");
     if (!vol)
         return;
     tree = surface_build(vol);
-    shortcut = 0;
-    /* Skin and bone at 2% and 5% of the range: 99-100% of the exact triangles, most
-     * coarse bricks clear of the level. */
-    const double levels[] = {700, 1500}, shares[] = {65.44, 163.6};
+    const double levels[] = {700, 1500}, shares[] = {65.44, 654.4, 1636};
     for (int l = 0; l < 2; l++)
-        for (int t = 0; t < 2; t++)
-            check_clear_bricks_marched_whole(tree, levels[l], shares[t], &shortcut);
-    CHECKF(shortcut > 1000, "CThead's rungs marched %zu clear bricks whole", shortcut);
+        for (int t = 0; t < 3; t++)
+            check_threads_give_same_bytes(tree, levels[l], shares[t], 0);
     iso_tree_destroy(tree);
     iso_vol_destroy(vol);
 }
@@ -860,7 +892,7 @@ static void test_world_positions_are_the_index_map(void)
             iso_mesh_init(&index);
             iso_mesh_init(&world);
             iso_extract_params p = {.level = 4, .tolerance = variant == 2 ? 0 : 0.15, .cap = variant == 1,
-                                    .space = ISO_SPACE_INDEX, .threads = 1};
+                                    .space = ISO_SPACE_INDEX, .threads = 1, .coarsen = ISO_COARSEN_ALL};
             iso_error err;
             if (variant == 2) {
                 CHECK_OK(iso_extract_full_scan(vol, p.level, ISO_SPACE_INDEX, &index, NULL, &err), &err);
@@ -905,7 +937,8 @@ int main(void)
     CHECK_RUN(test_coarse_bricks_join_without_weld);
     CHECK_RUN(test_tolerance_on_one_cell_bricks);
     CHECK_RUN(test_tolerance_that_coarsens_nothing_is_exact);
-    CHECK_RUN(test_clear_bricks_marched_whole);
+    CHECK_RUN(test_tolerance_coarsens_only_where_it_pays);
+    CHECK_RUN(test_tolerance_meshes_do_not_depend_on_threads);
     CHECK_RUN(test_world_positions_are_the_index_map);
     CHECK_RUN(test_level_errors_are_lemma1_per_coarse_cell);
     CHECK_RUN(test_level_codes);

@@ -245,7 +245,8 @@ static void test_nan_samples_defined(void)
     iso_tree *tree = NULL;
     CHECK_OK(iso_tree_build(vol, 0, NULL, NULL, &tree, &err), &err);
     for (int tol = 0; tree && tol <= 2; tol += 2) {
-        iso_extract_params p = {.level = 5, .tolerance = tol, .space = ISO_SPACE_INDEX};
+        iso_extract_params p = {.level = 5, .tolerance = tol, .space = ISO_SPACE_INDEX,
+                                .coarsen = ISO_COARSEN_ALL};
         iso_mesh mesh;
         iso_mesh_init(&mesh);
         iso_extract_stats stats = {0};

@@ -377,7 +377,7 @@ static void test_budget_picks_finest_fit(void)
     iso_mesh mesh;
     iso_mesh_init(&mesh);
     iso_extract_stats full = {0}, st = {0};
-    iso_extract_params params = {.level = 0.5};
+    iso_extract_params params = {.level = 0.5, .coarsen = ISO_COARSEN_ALL}; /* the ladder's rungs */
     CHECK_OK(iso_extract(tree, &params, &mesh, &full, &err), &err);
     /* Watertight meshes keep every crossing on a fanned node's faces, so even the coarsest
      * rung keeps most of this wavy field's triangles: aim between it and the exact mesh. */

@@ -29,7 +29,8 @@ typedef struct totals {
 static int extract(const iso_tree *tree, double level, double tolerance, int cap, iso_space space,
                    iso_mesh *m, iso_extract_stats *st)
 {
-    iso_extract_params p = {.level = level, .tolerance = tolerance, .cap = cap, .space = space};
+    iso_extract_params p = {.level = level, .tolerance = tolerance, .cap = cap, .space = space,
+                            .coarsen = ISO_COARSEN_ALL};
     iso_error err;
     int rc = iso_extract(tree, &p, m, st, &err);
     CHECKF(rc == 0, "iso_extract(%g, %g): %s", level, tolerance, err.message);
@@ -137,15 +138,16 @@ static void test_coarse_bricks_meet_cells(void)
 }
 
 /* f = x - 1.5 on 17^3 (2 x 2 x 2 bricks, 4 x 4 x 4 blocks), one block coarse: block
- * (0, 0, 0) at stride 4, every other block at stride 1, so its brick is marched block by
- * block and the other bricks by the kernel. The plane crosses the cells with x in [1, 2].
- * The coarse block is one transition cell: its faces x = 0 and x = 4 hold no crossing;
- * y = 0 and z = 0 lie on the border, held by it alone (stride 4), one segment each; y = 4
- * and z = 4 meet stride-1 blocks, four segments each. The loop of 10 crossings is fanned
- * around a centre: 10 triangles. The other 15 blocks with x in [0, 4] have 4 x 4 crossed
- * cells, 2 triangles each: 480. Vertices: the 17 x 17 crossings of the plane's x-edges but
- * the 15 of the coarse block's 5 x 5 that its loop does not use, and the centre: 275.
- * Every vertex is on the plane. */
+ * (0, 0, 0) asked at stride 4 among blocks at stride 1. The plane crosses its faces y = 4
+ * and z = 4, which it shares with stride-1 blocks, so the balance takes it to stride 2
+ * (a stride-4 block never meets a stride-1 one across a crossed set); asked at 2, the same.
+ * Its 2 x 2 x 2 cells at stride 2: the plane crosses the four with x in [0, 2]. The one at
+ * y, z in [0, 2] is marching cubes' (2 triangles); the two touching one refined face have a
+ * loop of 5 crossings (3 triangles each), the one touching both faces of 6 (4): 12. The
+ * 15 stride-1 blocks with x in [0, 4] have 4 x 4 crossed cells, 2 triangles each: 480.
+ * Vertices: the 17 x 17 crossings of the plane's data x-edges, less the 25 of the coarse
+ * block's box but the 9 on its refined faces, plus its 4 stride-2 x-edges off those
+ * faces: 277. Every vertex is on the plane: no vertex inside a cell. */
 static void test_one_coarse_block_among_fine_ones(void)
 {
     iso_volume *vol = surface_make_volume(17, 17, 17, ISO_F32);
@@ -156,16 +158,20 @@ static void test_one_coarse_block_among_fine_ones(void)
     iso_vol_update_stats(vol);
     iso_error err;
     iso_tree *tree = surface_build(vol);
-    uint8_t plan[4 * 4 * 4] = {0};
-    plan[0] = 2;
-    iso_extract_params p = {.level = 0, .tolerance = 1, .space = ISO_SPACE_INDEX, .threads = 1};
+    iso_extract_params p = {.level = 0, .tolerance = 1, .space = ISO_SPACE_INDEX, .threads = 1,
+                            .coarsen = ISO_COARSEN_ALL};
     iso_mesh m;
     iso_mesh_init(&m);
     iso_extract_stats st = {0};
-    CHECK_OK(iso_lod_extract_planned(tree, &p, plan, &m, &st, &err), &err);
-    CHECK_EQ(m.triangle_count, 490);
-    CHECK_EQ(m.vertex_count, 275);
-    CHECK_EQ(st.nodes_polygonized, 1);
+    for (int stride = 2; stride >= 1 && !check_failed(); stride--) {
+        uint8_t plan[4 * 4 * 4] = {0};
+        plan[0] = (uint8_t)stride;
+        memset(&st, 0, sizeof st);
+        CHECK_OK(iso_lod_extract_planned(tree, &p, plan, NULL, &m, &st, &err), &err);
+        CHECK_EQ(m.triangle_count, 492);
+        CHECK_EQ(m.vertex_count, 277);
+        CHECK_EQ(st.nodes_polygonized, 1);
+    }
     for (size_t v = 0; v < m.vertex_count; v++)
         CHECKF(m.positions[3 * v] == 1.5f, "vertex %zu at x = %g", v, (double)m.positions[3 * v]);
     iso_census c;
@@ -186,12 +192,61 @@ static void test_one_coarse_block_among_fine_ones(void)
     iso_vol_destroy(vol);
 }
 
+/* 1 if the samples block a shares with its face or edge neighbour a + delta lie on both
+ * sides of level (blocks of ISO_TREE_BLOCK cells, clipped by the border). */
+static int shared_set_crosses(const iso_volume *vol, const size_t a[3], const int delta[3], double level)
+{
+    size_t lo[3], hi[3];
+    for (int d = 0; d < 3; d++) {
+        size_t first = a[d] * ISO_TREE_BLOCK, last = first + ISO_TREE_BLOCK < vol->dims[d] - 1 ? first + ISO_TREE_BLOCK : vol->dims[d] - 1;
+        lo[d] = delta[d] > 0 ? last : first;
+        hi[d] = delta[d] < 0 ? first : last;
+    }
+    int above = 0, below = 0;
+    for (size_t k = lo[2]; k <= hi[2]; k++)
+        for (size_t j = lo[1]; j <= hi[1]; j++)
+            for (size_t i = lo[0]; i <= hi[0]; i++) {
+                int in = iso_vol_get(vol, i, j, k) > level;
+                above |= in;
+                below |= !in;
+            }
+    return above && below;
+}
+
+/* The pairs of face or edge neighbours in a plan (log2 strides per block) more than one
+ * stride apart across a set the level crosses: 0 once the kernel has balanced it. */
+static size_t unbalanced_pairs(const iso_volume *vol, const uint8_t *plan, double level)
+{
+    size_t n[3], pairs = 0;
+    for (int d = 0; d < 3; d++)
+        n[d] = (vol->dims[d] - 1 + ISO_TREE_BLOCK - 1) / ISO_TREE_BLOCK;
+    for (size_t z = 0; z < n[2]; z++)
+        for (size_t y = 0; y < n[1]; y++)
+            for (size_t x = 0; x < n[0]; x++)
+                for (int dz = -1; dz <= 1; dz++)
+                    for (int dy = -1; dy <= 1; dy++)
+                        for (int dx = -1; dx <= 1; dx++) {
+                            int off = (dx != 0) + (dy != 0) + (dz != 0);
+                            size_t q[3] = {x + (size_t)dx, y + (size_t)dy, z + (size_t)dz};
+                            if (off == 0 || off == 3 || q[0] >= n[0] || q[1] >= n[1] || q[2] >= n[2])
+                                continue;
+                            size_t a[3] = {x, y, z};
+                            const int delta[3] = {dx, dy, dz};
+                            int sa = plan[(z * n[1] + y) * n[0] + x], sb = plan[(q[2] * n[1] + q[1]) * n[0] + q[0]];
+                            if (sa > sb + 1 && shared_set_crosses(vol, a, delta, level))
+                                pairs++;
+                        }
+    return pairs;
+}
+
 /* Each brick's blocks from the tolerance's own plan: one rough block of a brick at stride
  * 1 keeps it from stride 8, and its seven smooth blocks take stride 4. Field: the plane
  * f = 0.5x + 0.3y + 0.2z, with noise only on the samples strictly inside block (1, 1, 1)
- * (5..7 per axis), at level 6.1, which crosses 6 of the 8 bricks. Cells: brick 0's rough
- * block at stride 1 (64) and its 7 other blocks at stride 4 (7), the 5 other bricks at
- * stride 8 whole (5): 76. The vertex bound holds and the mesh is sound, capped and not. */
+ * (5..7 per axis), at level 6.1, which crosses 6 of the 8 bricks. The kernel's balance then
+ * refines what shares a crossed face or edge with the rough block to stride 2 (a stride-8
+ * brick there gives up stride 8), and so on until no crossed set joins strides more than
+ * one apart; the rough block stays the only one at stride 1. The vertex bound holds and
+ * the mesh is sound, capped and not. */
 static void test_rough_block_keeps_only_itself_fine(void)
 {
     iso_volume *vol = surface_make_volume(17, 17, 17, ISO_F32);
@@ -218,9 +273,27 @@ static void test_rough_block_keeps_only_itself_fine(void)
         check_sound(vol, &m, &st, 6.1, 0.05, cap, "rough block");
         CHECKF(st.error_bound <= 0.05, "bound %g", st.error_bound);
     }
-    extract(tree, 6.1, 0.05, 0, ISO_SPACE_INDEX, &m, &st);
-    CHECK_EQ(st.cells_visited, 64 + 7 + 5);
-    CHECK_EQ(st.nodes_polygonized, 6);
+    /* The plan before and after the balance (64 blocks, 4 per axis). */
+    uint8_t planned[64], balanced[64];
+    CHECK(iso_lod_plan(tree, 6.1, 0.05, planned) == 0);
+    for (int k = 0; k < 8; k++) {
+        size_t b = (size_t)(k >> 2) * 16 + (size_t)(k >> 1 & 1) * 4 + (size_t)(k & 1);
+        CHECK_EQ(planned[b], k == 7 ? 0 : 2);
+    }
+    iso_extract_params p = {.level = 6.1, .tolerance = 0.05, .space = ISO_SPACE_INDEX, .threads = 1,
+                            .coarsen = ISO_COARSEN_ALL};
+    iso_error err;
+    CHECK_OK(iso_lod_extract_planned(tree, &p, planned, balanced, &m, &st, &err), &err);
+    size_t fine = 0, refined = 0;
+    for (size_t b = 0; b < 64; b++) {
+        fine += balanced[b] == 0;
+        refined += balanced[b] < planned[b];
+    }
+    CHECK_EQ(fine, 1);
+    CHECK_EQ(balanced[16 + 4 + 1], 0);
+    CHECKF(refined > 0, "the rough block refined nothing around it");
+    CHECK_EQ(unbalanced_pairs(vol, planned, 6.1) > 0, 1);
+    CHECK_EQ(unbalanced_pairs(vol, balanced, 6.1), 0);
     iso_mesh_free(&m);
     iso_tree_destroy(tree);
     iso_vol_destroy(vol);
@@ -277,11 +350,12 @@ static void check_plan(iso_volume *vol, const uint8_t *shift, int cap, const cha
     CHECK_OK(iso_tree_build(vol, 1, NULL, NULL, &tree, &err), &err);
     if (!tree)
         return;
-    iso_extract_params p = {.level = 0, .tolerance = 1, .cap = cap, .space = ISO_SPACE_INDEX};
+    iso_extract_params p = {.level = 0, .tolerance = 1, .cap = cap, .space = ISO_SPACE_INDEX,
+                            .coarsen = ISO_COARSEN_ALL};
     iso_mesh m;
     iso_mesh_init(&m);
     iso_extract_stats st = {0};
-    CHECK_OK(iso_lod_extract_planned(tree, &p, shift, &m, &st, &err), &err);
+    CHECK_OK(iso_lod_extract_planned(tree, &p, shift, NULL, &m, &st, &err), &err);
     iso_census c;
     CHECK_OK(iso_census_compute(vol, &m, ISO_SPACE_INDEX, &c, &err), &err);
     CHECKF(c.open_edges == 0 && c.nonmanifold_edges == 0 && c.misoriented_edges == 0 &&
@@ -389,16 +463,16 @@ static void test_random_plans_on_random_shapes(void)
 
 /* A trilinear field, f = (x - 7.3)(y - 5.6)(z - 4.1) + 0.37 x, under random plans: every
  * coarse grid reproduces it exactly (level errors 0), so the data's interpolant is f
- * itself. The loop centres (the vertices off every lattice line: two or more coordinates
- * off the integers) are placed by a root finder on a line along which f is cubic; each
- * must lie on the level to within the float rounding of its position, on a watertight
- * mesh with every vertex within the reported bound. */
+ * itself, linear along every lattice edge. Every vertex lies on a lattice edge (at most one
+ * coordinate off the integers: transition cells add no vertex inside a cell), and so on the
+ * level to within the reported bound and the float rounding of its position, on a
+ * watertight mesh. */
 static double trilinear_field(double x, double y, double z)
 {
     return (x - 7.3) * (y - 5.6) * (z - 4.1) + 0.37 * x;
 }
 
-static void test_centres_on_a_trilinear_field(void)
+static void test_vertices_on_lattice_edges(void)
 {
     iso_volume *vol = surface_make_volume(31, 17, 12, ISO_F64);
     for (size_t k = 0; k < 12; k++)
@@ -410,33 +484,42 @@ static void test_centres_on_a_trilinear_field(void)
     iso_tree *tree;
     CHECK_OK(iso_tree_build(vol, 1, NULL, NULL, &tree, &err), &err);
     uint8_t plan[8 * 4 * 3];
-    size_t centres = 0;
+    size_t on_edges = 0, inside = 0;
     double worst = 0, slack = surface_rounding_slack(vol);
     for (int trial = 0; trial < 400 && tree && !check_failed(); trial++) {
         random_block_plan(vol, plan);
         double level = vol->value_min + (vol->value_max - vol->value_min) * (0.3 + 0.4 * surface_uniform());
-        iso_extract_params p = {.level = level, .tolerance = 1, .cap = trial & 1, .space = ISO_SPACE_INDEX};
+        iso_extract_params p = {.level = level, .tolerance = 1, .cap = trial & 1, .space = ISO_SPACE_INDEX,
+                                .coarsen = ISO_COARSEN_ALL};
         iso_mesh m;
         iso_mesh_init(&m);
         iso_extract_stats st = {0};
-        CHECK_OK(iso_lod_extract_planned(tree, &p, plan, &m, &st, &err), &err);
+        CHECK_OK(iso_lod_extract_planned(tree, &p, plan, NULL, &m, &st, &err), &err);
         char what[64];
         snprintf(what, sizeof what, "trilinear plan %d", trial);
         check_sound(vol, &m, &st, level, st.error_bound, 0, what);
         for (size_t v = 0; v < m.vertex_count; v++) {
             const float *x = m.positions + 3 * v;
-            int off = (x[0] != floorf(x[0])) + (x[1] != floorf(x[1])) + (x[2] != floorf(x[2]));
-            if (off < 2)
+            int outside = 0; /* a cap's vertex, toward the virtual layer */
+            for (int d = 0; d < 3; d++)
+                outside |= x[d] < 0 || x[d] > (float)(vol->dims[d] - 1);
+            if (outside)
                 continue;
-            centres++;
-            worst = fmax(worst, fabs(trilinear_field(x[0], x[1], x[2]) - level));
+            int off = (x[0] != floorf(x[0])) + (x[1] != floorf(x[1])) + (x[2] != floorf(x[2]));
+            inside += off > 1;
+            on_edges += off == 1;
+            /* Beyond the bound the extraction reports: its measured worst, which holds the
+             * gap a crossing keeps from a sample on the level (mc.h). */
+            worst = fmax(worst, fabs(trilinear_field(x[0], x[1], x[2]) - level) - st.error_bound);
         }
         iso_mesh_free(&m);
     }
-    printf("  info: 400 plans on a trilinear field, %zu centres, largest |f - level| %.3g (slack %.3g)\n",
-           centres, worst, slack);
-    CHECK(centres >= 40);
-    CHECKF(worst <= slack, "a centre off the level by %g", worst);
+    printf("  info: 400 plans on a trilinear field, %zu vertices on lattice edges, largest |f - level| past the bound %.3g "
+           "(slack %.3g)\n",
+           on_edges, worst, slack);
+    CHECK_EQ(inside, 0);
+    CHECK(on_edges > 1000);
+    CHECKF(worst <= slack, "a vertex off the level by %g", worst);
     iso_tree_destroy(tree);
     iso_vol_destroy(vol);
 }
@@ -671,7 +754,7 @@ int main(void)
     CHECK_RUN(test_transition_cell_every_pattern);
     CHECK_RUN(test_random_plans);
     CHECK_RUN(test_random_plans_on_random_shapes);
-    CHECK_RUN(test_centres_on_a_trilinear_field);
+    CHECK_RUN(test_vertices_on_lattice_edges);
     CHECK_RUN(test_random_fields_property);
     CHECK_RUN(test_analytic_fields_property);
     CHECK_RUN(test_mricron_brain);
