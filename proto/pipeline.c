@@ -12,8 +12,11 @@
 
 void proto_pipeline_request_init(proto_pipeline_request *req)
 {
-    *req = (proto_pipeline_request){.extract = {.space = ISO_SPACE_WORLD}, .normals = 4,
-                                    .distance = -1, .format = PROTO_FORMAT_DRACO};
+    /* Every coarse unit the tolerance allows: a request's time is mostly normals and
+     * encoding, which follow the triangles, so the fewest triangles answer first even where
+     * the coarse kernel is slower than the exact one (docs/performance.md). */
+    *req = (proto_pipeline_request){.extract = {.space = ISO_SPACE_WORLD, .coarsen = ISO_COARSEN_ALL},
+                                    .normals = 4, .distance = -1, .format = PROTO_FORMAT_DRACO};
     proto_encode_options_init(&req->encode);
 }
 
@@ -56,6 +59,7 @@ static int faithful_triangles(const iso_tree *tree, const proto_pipeline_request
         return 0;
     iso_extract_params p = req->extract;
     p.tolerance = iso_budget_faithful_tolerance(tree->vol, p.tolerance);
+    p.coarsen = ISO_COARSEN_ALL; /* the budget ladder's mesh (extract.h) */
     iso_mesh m;
     iso_extract_stats stats;
     iso_mesh_init(&m);

@@ -86,8 +86,9 @@ typedef struct proto_pipeline_result {
     double extract_ms, simplify_ms, normals_ms, measure_ms, encode_ms, gzip_ms;
 } proto_pipeline_result;
 
-/* Fills the defaults: world space, all cores, no budget, tricubic normals, no measures,
- * Draco with proto_encode_options_init's options. */
+/* Fills the defaults: world space, all cores, every coarse unit the tolerance allows
+ * (ISO_COARSEN_ALL), no budget, tricubic normals, no measures, Draco with
+ * proto_encode_options_init's options. */
 void proto_pipeline_request_init(proto_pipeline_request *req);
 
 /* Runs the steps above for tree (or vol alone when req->full_scan). On success *res owns

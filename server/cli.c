@@ -117,6 +117,17 @@ int srv_parse_threads(const char *command, const char *text, int *threads)
     return 0;
 }
 
+int srv_parse_coarsen(const char *command, const char *text, iso_coarsen *coarsen)
+{
+    if (!strcmp(text, "faster"))
+        *coarsen = ISO_COARSEN_WHERE_FASTER;
+    else if (!strcmp(text, "all"))
+        *coarsen = ISO_COARSEN_ALL;
+    else
+        return srv_fail("%s: --coarsen '%s': expected faster or all", command, text);
+    return 0;
+}
+
 int srv_parse_dims(const char *text, size_t dims[3])
 {
     unsigned long long v[3];

@@ -67,6 +67,10 @@ extern const srv_command srv_info_command, srv_build_command, srv_extract_comman
 /* "--threads N": N in 1..256 into *threads; 0, or prints the problem and returns 1. */
 int srv_parse_threads(const char *command, const char *text, int *threads);
 
+/* "--coarsen WHEN": faster or all (extract.h's iso_coarsen); 0, or prints the problem and
+ * returns 1. */
+int srv_parse_coarsen(const char *command, const char *text, iso_coarsen *coarsen);
+
 /* A mesh request allocates and frees tens of MB (the mesh, the vertex map, the edge census,
  * Draco's corner tables). With glibc's defaults the large blocks are fresh mmaps and
  * freed memory above 128 KiB is handed back, so every request faults its pages in again

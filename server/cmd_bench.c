@@ -5,7 +5,8 @@
  * distance to the exact surface (mean, p99, max; iso_mesh_distance_compute) in mm and in
  * voxels of the smallest spacing, and its time against the exact path's.
  * Times are the best of --repeat runs (the build's of 1 + --build-repeat, wall and CPU
- * time): the machine is shared and noisy. */
+ * time): the machine is shared and noisy. A tolerance coarsens where it pays (extract.h),
+ * or with --coarsen all everywhere it may; each row says how much it coarsened. */
 #include <jansson.h>
 #include <math.h>
 #include <stdio.h>
@@ -88,10 +89,10 @@ static int parse_tolerances(const char *text, const iso_volume *vol, double **ou
 
 /* Best of `repeat` extractions; the last one's surface stays in mesh (world mm). */
 static int run(const iso_tree *tree, double level, double tolerance, int no_minmax, int threads,
-               int repeat, iso_mesh *mesh, iso_extract_stats *st, double *best)
+               iso_coarsen coarsen, int repeat, iso_mesh *mesh, iso_extract_stats *st, double *best)
 {
     iso_extract_params p = {.level = level, .tolerance = tolerance, .no_minmax = no_minmax,
-                            .threads = threads};
+                            .threads = threads, .coarsen = coarsen};
     iso_error err;
     *best = 1e300;
     for (int r = 0; r < repeat; r++) {
@@ -134,15 +135,16 @@ static int best_build(const srv_subject *s, int threads, int repeat, double *bes
 
 /* Row i's extraction, best of repeat, with and (baselines) without min/max pruning; with
  * exact (the tolerance-0 surface) also its distance to it. */
-static int measure_row(const srv_subject *s, double level, int threads, int repeat, int baselines,
-                       const iso_mesh *exact, bench_row *row)
+static int measure_row(const srv_subject *s, double level, int threads, iso_coarsen coarsen, int repeat,
+                       int baselines, const iso_mesh *exact, bench_row *row)
 {
     iso_mesh mesh;
     iso_mesh_init(&mesh);
     iso_error err;
-    int status = (baselines && run(s->tree, level, row->tolerance, 1, threads, repeat, &mesh, &row->unpruned,
-                                   &row->best_unpruned_ms)) ||
-                 run(s->tree, level, row->tolerance, 0, threads, repeat, &mesh, &row->pruned, &row->best_pruned_ms);
+    int status = (baselines && run(s->tree, level, row->tolerance, 1, threads, coarsen, repeat, &mesh,
+                                   &row->unpruned, &row->best_unpruned_ms)) ||
+                 run(s->tree, level, row->tolerance, 0, threads, coarsen, repeat, &mesh, &row->pruned,
+                     &row->best_pruned_ms);
     if (status == 0 && exact && row->tolerance > 0) {
         /* The chain's sample spacing (mesh.h); all cores: the result does not depend on it. */
         double spacing = ISO_CHAIN_SPACING_VOXELS * iso_vol_min_spacing(s->vol);
@@ -181,8 +183,8 @@ static void print_table(const srv_subject *s, double level, const iso_extract_st
            s->name, level, v->dims[0], v->dims[1], v->dims[2], iso_vol_type_name(v->type), iso_tree_memory(s->tree),
            bytes, 100.0 * (double)iso_tree_memory(s->tree) / (double)bytes, build_ms, build_cpu_ms,
            build_ms / (double)voxels * 1e4, build_cpu_ms / (double)voxels * 1e4);
-    printf("%-16s %10s %12s %10s %12s %14s %12s", "tolerance", "polygons", "cells", "nodes", "build ms",
-           "no min/max ms", "min/max ms");
+    printf("%-16s %10s %12s %10s %12s %14s %12s %8s", "tolerance", "polygons", "cells", "nodes", "build ms",
+           "no min/max ms", "min/max ms", "coarse %");
     if (distances)
         printf(" %7s %9s %8s %8s %8s %8s %8s %8s", "of exact", "exact/tol", "mean mm", "p99 mm", "max mm",
                "mean vx", "p99 vx", "max vx");
@@ -192,8 +194,9 @@ static void print_table(const srv_subject *s, double level, const iso_extract_st
     size_t exact_tri = exact_triangles(rows, count);
     for (size_t i = 0; i < count; i++) {
         const bench_row *r = &rows[i];
-        printf("%-16g %10zu %12zu %10zu %12.1f %14.2f %12.2f", r->tolerance, r->pruned.triangles,
-               r->pruned.cells_visited, r->pruned.nodes_visited, build_ms, r->best_unpruned_ms, r->best_pruned_ms);
+        printf("%-16g %10zu %12zu %10zu %12.1f %14.2f %12.2f %8.1f", r->tolerance, r->pruned.triangles,
+               r->pruned.cells_visited, r->pruned.nodes_visited, build_ms, r->best_unpruned_ms, r->best_pruned_ms,
+               100 * r->pruned.coarse_share);
         if (distances) {
             const iso_mesh_distance *d = &r->distance;
             printf(" %7.1f%% %9.2f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f",
@@ -229,12 +232,13 @@ static json_t *row_json(const srv_subject *s, const bench_row *r, double exact, 
                         exact_tri ? json_real((double)r->pruned.triangles / (double)exact_tri) : json_null());
     json_object_set_new(o, "exact_over_tolerance_time", maybe_real(exact / r->best_pruned_ms));
     json_object_set_new(o, "fit_error", maybe_real(r->pruned.fit_error));
+    json_object_set_new(o, "coarse_share", json_real(r->pruned.coarse_share));
     json_object_set_new(o, "distance_mm", distance_json(r, 1));
     json_object_set_new(o, "distance_voxels", distance_json(r, iso_vol_min_spacing(v)));
     return o;
 }
 
-static int write_json(const char *path, const srv_subject *s, double level, int threads,
+static int write_json(const char *path, const srv_subject *s, double level, int threads, iso_coarsen coarsen,
                       const iso_extract_stats *full, double full_best, const bench_row *rows, size_t count,
                       double build_ms, double build_cpu_ms)
 {
@@ -254,6 +258,7 @@ static int write_json(const char *path, const srv_subject *s, double level, int 
     int status = 0;
     if (doc) {
         json_object_set_new(doc, "voxels", json_integer((json_int_t)voxels));
+        json_object_set_new(doc, "coarsen", json_string(coarsen == ISO_COARSEN_ALL ? "all" : "faster"));
         json_object_set_new(doc, "value_range", json_real(v->value_max - v->value_min));
         json_object_set_new(doc, "voxel_mm", json_real(iso_vol_min_spacing(v)));
         json_object_set_new(doc, "preview_tolerance", json_real(iso_preview_tolerance(v)));
@@ -291,7 +296,7 @@ static int full_scan(const srv_subject *s, double level, int repeat, int baselin
 
 enum {
     BENCH_LEVEL, BENCH_TOLERANCES, BENCH_JSON, BENCH_REPEAT, BENCH_BUILD_REPEAT, BENCH_THREADS, BENCH_NO_BASELINES,
-    BENCH_DISTANCES, BENCH_RESAMPLE, BENCH_OPTIONS
+    BENCH_DISTANCES, BENCH_RESAMPLE, BENCH_COARSEN, BENCH_OPTIONS
 };
 static const srv_option bench_options[BENCH_OPTIONS] = {
     [BENCH_LEVEL] = {"--level", "L", "the iso-level (required)"},
@@ -303,6 +308,8 @@ static const srv_option bench_options[BENCH_OPTIONS] = {
     [BENCH_NO_BASELINES] = {"--no-baselines", NULL, "skip the full-scan and unpruned runs"},
     [BENCH_DISTANCES] = {"--distances", NULL, "add each tolerance's distance to the exact surface"},
     [BENCH_RESAMPLE] = {"--resample", "WxHxD", "box-filter the volume to these dims first (or N for NxNxN)"},
+    [BENCH_COARSEN] = {"--coarsen", "WHEN", "faster: where coarse units beat the exact path (default); all: fewest "
+                       "triangles"},
 };
 
 static int srv_cmd_bench(int argc, char **argv);
@@ -317,6 +324,7 @@ static int srv_cmd_bench(int argc, char **argv)
     double level = 0, *tolerances = NULL;
     size_t count = 0;
     int have_level = 0, repeat = 3, baselines = 1, distances = 0, build_repeat = 1, at = 0, arg;
+    iso_coarsen coarsen = ISO_COARSEN_WHERE_FASTER;
     const char *json_path = NULL, *tol_text = "0,6,10,15,25,50,75,100,200,300,400,500", *value;
     srv_keep_freed_memory(); /* the server's allocator, as bench_peer tunes VTK's */
     while ((arg = srv_next_arg(&srv_bench_command, argc, argv, &at, &value)) != SRV_ARG_END) {
@@ -347,6 +355,10 @@ static int srv_cmd_bench(int argc, char **argv)
             break;
         case BENCH_NO_BASELINES: baselines = 0; break;
         case BENCH_DISTANCES: distances = 1; break;
+        case BENCH_COARSEN:
+            if (srv_parse_coarsen("bench", value, &coarsen))
+                return 1;
+            break;
         default: /* SRV_ARG_OPERAND */
             if (opt.path)
                 return srv_fail("bench: unexpected argument '%s' (one VOLUME)", value);
@@ -375,16 +387,17 @@ static int srv_cmd_bench(int argc, char **argv)
     if (status == 0)
         status = best_build(&s, opt.threads, build_repeat, &build_ms, &build_cpu_ms) ||
                  full_scan(&s, level, repeat, baselines, &full, &full_best) ||
-                 (distances && run(s.tree, level, 0, 0, opt.threads, 1, &exact, &exact_stats, &exact_best));
+                 (distances && run(s.tree, level, 0, 0, opt.threads, coarsen, 1, &exact, &exact_stats, &exact_best));
     for (size_t i = 0; status == 0 && i < count; i++) {
         rows[i].tolerance = tolerances[i];
         rows[i].best_unpruned_ms = NAN;
-        status = measure_row(&s, level, opt.threads, repeat, baselines, distances ? &exact : NULL, &rows[i]);
+        status = measure_row(&s, level, opt.threads, coarsen, repeat, baselines, distances ? &exact : NULL,
+                             &rows[i]);
     }
     if (status == 0)
         print_table(&s, level, &full, full_best, rows, count, build_ms, build_cpu_ms, distances);
     if (status == 0 && json_path)
-        status = write_json(json_path, &s, level, opt.threads, &full, full_best, rows, count, build_ms, build_cpu_ms);
+        status = write_json(json_path, &s, level, opt.threads, coarsen, &full, full_best, rows, count, build_ms, build_cpu_ms);
     iso_mesh_free(&exact);
     free(rows);
     free(tolerances);

@@ -91,7 +91,8 @@ static json_t *chain_json(const proto_pipeline_result *res)
 
 enum {
     EX_LEVEL, EX_TOLERANCE, EX_OUT, EX_JSON, EX_NORMALS, EX_CAP, EX_BUDGET, EX_NO_SIMPLIFY, EX_SIMPLIFY,
-    EX_DISTANCE, EX_THREADS, EX_HIERARCHY, EX_RESAMPLE, EX_INDEX_SPACE, EX_FULL_SCAN, EX_OPTIONS
+    EX_DISTANCE, EX_THREADS, EX_HIERARCHY, EX_RESAMPLE, EX_INDEX_SPACE, EX_FULL_SCAN, EX_COARSEN,
+    EX_OPTIONS
 };
 static const srv_option extract_options[EX_OPTIONS] = {
     [EX_LEVEL] = {"--level", "L", "the iso-level, in the volume's values (required)"},
@@ -109,6 +110,8 @@ static const srv_option extract_options[EX_OPTIONS] = {
     [EX_RESAMPLE] = {"--resample", "WxHxD", "box-filter the volume to these dims first (or N for NxNxN)"},
     [EX_INDEX_SPACE] = {"--index-space", NULL, "positions in voxel indices, not world millimetres"},
     [EX_FULL_SCAN] = {"--full-scan", NULL, "march every cell, without the hierarchy (the baseline)"},
+    [EX_COARSEN] = {"--coarsen", "WHEN", "all: the fewest triangles the tolerance allows (default); faster: "
+                    "coarse only where extraction gains"},
 };
 
 static int srv_cmd_extract(int argc, char **argv);
@@ -128,7 +131,7 @@ static int parse_triangles(const char *option, const char *value, double *n)
 static int srv_cmd_extract(int argc, char **argv)
 {
     srv_open_options opt = {.want_tree = 1};
-    iso_extract_params params = {0};
+    iso_extract_params params = {.coarsen = ISO_COARSEN_ALL}; /* a file wants the fewest triangles */
     const char *out = NULL, *value;
     int as_json = 0, have_level = 0, full_scan = 0, normals = 4; /* tricubic by default */
     int no_simplify = 0, i = 0, arg;
@@ -142,6 +145,10 @@ static int srv_cmd_extract(int argc, char **argv)
         case EX_INDEX_SPACE: params.space = ISO_SPACE_INDEX; break;
         case EX_FULL_SCAN: full_scan = 1; break;
         case EX_CAP: params.cap = 1; break;
+        case EX_COARSEN:
+            if (srv_parse_coarsen("extract", value, &params.coarsen))
+                return 1;
+            break;
         case EX_NO_SIMPLIFY: no_simplify = 1; break;
         case EX_BUDGET:
             if (parse_triangles("--budget", value, &budget))
@@ -236,6 +243,7 @@ static int srv_cmd_extract(int argc, char **argv)
             "area", res.area, "hierarchy_bytes", (json_int_t)(s.tree ? iso_tree_memory(s.tree) : 0),
             "volume_bytes", (json_int_t)volume_bytes, "space",
             world ? "world_mm" : "index", "normals", iso_normals_name(normals));
+        json_object_set_new(doc, "coarse_share", json_real(st.coarse_share));
         const iso_census *census = &res.census;
         json_t *watertight = json_pack("{s:I, s:I, s:I, s:I, s:I, s:b}",
             "open_edges", (json_int_t)census->open_edges,

@@ -4,12 +4,15 @@ VTK's vtkFlyingEdges3D (full scan, 1 and 2 threads) and vtkContourFilter with vt
 
 Per case: isoserve's hierarchy build on one thread (best of 4 wall times and of 3 CPU
 times, seconds per 10^7 voxels; target <= 1) and its bytes against the volume's (target <= 10%); the exact path on 1 and 2
-threads against Flying Edges; then the ladder on one thread: 0, 2%, 5%, 10% and 20% of the
-value range and the client's preview tolerance (half of it), each rung's triangles (and
-share of the exact ones), time against the exact path and against Flying Edges, and its
-symmetric distance to the exact surface (mean, p99, max over both surfaces, measured by
-`isoserve bench --distances`, core/mesh/distance.c), in mm and in voxels of the smallest
-spacing. Then scaling: CThead and ch2better resampled to four sizes, time and cells visited
+threads against Flying Edges; then the ladder: 0, 2%, 5%, 10% and 20% of the value range and
+the client's preview tolerance (half of it), on 1 and 2 threads, twice: as extraction
+answers by default (`--coarsen faster`: coarse units only where they beat the exact kernel;
+target: every rung >= 0.95x the exact path's speed) and with every coarse unit the tolerance
+allows (`--coarsen all`, what the server sends), each rung's share of blocks coarsened,
+triangles (and share of the exact ones), time against the exact path and against Flying
+Edges, and (all, one thread) its symmetric distance to the exact surface (mean, p99, max over
+both surfaces, measured by `isoserve bench --distances`, core/mesh/distance.c), in mm and in
+voxels of the smallest spacing. Then scaling: CThead and ch2better resampled to four sizes, time and cells visited
 against voxels with the fitted exponent. Prints tables, writes bench/results/peer.json and
 bench/results/scaling.png (beside the JSON).
 
@@ -53,6 +56,7 @@ CASES = [  # file, level, label
     ("bonsai_256x256x256_u8.nhdr", 40, "bonsai"),
     ("aneurism_256x256x256_u8.nhdr", 120, "aneurism"),
     ("engine_256x256x128_u8.nhdr", 80, "engine"),
+    ("bunny_512x512x361_i16le.nhdr", 1700, "bunny"),  # the hold-out class, 512^2
 ]
 # Without the shared scans: Debian's mricron-data (README.md's default collection).
 DEBIAN = "/usr/share/mricron/templates"
@@ -62,6 +66,7 @@ DEBIAN_CASES = [("ch2better.nii.gz", 30, "ch2better (Debian)"), ("ch2bet.nii.gz"
 LADDER = "0,2%,5%,10%,20%,preview"
 TARGET_BUILD_S = 1.0      # per 10^7 voxels, one thread
 TARGET_HIERARCHY = 10.0   # % of the volume's bytes
+TARGET_RUNG_SPEED = 0.95  # a rung's speed against the exact path's, --coarsen faster
 
 
 def tune_malloc():
@@ -159,13 +164,13 @@ def span_space(img, level):
     return {"first_update_ms": first, "query_ms": min(queries), "triangles": triangles}
 
 
-def isoserve_bench(path, level, tolerances, threads, resample=None, distances=False, builds=1):
+def isoserve_bench(path, level, tolerances, threads, resample=None, distances=False, builds=1, coarsen="faster"):
     """`isoserve bench` on the preloaded hierarchy; tolerances as its --tolerances reads them;
     the build timed 1 + `builds` times."""
     with tempfile.NamedTemporaryFile(suffix=".json") as out:
         args = [BIN, "bench", path, "--level", str(level), "--tolerances", tolerances,
                 "--threads", str(threads), "--repeat", str(REPEAT), "--no-baselines", "--json", out.name,
-                "--build-repeat", str(builds)]
+                "--build-repeat", str(builds), "--coarsen", coarsen]
         if resample:
             args += ["--resample", resample]
         if distances:
@@ -182,20 +187,22 @@ def run_case(path, level, label):
             "voxels": int(array.size), "volume_bytes": int(array.nbytes), "threads": {}}
     for n in THREADS:
         fe_ms, fe_tri = flying_edges(img, level, n)
-        # One thread: the ladder with its distances; two: the exact path only.
-        iso = isoserve_bench(path, level, LADDER if n == 1 else "0", n, distances=n == 1, builds=3 if n == 1 else 0)
+        # The ladder as extraction answers it, then with every coarse unit (distances on one
+        # thread: the meshes do not depend on the threads).
+        iso = isoserve_bench(path, level, LADDER, n, builds=3 if n == 1 else 0)
         fe_again, _ = flying_edges(img, level, n)  # alternate, keep the best of both
+        every = isoserve_bench(path, level, LADDER, n, distances=n == 1, builds=0, coarsen="all")
         fe_ms = min(fe_ms, fe_again)
-        for row in iso["rows"]:
+        for row in iso["rows"] + every["rows"]:
             row["flying_edges_over_isoserve"] = fe_ms / row["extract_ms_with_minmax"]
         case["threads"][n] = {"flying_edges_ms": fe_ms, "flying_edges_triangles": fe_tri,
-                              "build_ms": iso["build_ms"], "rows": iso["rows"]}
+                              "build_ms": iso["build_ms"], "rows": iso["rows"], "rows_all": every["rows"]}
         if n == 1:
             for key in ("hierarchy_bytes", "hierarchy_percent", "build_ms", "build_s_per_1e7_voxels",
                         "build_cpu_ms", "build_cpu_s_per_1e7_voxels",
                         "value_range", "voxel_mm", "preview_tolerance"):
                 case[key] = iso[key]
-    case["ladder"] = case["threads"][1]["rows"]
+    case["ladder"] = case["threads"][1]["rows_all"]
     case["span_space"] = span_space(img, level)
     # Ties: integer levels on integer data; at level + 0.5 both must give the same count.
     fe_half, fe_half_tri = flying_edges(img, level + 0.5, 1)
@@ -241,7 +248,7 @@ def scaling():
         points = []
         for f in factors:
             size = "x".join(str(max(2, round(d * f))) for d in dims)
-            iso = isoserve_bench(path, level, "0,50", 1, resample=size, builds=0)
+            iso = isoserve_bench(path, level, "0,50", 1, resample=size, builds=0, coarsen="all")
             voxels = int(np.prod([int(v) for v in size.split("x")]))
             points.append({"size": size, "voxels": voxels,
                            "tolerance_0": {k: iso["rows"][0][k] for k in ("extract_ms_with_minmax", "cells_visited", "polygons")},
@@ -323,6 +330,28 @@ def print_build(cases):
               f"{c['hierarchy_percent']:>6.1f} {mark(c['hierarchy_percent'] <= TARGET_HIERARCHY):>6}")
 
 
+def rung_name(case, row):
+    if row["tolerance"] == case["preview_tolerance"] and row["tolerance"] > 0:
+        return "prev."
+    return f"{100 * (row['share_of_range'] or 0):.0f}%"
+
+
+def print_speed(cases):
+    print(f"{'case':18} {'range':>6} | {'coarse %':>8} {'exact/t 1t':>10} {'2t':>6} {'target':>6} | "
+          f"{'coarse %':>8} {'tri %':>6} {'exact/t 1t':>10} {'2t':>6}")
+    for c in cases:
+        one, two = c["threads"][1], c["threads"][2]
+        for k, r in enumerate(one["rows"]):
+            if r["tolerance"] == 0:
+                continue
+            a1, f2, a2 = one["rows_all"][k], two["rows"][k], two["rows_all"][k]
+            ok = min(r["exact_over_tolerance_time"], f2["exact_over_tolerance_time"]) >= TARGET_RUNG_SPEED
+            print(f"{c['case']:18} {rung_name(c, r):>6} | {100 * r['coarse_share']:>8.1f} "
+                  f"{r['exact_over_tolerance_time']:>10.2f} {f2['exact_over_tolerance_time']:>6.2f} {mark(ok):>6} | "
+                  f"{100 * a1['coarse_share']:>8.1f} {100 * (a1['share_of_exact_triangles'] or 0):>6.1f} "
+                  f"{a1['exact_over_tolerance_time']:>10.2f} {a2['exact_over_tolerance_time']:>6.2f}")
+
+
 def print_ladder(cases):
     print(f"{'case':18} {'tol':>8} {'range':>6} {'tri':>8} {'tri %':>6} {'ms 1t':>7} {'exact/t':>7} "
           f"{'FE/t':>6} {'mean mm':>8} {'p99 mm':>7} {'max mm':>7} {'mean vx':>8} {'p99 vx':>7} {'max vx':>7}")
@@ -330,8 +359,7 @@ def print_ladder(cases):
         for r in c["ladder"]:
             dm = r["distance_mm"] or {"mean": 0, "p99": 0, "max": 0}
             dv = r["distance_voxels"] or {"mean": 0, "p99": 0, "max": 0}
-            share = "prev." if r["tolerance"] == c["preview_tolerance"] and r["tolerance"] > 0 else \
-                f"{100 * (r['share_of_range'] or 0):.0f}%"
+            share = rung_name(c, r)
             print(f"{c['case']:18} {r['tolerance']:>8.4g} {share:>6} {r['polygons']:>8} "
                   f"{100 * (r['share_of_exact_triangles'] or 0):>6.1f} {r['extract_ms_with_minmax']:>7.1f} "
                   f"{r['exact_over_tolerance_time']:>7.2f} {r['flying_edges_over_isoserve']:>6.2f} "
@@ -368,7 +396,11 @@ def main():
     print(f"\nthe hierarchy: build on one thread (target <= {TARGET_BUILD_S:g} s per 10^7 voxels), "
           f"size (target <= {TARGET_HIERARCHY:g}% of the volume)")
     print_build(cases)
-    print("\nthe ladder on one thread: distances to the exact surface, both ways (mm, and voxels of the smallest spacing)")
+    print("\nthe ladder against the exact path's time: as extraction answers (--coarsen faster; target every rung "
+          f">= {TARGET_RUNG_SPEED:g}x on 1 and 2 threads) | every coarse unit (--coarsen all, the server's)")
+    print_speed(cases)
+    print("\nthe ladder with every coarse unit, one thread: distances to the exact surface, both ways (mm, and voxels "
+          "of the smallest spacing)")
     print_ladder(cases)
     scale = scaling() if shared else []
     print()

@@ -31,7 +31,7 @@ RESULTS = Results("ladder" + os.environ.get("ISO_SAN_SUFFIX", ""))
 N, R0, LEVEL, SPACING = 48, 23.5, 8.0, 0.5
 RADIUS = R0 - LEVEL
 ROW_FIELDS = ("tolerance", "polygons", "extract_ms_with_minmax", "share_of_range", "share_of_exact_triangles",
-              "exact_over_tolerance_time", "error_bound", "fit_error", "distance_mm", "distance_voxels")
+              "exact_over_tolerance_time", "error_bound", "fit_error", "distance_mm", "distance_voxels", "coarse_share")
 
 
 def write_sphere(directory):
@@ -67,6 +67,7 @@ def check_rows(doc):
         assert not missing, f"row {r['tolerance']} lacks {missing}"
         assert close(r["share_of_exact_triangles"], r["polygons"] / exact["polygons"]), r
         assert close(r["exact_over_tolerance_time"], exact["extract_ms_with_minmax"] / r["extract_ms_with_minmax"]), r
+        assert 0 <= r["coarse_share"] <= 1 and (r["coarse_share"] > 0 or r["polygons"] == exact["polygons"]), r
     for r in rows[1:]:
         mm, vx = r["distance_mm"], r["distance_voxels"]
         e = r["error_bound"]
@@ -83,7 +84,7 @@ def check_rows(doc):
 def test_bench_distances(header, tmp):
     out = os.path.join(tmp, "bench.json")
     subprocess.run([BIN, "bench", header, "--level", str(LEVEL), "--tolerances", "0,2%,5%,10%", "--threads", "1",
-                    "--repeat", "2", "--no-baselines", "--distances", "--json", out],
+                    "--repeat", "2", "--no-baselines", "--distances", "--coarsen", "all", "--json", out],
                    check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     doc = json.load(open(out))
     assert doc["voxels"] == N ** 3 and doc["voxel_mm"] == SPACING, doc
@@ -131,6 +132,15 @@ def test_peer_ladder(header, tmp):
     for r in ladder[1:5]:  # the rungs up to 20%: distances measured; below the bound up to 10%
         assert r["distance_voxels"] is not None and r["distance_mm"] is not None, r
     assert case["threads"]["1"]["flying_edges_triangles"] > 0
+    # As extraction answers: a rung coarsens nothing (the exact surface) or as every coarse
+    # unit would; both on 1 and 2 threads, the same meshes.
+    for n in ("1", "2"):
+        t = case["threads"][n]
+        assert len(t["rows"]) == len(t["rows_all"]) == 6, t
+        for fast, every in zip(t["rows"], t["rows_all"]):
+            assert fast["coarse_share"] == 0 and fast["polygons"] == t["rows"][0]["polygons"] or \
+                fast["coarse_share"] == every["coarse_share"] and fast["polygons"] == every["polygons"], (fast, every)
+        assert [r["polygons"] for r in t["rows_all"]] == [r["polygons"] for r in ladder], n
 
 
 def main():

@@ -103,11 +103,12 @@ check_refusal no_simplify_alone "--no-simplify goes with --budget" $bin extract 
 # --budget: on a sphere the faithful ladder (up to range / 32) stays above 300 triangles, so
 # 300 are met by the exact mesh's simplification chain, its finest level within the budget
 # (10172 >> 6 = 158 at most, 316 > 300 above it), measured; --no-simplify climbs the whole
-# ladder instead, whose coarse rungs (bricks at their coarsest levels) meet it.
+# ladder instead, whose coarse rungs (bricks at their coarsest levels, 320 triangles: the
+# border's clipped bricks cannot take stride 8) meet 330.
 if $bin extract field:sphere:40 --level 3 --budget 300 --normals none --json > "$tmp/bs.json" &&
-   $bin extract field:sphere:40 --level 3 --budget 300 --no-simplify --normals none --json > "$tmp/bl.json" &&
+   $bin extract field:sphere:40 --level 3 --budget 330 --no-simplify --normals none --json > "$tmp/bl.json" &&
    [ "$(json "$tmp/bs.json" "(d['triangles'], d['tolerance'], d['budget']['fits'], d['chain']['level'], d['chain']['built'][5]['triangles'] > 300, d['distance']['p99'] > 0, d['closed'])")" = "(158, 0.0, True, 6, True, True, True)" ] &&
-   [ "$(json "$tmp/bl.json" "(d['triangles'] <= 300, d['tolerance'] > 1.03, d['budget']['fits'], 'simplify' in d)")" = "(True, True, True, False)" ]; then
+   [ "$(json "$tmp/bl.json" "(d['triangles'] <= 330, d['tolerance'] > 1.03, d['budget']['fits'], 'simplify' in d)")" = "(True, True, True, False)" ]; then
     pass budget_simplifies
 else
     fail budget_simplifies "$(cat "$tmp/bs.json" "$tmp/bl.json")"
@@ -133,6 +134,20 @@ if $bin bench field:ml:40 --level 0.5 --tolerances 0,0.01,0.1 --repeat 1 --json 
    [ "$(json "$tmp/b.json" "d['rows'][0]['polygons'] == d['marching_cubes']['polygons']")" = True ]; then
     pass bench_table
 else fail bench_table "$(cat "$tmp/b.txt")"; fi
+
+# A tolerance coarsens every unit it may (the fewest triangles) unless --coarsen faster, which
+# keeps the exact surface where coarse units would not pay (here: too few stride-8 bricks).
+if $bin extract field:ml:40 --level 0.5 --tolerance 0.3 --json > "$tmp/ca.json" &&
+   $bin extract field:ml:40 --level 0.5 --tolerance 0.3 --coarsen faster --json > "$tmp/cf.json" &&
+   $bin extract field:ml:40 --level 0.5 --json > "$tmp/c0.json" &&
+   [ "$(json "$tmp/ca.json" "(d['coarse_share'] > 0.5, d['triangles'] * 2 < $(json "$tmp/c0.json" "d['triangles']"), d['error_bound'] <= 0.3, d['open_edges'], d['nonmanifold_edges'])")" = "(True, True, True, 0, 0)" ] &&
+   [ "$(json "$tmp/cf.json" "(d['coarse_share'], d['triangles'], d['error_bound'])")" = "(0.0, $(json "$tmp/c0.json" "d['triangles']"), 0.0)" ]; then
+    pass coarsen_choice
+else
+    fail coarsen_choice "$(cat "$tmp/ca.json" "$tmp/cf.json")"
+fi
+check_refusal coarsen_unknown "coarsen 'sometimes': expected faster or all" \
+    $bin extract field:ml:40 --level 0.5 --coarsen sometimes
 
 # The paper's data set: tolerance 0 through the hierarchy is the full-scan surface.
 if [ -d "$shared" ]; then
