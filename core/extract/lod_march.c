@@ -12,10 +12,9 @@
  * popcount.
  *
  * PASS 1 (select): the bricks whose [min, max] holds the level, in grid order.
- * PASS 2 (balance): a block that shares a crossed face or edge with a block more than one
- *   stride finer is refined (the caller chooses the stride), until none does; a stride-8
- *   brick refined leaves stride 8 whole. Then every transition cell's points are at most
- *   one stride finer than the cell. The shared sets are read from the volume.
+ * PASS 2 (balance, lod_balance.c): a block that shares a crossed face or edge with a
+ *   block more than one stride finer is refined, until none does. Then every transition
+ *   cell's points are at most one stride finer than the cell.
  * PASS 3 (cells, threads): per brick, the rows its units read classified (a stride-1
  *   block's every row, a coarse unit's every stride or, with finer neighbours, every half
  *   stride); the stride-1 blocks' cells by rows as march.c; a coarse unit's cells one by
@@ -29,112 +28,20 @@
  *   error, the ids of the crossings on its upper faces from their owners, and its
  *   triangles in the order PASS 3 counted them.
  *
- * Layout: a brick has at most 9 x 9 x 9 samples; bit x of row z * 9 + y is sample (x, y,
- * z), brick-local. Its blocks around: near[z][y][x], index 0 the block before its first
- * along the axis, 1 and 2 its own, 3 the next brick's first. */
+ * The layout of a brick's samples, rows and blocks around is lod_job.h's. */
 #include "lod_march.h"
 
 #include <assert.h>
 #include <stddef.h>
 #include <math.h>
-#include <pthread.h>
-#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "march.h"
+#include "lod_job.h"
 #include "mc.h"
-#include "transition.h"
 
-#define S ISO_BRICK_SAMPLES
-#define ROWS (S * S)
-#define LEVELS (ISO_TREE_LEVELS + 1)
-#define HALF ISO_TREE_BLOCK  /* a block's side in cells */
-#define NEAR 4
-#define NO_BLOCK 7           /* the stride of a block past the grid: above every real one */
-#define MAX_THREADS ISO_PARALLEL_MAX_THREADS
-#define CHUNK 32
-#define MAX_COARSE_CELLS 64
-#define CORNER_POINTS (1u << 0 | 1u << 2 | 1u << 6 | 1u << 8 | 1u << 18 | 1u << 20 | 1u << 24 | 1u << 26)
-
-/* A brick's lattice rows of every level, one after the other: level l's rows are those
- * whose y and z are multiples of 2^l, (9 >> l... 9, 5, 3, 2 per axis), 119 in all. Edges of
- * level l lie in its rows. */
-#define LEVEL_ROWS 119
-static const uint8_t level_base[LEVELS] = {0, 81, 106, 115}, level_width[LEVELS] = {9, 5, 3, 2};
-
-static inline int level_row(int l, int y, int z)
-{
-    return level_base[l] + (z >> l) * level_width[l] + (y >> l);
-}
-
-/* The level, y and z of lattice row r. */
-static inline void row_of(int r, int *l, int *y, int *z)
-{
-    int k = r < 81 ? 0 : r < 106 ? 1 : r < 115 ? 2 : 3, i = r - level_base[k];
-    *l = k;
-    *y = i % level_width[k] << k;
-    *z = i / level_width[k] << k;
-}
-
-/* A coarse cell with triangles: its corner (brick-local), stride level, and its case:
- * marching cubes' (tc NULL) or a transition cell's. */
-typedef struct cell_record {
-    uint8_t c[3], l, mc;
-    const iso_transition_case *tc;
-} cell_record;
-
-typedef struct work_brick {
-    uint32_t brick[3];
-    uint8_t n[3];            /* samples per axis, 2..9 */
-    uint8_t owned[3];        /* samples 0..owned-1 per axis are this brick's */
-    uint8_t finest;          /* log2 of the finest stride around: rows classified every 2^finest */
-    uint8_t records_thread;  /* its coarse cells with triangles: that thread's records */
-    uint16_t cell_count;     /* from records_first on */
-    uint32_t records_first;
-    uint8_t coarse;          /* 1 if the level crosses a coarse unit of its own */
-    uint8_t uniform;         /* every block around it has one stride */
-    uint32_t vertices, triangles;
-    size_t first_vertex, first_triangle;
-    uint8_t near[NEAR][NEAR][NEAR];
-    uint16_t inside[ROWS];
-    uint16_t cross[3][LEVEL_ROWS];      /* owned crossings used, per axis and lattice row */
-    uint16_t foreign[3][LEVEL_ROWS];    /* crossings used on its upper faces, owned by neighbours */
-    uint64_t marked_rows[2], foreign_rows[2]; /* lattice rows with some */
-    uint16_t row_base[LEVEL_ROWS];      /* owned crossings numbered before lattice row r */
-    uint8_t marching[ROWS];             /* bit x: stride-1 cell (x, y, z) to march */
-    uint64_t crossing_rows[2], marching_rows[2];
-} work_brick;
-
-/* One thread's coarse cell records, for the bricks it counted. */
-typedef struct cell_records {
-    cell_record *at;
-    size_t count, capacity;
-} cell_records;
-
-typedef struct lod_job {
-    const iso_lod_march_params *params;
-    const iso_volume *vol;
-    const iso_bricks *bricks;
-    double level;
-    iso_march_threshold threshold;
-    uint8_t *shift;
-    uint32_t blocks[3];
-    work_brick *work;
-    size_t work_count;
-    int32_t *slot;            /* per brick of the grid: its index in work, or -1 */
-    uint8_t *brick_lo, *brick_hi; /* per brick of the grid: its blocks' finest and coarsest strides */
-    iso_mesh *mesh;
-    double error[MAX_THREADS];
-    size_t cells[MAX_THREADS], transitions[MAX_THREADS];
-    cell_records records[MAX_THREADS];
-    atomic_size_t next;
-    /* Blocks (with their stride then) a cell of had no kept triangulation; under the lock. */
-    pthread_mutex_t lock;
-    size_t *infeasible;
-    size_t infeasible_count, infeasible_capacity;
-    int failed;               /* ISO_E_NOMEM recording one */
-} lod_job;
+#define CHUNK 32             /* bricks a thread takes at a time */
+#define CORNER_POINTS (1u << 0 | 1u << 2 | 1u << 6 | 1u << 8 | 1u << 18 | 1u << 20 | 1u << 24 | 1u << 26)  /* a cell's 8 corners among its 27 points */
 
 /* ---- tables, made once ---- */
 
@@ -235,18 +142,13 @@ static pthread_once_t tables_once = PTHREAD_ONCE_INIT;
 
 /* ---- blocks and strides ---- */
 
-static size_t block_index(const lod_job *job, uint32_t x, uint32_t y, uint32_t z)
-{
-    return ((size_t)z * job->blocks[1] + y) * job->blocks[0] + x;
-}
 
 /* The strides of the blocks around brick wb (near[][][]), and the finest of those that
  * share more than a corner with it. */
-static unsigned bricks_around_lo(const lod_job *job, const uint32_t b[3], unsigned *hi_around);
 
 static void gather_near(const lod_job *job, work_brick *wb)
 {
-    unsigned hi, lo = bricks_around_lo(job, wb->brick, &hi);
+    unsigned hi, lo = iso_lod_bricks_around(job, wb->brick, &hi);
     if (lo == hi) { /* one stride all round */
         memset(wb->near, (int)lo, sizeof wb->near);
         wb->finest = (uint8_t)lo;
@@ -875,260 +777,6 @@ static void number_share(void *context, int t, int threads)
         }
 }
 
-/* ---- PASS 2: balance ---- */
-
-/* 1 if the samples of the set block q shares with its neighbour at q + delta lie on both
- * sides of the level (read from the volume: bricks are classified after the plan). */
-#define DEFINE_SET_CROSSES(NAME, T, ABOVE)                                                     \
-    static int NAME(const lod_job *job, const size_t lo[3], const size_t hi[3])                \
-    {                                                                                          \
-        const iso_volume *vol = job->vol;                                                      \
-        const iso_march_threshold *th = &job->threshold;                                       \
-        const T *data = (const T *)vol->data;                                                  \
-        int above = 0, below = 0;                                                              \
-        for (size_t z = lo[2]; z <= hi[2]; z++)                                                \
-            for (size_t y = lo[1]; y <= hi[1]; y++) {                                          \
-                const T *p = data + (z * vol->dims[1] + y) * vol->dims[0];                     \
-                for (size_t x = lo[0]; x <= hi[0]; x++) {                                      \
-                    int in = ABOVE;                                                            \
-                    above |= in;                                                               \
-                    below |= !in;                                                              \
-                }                                                                              \
-                if (above && below)                                                            \
-                    return 1;                                                                  \
-            }                                                                                  \
-        return 0;                                                                              \
-    }
-DEFINE_SET_CROSSES(set_crosses_u8, uint8_t, p[x] > th->floor)
-DEFINE_SET_CROSSES(set_crosses_i8, int8_t, p[x] > th->floor)
-DEFINE_SET_CROSSES(set_crosses_u16, uint16_t, p[x] > th->floor)
-DEFINE_SET_CROSSES(set_crosses_i16, int16_t, p[x] > th->floor)
-DEFINE_SET_CROSSES(set_crosses_u32, uint32_t, p[x] > th->floor)
-DEFINE_SET_CROSSES(set_crosses_i32, int32_t, p[x] > th->floor)
-DEFINE_SET_CROSSES(set_crosses_f32, float, (double)p[x] > th->level)
-DEFINE_SET_CROSSES(set_crosses_f64, double, p[x] > th->level)
-
-static int shared_set_crosses(const lod_job *job, const uint32_t q[3], const int8_t delta[3])
-{
-    const iso_volume *vol = job->vol;
-    if (job->threshold.reach != ISO_MARCH_SOME_ABOVE)
-        return 0; /* every sample on one side */
-    size_t lo[3], hi[3];
-    for (int d = 0; d < 3; d++) {
-        size_t first = (size_t)q[d] * HALF, last = first + HALF < vol->dims[d] - 1 ? first + HALF : vol->dims[d] - 1;
-        lo[d] = delta[d] > 0 ? last : first;
-        hi[d] = delta[d] < 0 ? first : last;
-    }
-    switch (vol->type) {
-    case ISO_U8: return set_crosses_u8(job, lo, hi);
-    case ISO_I8: return set_crosses_i8(job, lo, hi);
-    case ISO_U16: return set_crosses_u16(job, lo, hi);
-    case ISO_I16: return set_crosses_i16(job, lo, hi);
-    case ISO_U32: return set_crosses_u32(job, lo, hi);
-    case ISO_I32: return set_crosses_i32(job, lo, hi);
-    case ISO_F32: return set_crosses_f32(job, lo, hi);
-    case ISO_F64: return set_crosses_f64(job, lo, hi);
-    }
-    return 0;
-}
-
-/* The finest and coarsest stride of every selected brick's blocks (the others keep 3:
- * PASS 2 never refines a brick the level does not cross). */
-static void brick_ranges(lod_job *job)
-{
-    for (size_t i = 0; i < job->work_count; i++) {
-        const work_brick *wb = &job->work[i];
-        unsigned lo = NO_BLOCK, hi = 0;
-        for (int k = 0; k < 8; k++) {
-            uint32_t at[3] = {2 * wb->brick[0] + (uint32_t)(k & 1), 2 * wb->brick[1] + (uint32_t)(k >> 1 & 1),
-                              2 * wb->brick[2] + (uint32_t)(k >> 2)};
-            if (at[0] >= job->blocks[0] || at[1] >= job->blocks[1] || at[2] >= job->blocks[2])
-                continue;
-            unsigned s = job->shift[block_index(job, at[0], at[1], at[2])];
-            lo = s < lo ? s : lo;
-            hi = s > hi ? s : hi;
-        }
-        const iso_bricks *g = job->bricks;
-        size_t at = ((size_t)wb->brick[2] * g->count[1] + wb->brick[1]) * g->count[0] + wb->brick[0];
-        job->brick_lo[at] = (uint8_t)lo;
-        job->brick_hi[at] = (uint8_t)hi;
-    }
-}
-
-/* The finest stride of the blocks of brick b and its 26 neighbours (from brick_lo). */
-static unsigned bricks_around_lo(const lod_job *job, const uint32_t b[3], unsigned *hi_around)
-{
-    const iso_bricks *g = job->bricks;
-    unsigned lo = NO_BLOCK, hi = 0;
-    for (int dz = -1; dz <= 1; dz++)
-        for (int dy = -1; dy <= 1; dy++)
-            for (int dx = -1; dx <= 1; dx++) {
-                uint32_t n[3] = {b[0] + (uint32_t)dx, b[1] + (uint32_t)dy, b[2] + (uint32_t)dz};
-                if (n[0] >= g->count[0] || n[1] >= g->count[1] || n[2] >= g->count[2])
-                    continue;
-                size_t at = ((size_t)n[2] * g->count[1] + n[1]) * g->count[0] + n[0];
-                lo = job->brick_lo[at] < lo ? job->brick_lo[at] : lo;
-                hi = job->brick_hi[at] > hi ? job->brick_hi[at] : hi;
-            }
-    if (hi_around)
-        *hi_around = hi;
-    return lo;
-}
-
-/* Blocks to check, each listed once until it is taken. */
-typedef struct balance_queue {
-    size_t *items;
-    size_t count;
-    uint8_t *queued;
-} balance_queue;
-
-static void push(balance_queue *q, size_t block)
-{
-    if (q->queued[block])
-        return;
-    q->queued[block] = 1;
-    q->items[q->count++] = block;
-}
-
-static void block_coords(const lod_job *job, size_t b, uint32_t p[3])
-{
-    p[0] = (uint32_t)(b % job->blocks[0]);
-    p[1] = (uint32_t)(b / job->blocks[0] % job->blocks[1]);
-    p[2] = (uint32_t)(b / job->blocks[0] / job->blocks[1]);
-}
-
-/* The 18 offsets of a block's face and edge neighbours. */
-static const int8_t neighbour[18][3] = {
-    {-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1},
-    {-1, -1, 0}, {1, -1, 0}, {-1, 1, 0}, {1, 1, 0}, {-1, 0, -1}, {1, 0, -1},
-    {-1, 0, 1}, {1, 0, 1}, {0, -1, -1}, {0, 1, -1}, {0, -1, 1}, {0, 1, 1}};
-
-/* Pushes block b's neighbours whose stride may now be too coarse for it. */
-static void push_neighbours(const lod_job *job, balance_queue *q, size_t b)
-{
-    uint32_t p[3];
-    block_coords(job, b, p);
-    for (int k = 0; k < 18; k++) {
-        uint32_t n[3] = {p[0] + (uint32_t)neighbour[k][0], p[1] + (uint32_t)neighbour[k][1],
-                         p[2] + (uint32_t)neighbour[k][2]};
-        if (n[0] < job->blocks[0] && n[1] < job->blocks[1] && n[2] < job->blocks[2]) {
-            size_t nb = block_index(job, n[0], n[1], n[2]);
-            if (job->shift[nb] > job->shift[b] + 1)
-                push(q, nb);
-        }
-    }
-}
-
-/* Sets block b's stride to at most `most`; a stride-8 brick gives up stride 8 whole (its
- * other blocks at most 4). Pushes what that may have unbalanced; returns the blocks
- * changed. */
-static size_t refine(lod_job *job, balance_queue *q, size_t b, int most)
-{
-    const iso_lod_march_params *p = job->params;
-    size_t changed = 0;
-    if (job->shift[b] == ISO_TREE_LEVELS) {
-        uint32_t at[3];
-        block_coords(job, b, at);
-        for (int k = 0; k < 8; k++) {
-            uint32_t s[3] = {at[0] / 2 * 2 + (uint32_t)(k & 1), at[1] / 2 * 2 + (uint32_t)(k >> 1 & 1),
-                             at[2] / 2 * 2 + (uint32_t)(k >> 2)};
-            if (s[0] >= job->blocks[0] || s[1] >= job->blocks[1] || s[2] >= job->blocks[2])
-                continue;
-            size_t sb = block_index(job, s[0], s[1], s[2]);
-            if (sb == b)
-                continue;
-            job->shift[sb] = (uint8_t)p->refine(p->refine_context, sb, ISO_TREE_BLOCK_LEVELS);
-            push(q, sb);
-            push_neighbours(job, q, sb);
-            changed++;
-        }
-    }
-    job->shift[b] = (uint8_t)p->refine(p->refine_context, b, most);
-    push_neighbours(job, q, b);
-    return changed + 1;
-}
-
-/* Checks block b against its face and edge neighbours; refines it where one is more than
- * one stride finer across a crossed set. */
-static size_t balance_block(lod_job *job, balance_queue *q, size_t b)
-{
-    int s = job->shift[b];
-    if (s < 2)
-        return 0; /* no stride is more than one below it */
-    uint32_t p[3];
-    block_coords(job, b, p);
-    int inner = p[0] > 0 && p[1] > 0 && p[2] > 0 && p[0] + 1 < job->blocks[0] && p[1] + 1 < job->blocks[1] &&
-                p[2] + 1 < job->blocks[2];
-    const ptrdiff_t row = (ptrdiff_t)job->blocks[0], plane = row * (ptrdiff_t)job->blocks[1];
-    int most = NO_BLOCK;
-    for (int k = 0; k < 18; k++) {
-        const int8_t *o = neighbour[k];
-        if (!inner) {
-            uint32_t n[3] = {p[0] + (uint32_t)o[0], p[1] + (uint32_t)o[1], p[2] + (uint32_t)o[2]};
-            if (n[0] >= job->blocks[0] || n[1] >= job->blocks[1] || n[2] >= job->blocks[2])
-                continue;
-        }
-        int limit = job->shift[(ptrdiff_t)b + o[0] + o[1] * row + o[2] * plane] + 1;
-        if (s <= limit || limit >= most)
-            continue;
-        if (shared_set_crosses(job, p, o))
-            most = limit;
-    }
-    return most < s ? refine(job, q, b, most) : 0;
-}
-
-/* PASS 2: the blocks of the selected bricks at stride 4 or 8 (a block of stride 1 or 2
- * has no neighbour two strides finer), then what refining them touches; or, given
- * `start`, those blocks refined one stride (a cell without a triangulation) first. */
-static int balance(lod_job *job, const size_t *start, size_t start_count, size_t *refined)
-{
-    size_t total = (size_t)job->blocks[0] * job->blocks[1] * job->blocks[2];
-    balance_queue q = {0};
-    q.items = malloc((total ? total : 1) * sizeof *q.items);
-    q.queued = calloc(total ? total : 1, 1);
-    if (!q.items || !q.queued) {
-        free(q.items);
-        free(q.queued);
-        return ISO_E_NOMEM;
-    }
-    if (start) {
-        /* A block is listed once per cell without a triangulation, with its stride then:
-         * refined once. */
-        for (size_t i = 0; i < start_count; i++) {
-            size_t b = start[i] / LEVELS;
-            int was = (int)(start[i] % LEVELS);
-            if (job->shift[b] == was && was)
-                *refined += refine(job, &q, b, was - 1);
-        }
-    } else {
-        for (size_t i = 0; i < job->work_count; i++) {
-            const work_brick *wb = &job->work[i];
-            const iso_bricks *g = job->bricks;
-            size_t here = ((size_t)wb->brick[2] * g->count[1] + wb->brick[1]) * g->count[0] + wb->brick[0];
-            unsigned lo = bricks_around_lo(job, wb->brick, NULL);
-            if (job->brick_hi[here] <= lo + 1)
-                continue; /* no block of it has a neighbour two strides finer */
-            for (int k = 0; k < 8; k++) {
-                uint32_t at[3] = {2 * wb->brick[0] + (uint32_t)(k & 1), 2 * wb->brick[1] + (uint32_t)(k >> 1 & 1),
-                                  2 * wb->brick[2] + (uint32_t)(k >> 2)};
-                if (at[0] >= job->blocks[0] || at[1] >= job->blocks[1] || at[2] >= job->blocks[2])
-                    continue;
-                size_t b = block_index(job, at[0], at[1], at[2]);
-                if (job->shift[b] >= lo + 2)
-                    push(&q, b);
-            }
-        }
-    }
-    while (q.count) {
-        size_t b = q.items[--q.count];
-        q.queued[b] = 0;
-        *refined += balance_block(job, &q, b);
-    }
-    free(q.items);
-    free(q.queued);
-    return 0;
-}
-
 /* ---- PASS 5: generate ---- */
 
 /* Positions of the brick's owned crossings, in numbering order, and their ids; returns
@@ -1412,10 +1060,10 @@ static int run_passes(lod_job *job, iso_lod_march_stats *stats)
         return ISO_E_NOMEM;
     memset(job->brick_lo, ISO_TREE_LEVELS, total_bricks);
     memset(job->brick_hi, ISO_TREE_LEVELS, total_bricks);
-    brick_ranges(job);
-    rc = balance(job, NULL, 0, &stats->refined);
+    iso_lod_brick_ranges(job);
+    rc = iso_lod_balance(job, NULL, 0, &stats->refined);
     while (!rc) {
-        brick_ranges(job);
+        iso_lod_brick_ranges(job);
         job->infeasible_count = 0;
         memset(job->transitions, 0, sizeof job->transitions);
         memset(job->cells, 0, sizeof job->cells);
@@ -1424,7 +1072,7 @@ static int run_passes(lod_job *job, iso_lod_march_stats *stats)
             return ISO_E_NOMEM;
         if (!job->infeasible_count)
             break;
-        rc = balance(job, job->infeasible, job->infeasible_count, &stats->refined);
+        rc = iso_lod_balance(job, job->infeasible, job->infeasible_count, &stats->refined);
     }
     if (rc)
         return rc;
