@@ -4,8 +4,8 @@
  * With --distances, the tolerance ladder's geometric cost as well: each rung's symmetric
  * distance to the exact surface (mean, p99, max; iso_mesh_distance_compute) in mm and in
  * voxels of the smallest spacing, and its time against the exact path's.
- * Times are the best of --repeat runs (the build's of 1 + --build-repeat, wall and CPU
- * time): the machine is shared and noisy. A tolerance coarsens where it pays (extract.h),
+ * Times are the best of --repeat runs, the rows taking turns (the build's of 1 +
+ * --build-repeat, wall and CPU time): the machine is shared and noisy. A tolerance coarsens where it pays (extract.h),
  * or with --coarsen all everywhere it may; each row says how much it coarsened. */
 #include <jansson.h>
 #include <math.h>
@@ -133,18 +133,20 @@ static int best_build(const srv_subject *s, int threads, int repeat, double *bes
     return 0;
 }
 
-/* Row i's extraction, best of repeat, with and (baselines) without min/max pruning; with
- * exact (the tolerance-0 surface) also its distance to it. */
-static int measure_row(const srv_subject *s, double level, int threads, iso_coarsen coarsen, int repeat,
-                       int baselines, const iso_mesh *exact, bench_row *row)
+/* One more run of row i's extraction, with and (baselines) without min/max pruning, its
+ * best times kept; with exact (the tolerance-0 surface) also its distance to it. */
+static int measure_row(const srv_subject *s, double level, int threads, iso_coarsen coarsen, int baselines,
+                       const iso_mesh *exact, bench_row *row)
 {
     iso_mesh mesh;
     iso_mesh_init(&mesh);
     iso_error err;
-    int status = (baselines && run(s->tree, level, row->tolerance, 1, threads, coarsen, repeat, &mesh,
-                                   &row->unpruned, &row->best_unpruned_ms)) ||
-                 run(s->tree, level, row->tolerance, 0, threads, coarsen, repeat, &mesh, &row->pruned,
-                     &row->best_pruned_ms);
+    double unpruned = NAN, pruned = NAN;
+    int status = (baselines && run(s->tree, level, row->tolerance, 1, threads, coarsen, 1, &mesh, &row->unpruned,
+                                   &unpruned)) ||
+                 run(s->tree, level, row->tolerance, 0, threads, coarsen, 1, &mesh, &row->pruned, &pruned);
+    row->best_unpruned_ms = fmin(row->best_unpruned_ms, unpruned); /* fmin skips NAN */
+    row->best_pruned_ms = fmin(row->best_pruned_ms, pruned);
     if (status == 0 && exact && row->tolerance > 0) {
         /* The chain's sample spacing (mesh.h); all cores: the result does not depend on it. */
         double spacing = ISO_CHAIN_SPACING_VOXELS * iso_vol_min_spacing(s->vol);
@@ -390,10 +392,14 @@ static int srv_cmd_bench(int argc, char **argv)
                  (distances && run(s.tree, level, 0, 0, opt.threads, coarsen, 1, &exact, &exact_stats, &exact_best));
     for (size_t i = 0; status == 0 && i < count; i++) {
         rows[i].tolerance = tolerances[i];
-        rows[i].best_unpruned_ms = NAN;
-        status = measure_row(&s, level, opt.threads, coarsen, repeat, baselines, distances ? &exact : NULL,
-                             &rows[i]);
+        rows[i].best_unpruned_ms = rows[i].best_pruned_ms = NAN;
     }
+    /* The rows take turns, so that a change in the machine's load falls on all of them:
+     * their ratios are what the bench is read for. */
+    for (int r = 0; status == 0 && r < repeat; r++)
+        for (size_t i = 0; status == 0 && i < count; i++)
+            status = measure_row(&s, level, opt.threads, coarsen, baselines,
+                                 distances && r == repeat - 1 ? &exact : NULL, &rows[i]);
     if (status == 0)
         print_table(&s, level, &full, full_best, rows, count, build_ms, build_cpu_ms, distances);
     if (status == 0 && json_path)

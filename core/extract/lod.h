@@ -29,9 +29,10 @@
 #include "extract.h"
 
 /* The share of the crossed blocks that must lie in stride-8 bricks for the coarse kernel
- * to run (iso_coarsen). On the bench cases the coarse kernel takes 0.3-0.75x the exact
- * kernel's instructions where 85% or more do, and 1.4-3.9x where under 53% do. */
-#define ISO_LOD_PAYS 0.8
+ * to run (iso_coarsen). Measured with callgrind on the bench cases and the bunny
+ * (docs/performance.md, "Tolerance ladder"): the coarse kernel takes 0.3-0.79x the exact
+ * kernel's instructions where 74% or more do, and 1.4-3.9x where 53% or fewer do. */
+#define ISO_LOD_PAYS 0.7
 
 /* Replaces mesh with the surface at params->level within params->tolerance (> 0), in index
  * space, fills stats' counts and error_bound (not triangles, vertices or time). With
