@@ -64,7 +64,7 @@ static int emit_caps(const iso_volume *vol, double level, iso_mesh *soup)
 /* PASS 3. With an identity direction iso_vol_index_to_world is origin + index * spacing
  * per axis, to the same bits (its other terms add +0 to a sum that is not -0), as march.c
  * places its vertices: one multiply-add per coordinate, over the whole array. */
-static void to_world(const iso_volume *vol, iso_mesh *mesh)
+void iso_extract_to_world(const iso_volume *vol, iso_mesh *mesh)
 {
     int aligned = 1;
     for (int r = 0; r < 3; r++)
@@ -113,7 +113,7 @@ static int finish(const iso_volume *vol, iso_space space, int weld, iso_mesh *me
     if (weld && iso_mesh_weld(mesh))
         return iso_error_set(err, ISO_E_NOMEM, "out of memory welding the mesh");
     if (space == ISO_SPACE_WORLD)
-        to_world(vol, mesh);
+        iso_extract_to_world(vol, mesh);
     stats->triangles = mesh->triangle_count;
     stats->vertices = mesh->vertex_count;
     stats->extract_ms = iso_clock_ms() - start;

@@ -72,6 +72,10 @@ typedef struct iso_extract_stats {
 int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
                 iso_extract_stats *stats, iso_error *err);
 
+/* Moves mesh's index-space positions to world millimetres, bit for bit as the exact
+ * kernel places its own (an identity direction: origin + index * spacing). O(V). */
+void iso_extract_to_world(const iso_volume *vol, iso_mesh *mesh);
+
 /* The baseline: marching cubes over every cell, no hierarchy. Same table, welding and
  * output space as iso_extract at tolerance 0. */
 int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,

@@ -87,6 +87,12 @@ typedef struct march_job {
     size_t active_count;
     int32_t *slot;     /* per brick of the grid: its index in active, or -1 */
     const uint8_t *marked; /* iso_march_selected's bricks to march, or NULL: min/max */
+    /* iso_march_label: inside is "sample == label" (the indicator of one label), every
+     * crossing at its edge's midpoint; the bricks are listed (grid indices, ascending)
+     * and looked up there, so no per-grid slot array is made. */
+    int indicator;
+    const uint32_t *listed;
+    size_t listed_count;
     iso_mesh *mesh;
     int world;         /* positions in world mm rather than index space */
     int axis_aligned;  /* the volume's direction is the identity */
@@ -127,6 +133,42 @@ static void make_tables(void)
 /* ---- one brick's inside bits, per voxel type ---- */
 
 
+static void type_range(iso_voxel_type type, int64_t *lowest, int64_t *highest)
+{
+    switch (type) {
+    case ISO_U8: *lowest = 0, *highest = UINT8_MAX; break;
+    case ISO_I8: *lowest = INT8_MIN, *highest = INT8_MAX; break;
+    case ISO_U16: *lowest = 0, *highest = UINT16_MAX; break;
+    case ISO_I16: *lowest = INT16_MIN, *highest = INT16_MAX; break;
+    case ISO_U32: *lowest = 0, *highest = UINT32_MAX; break;
+    default: *lowest = INT32_MIN, *highest = INT32_MAX; break;
+    }
+}
+
+/* The indicator's threshold: th->floor is the label, and for 8- and 16-bit types every
+ * lane of th->lanes (compared for equality, so no bias). A label the type cannot hold is
+ * in no sample. */
+static void make_label(iso_voxel_type type, int64_t label, threshold *th)
+{
+    memset(th, 0, sizeof *th);
+    int64_t lowest, highest;
+    type_range(type, &lowest, &highest);
+    th->reach = SOME_ABOVE;
+    if (iso_vol_type_is_float(type) || label < lowest || label > highest) {
+        th->reach = NONE_ABOVE;
+        return;
+    }
+    th->floor = label;
+#ifdef __SSE2__
+    __m128i lanes = _mm_setzero_si128();
+    if (type == ISO_U8 || type == ISO_I8)
+        lanes = _mm_set1_epi8((char)label);
+    else if (type == ISO_U16 || type == ISO_I16)
+        lanes = _mm_set1_epi16((short)label);
+    _mm_storeu_si128((__m128i *)(void *)th->lanes, lanes);
+#endif
+}
+
 static void make_threshold(iso_voxel_type type, double level, threshold *th)
 {
     memset(th, 0, sizeof *th);
@@ -135,14 +177,7 @@ static void make_threshold(iso_voxel_type type, double level, threshold *th)
     if (type == ISO_F32 || type == ISO_F64)
         return;
     int64_t lowest, highest;
-    switch (type) {
-    case ISO_U8: lowest = 0, highest = UINT8_MAX; break;
-    case ISO_I8: lowest = INT8_MIN, highest = INT8_MAX; break;
-    case ISO_U16: lowest = 0, highest = UINT16_MAX; break;
-    case ISO_I16: lowest = INT16_MIN, highest = INT16_MAX; break;
-    case ISO_U32: lowest = 0, highest = UINT32_MAX; break;
-    default: lowest = INT32_MIN, highest = INT32_MAX; break;
-    }
+    type_range(type, &lowest, &highest);
     double f = floor(level);
     if (f < (double)lowest) {
         th->reach = ALL_ABOVE;
@@ -228,6 +263,35 @@ VECTOR_ROW(row_i16, int16_t, _mm_loadu_si128((const __m128i *)p), _mm_cmpgt_epi1
 #define row_i16 scalar_i16
 #endif
 
+/* The indicator's rows: bit x set where the sample equals the label (th->floor). */
+DEFINE_SCALAR_ROW(equal_scalar_u8, uint8_t, p[x] == th->floor)
+DEFINE_SCALAR_ROW(equal_scalar_i8, int8_t, p[x] == th->floor)
+DEFINE_SCALAR_ROW(equal_scalar_u16, uint16_t, p[x] == th->floor)
+DEFINE_SCALAR_ROW(equal_scalar_i16, int16_t, p[x] == th->floor)
+DEFINE_SCALAR_ROW(equal_u32, uint32_t, p[x] == th->floor)
+DEFINE_SCALAR_ROW(equal_i32, int32_t, p[x] == th->floor)
+
+#ifdef __SSE2__
+#define EQUAL_ROW(NAME, T, LOAD, COMPARE, PACK, SCALAR)                                    \
+    static inline unsigned NAME(const T *p, int n, const row_test *th)                     \
+    {                                                                                      \
+        if (n != S)                                                                        \
+            return SCALAR(p, n, th);                                                       \
+        __m128i same = COMPARE(LOAD, th->lanes);                                           \
+        unsigned low = (unsigned)_mm_movemask_epi8(PACK == 16 ? _mm_packs_epi16(same, same) : same) & 0xFFu; \
+        return low | (unsigned)(p[S - 1] == th->floor) << (S - 1);                         \
+    }
+EQUAL_ROW(equal_u8, uint8_t, _mm_loadl_epi64((const __m128i *)p), _mm_cmpeq_epi8, 8, equal_scalar_u8)
+EQUAL_ROW(equal_i8, int8_t, _mm_loadl_epi64((const __m128i *)p), _mm_cmpeq_epi8, 8, equal_scalar_i8)
+EQUAL_ROW(equal_u16, uint16_t, _mm_loadu_si128((const __m128i *)p), _mm_cmpeq_epi16, 16, equal_scalar_u16)
+EQUAL_ROW(equal_i16, int16_t, _mm_loadu_si128((const __m128i *)p), _mm_cmpeq_epi16, 16, equal_scalar_i16)
+#else
+#define equal_u8 equal_scalar_u8
+#define equal_i8 equal_scalar_i8
+#define equal_u16 equal_scalar_u16
+#define equal_i16 equal_scalar_i16
+#endif
+
 #define DEFINE_INSIDE_ROWS(NAME, T, ROW)                                                       \
     static void NAME(const iso_volume *vol, const size_t lo[3], const uint8_t n[3], int step,  \
                      const threshold *th, uint16_t *rows)                                      \
@@ -274,6 +338,12 @@ DEFINE_INSIDE_ROWS(inside_u32, uint32_t, row_u32)
 DEFINE_INSIDE_ROWS(inside_i32, int32_t, row_i32)
 DEFINE_INSIDE_ROWS(inside_f32, float, row_f32)
 DEFINE_INSIDE_ROWS(inside_f64, double, row_f64)
+DEFINE_INSIDE_ROWS(label_u8, uint8_t, equal_u8)
+DEFINE_INSIDE_ROWS(label_i8, int8_t, equal_i8)
+DEFINE_INSIDE_ROWS(label_u16, uint16_t, equal_u16)
+DEFINE_INSIDE_ROWS(label_i16, int16_t, equal_i16)
+DEFINE_INSIDE_ROWS(label_u32, uint32_t, equal_u32)
+DEFINE_INSIDE_ROWS(label_i32, int32_t, equal_i32)
 
 static void inside_rows_every(const iso_volume *vol, const threshold *th, const size_t lo[3], const uint8_t n[3],
                               int step, uint16_t *rows)
@@ -299,7 +369,21 @@ static void inside_rows_every(const iso_volume *vol, const threshold *th, const 
 
 static void inside_rows(const march_job *job, const size_t lo[3], const uint8_t n[3], uint16_t *rows)
 {
-    inside_rows_every(job->vol, &job->threshold, lo, n, 1, rows);
+    const iso_volume *vol = job->vol;
+    const threshold *th = &job->threshold;
+    if (!job->indicator || th->reach != SOME_ABOVE) {
+        inside_rows_every(vol, th, lo, n, 1, rows);
+        return;
+    }
+    switch (vol->type) {
+    case ISO_U8: label_u8(vol, lo, n, 1, th, rows); break;
+    case ISO_I8: label_i8(vol, lo, n, 1, th, rows); break;
+    case ISO_U16: label_u16(vol, lo, n, 1, th, rows); break;
+    case ISO_I16: label_i16(vol, lo, n, 1, th, rows); break;
+    case ISO_U32: label_u32(vol, lo, n, 1, th, rows); break;
+    case ISO_I32: label_i32(vol, lo, n, 1, th, rows); break;
+    case ISO_F32: case ISO_F64: break; /* make_label's NONE_ABOVE */
+    }
 }
 
 void iso_march_threshold_make(const iso_volume *vol, double level, iso_march_threshold *th)
@@ -686,7 +770,7 @@ typedef struct id_table {
  * the sample step fold. c is the row's first sample, row_at its linear index. */
 static inline __attribute__((always_inline)) float *place_row(const march_job *job, const active_brick *ab,
                                                               id_table *table, const iso_voxel_type type,
-                                                              const int a, int r, const size_t c[3],
+                                                              const int indicator, const int a, int r, const size_t c[3],
                                                               size_t row_at, uint32_t *id, double *worst, float *p)
 {
     const iso_volume *vol = job->vol;
@@ -702,13 +786,16 @@ static inline __attribute__((always_inline)) float *place_row(const march_job *j
     for (unsigned m = ab->cross[a][r]; m; m &= m - 1) {
         int x = __builtin_ctz(m);
         table->at[a][r][x] = next++;
-        size_t at = row_at + (size_t)x;
-        double from = iso_vol_sample_as(vol->data, type, at);
-        double to = iso_vol_sample_as(vol->data, type, at + step);
-        double t = integer ? iso_mc_edge_t_finite(from, to, level) : iso_mc_edge_t(from, to, level);
-        double e = iso_mc_edge_error(from, to, t, level);
-        if (e > most)
-            most = e;
+        double t = 0.5; /* the indicator's 0 and 1 cross 0.5 midway, exactly */
+        if (!indicator) {
+            size_t at = row_at + (size_t)x;
+            double from = iso_vol_sample_as(vol->data, type, at);
+            double to = iso_vol_sample_as(vol->data, type, at + step);
+            t = integer ? iso_mc_edge_t_finite(from, to, level) : iso_mc_edge_t(from, to, level);
+            double e = iso_mc_edge_error(from, to, t, level);
+            if (e > most)
+                most = e;
+        }
         size_t cx = c[0] + (size_t)x;
         if (plane_x) {
             p[0] = a == 0 ? along_axis(job, 0, cx, t) : plane_x[cx];
@@ -729,7 +816,8 @@ static inline __attribute__((always_inline)) float *place_row(const march_job *j
  * r = z * 9 + y, then axis, then x), and their ids into table; returns the largest
  * vertex error. */
 static inline __attribute__((always_inline)) double place_vertices_as(const march_job *job, const active_brick *ab,
-                                                                      id_table *table, const iso_voxel_type type)
+                                                                      id_table *table, const iso_voxel_type type,
+                                                                      const int indicator)
 {
     const iso_volume *vol = job->vol;
     const size_t row_step = vol->dims[0], plane_step = vol->dims[0] * vol->dims[1];
@@ -743,9 +831,9 @@ static inline __attribute__((always_inline)) double place_vertices_as(const marc
             int r = 64 * word + __builtin_ctzll(rows);
             const size_t c[3] = {lo[0], lo[1] + (size_t)(r % S), lo[2] + (size_t)(r / S)};
             size_t row_at = c[0] + c[1] * row_step + c[2] * plane_step;
-            p = place_row(job, ab, table, type, 0, r, c, row_at, &id, &worst, p);
-            p = place_row(job, ab, table, type, 1, r, c, row_at, &id, &worst, p);
-            p = place_row(job, ab, table, type, 2, r, c, row_at, &id, &worst, p);
+            p = place_row(job, ab, table, type, indicator, 0, r, c, row_at, &id, &worst, p);
+            p = place_row(job, ab, table, type, indicator, 1, r, c, row_at, &id, &worst, p);
+            p = place_row(job, ab, table, type, indicator, 2, r, c, row_at, &id, &worst, p);
         }
     assert(p == job->mesh->positions + 3 * (ab->first_vertex + ab->vertices));
     return worst;
@@ -754,17 +842,37 @@ static inline __attribute__((always_inline)) double place_vertices_as(const marc
 /* place_vertices_as, one copy per voxel type (the sample reads without a switch). */
 static double place_vertices(const march_job *job, const active_brick *ab, id_table *table)
 {
+    if (job->indicator) /* reads no sample: one copy for every type */
+        return place_vertices_as(job, ab, table, ISO_U8, 1);
     switch (job->vol->type) {
-    case ISO_U8: return place_vertices_as(job, ab, table, ISO_U8);
-    case ISO_I8: return place_vertices_as(job, ab, table, ISO_I8);
-    case ISO_U16: return place_vertices_as(job, ab, table, ISO_U16);
-    case ISO_I16: return place_vertices_as(job, ab, table, ISO_I16);
-    case ISO_U32: return place_vertices_as(job, ab, table, ISO_U32);
-    case ISO_I32: return place_vertices_as(job, ab, table, ISO_I32);
-    case ISO_F32: return place_vertices_as(job, ab, table, ISO_F32);
-    case ISO_F64: return place_vertices_as(job, ab, table, ISO_F64);
+    case ISO_U8: return place_vertices_as(job, ab, table, ISO_U8, 0);
+    case ISO_I8: return place_vertices_as(job, ab, table, ISO_I8, 0);
+    case ISO_U16: return place_vertices_as(job, ab, table, ISO_U16, 0);
+    case ISO_I16: return place_vertices_as(job, ab, table, ISO_I16, 0);
+    case ISO_U32: return place_vertices_as(job, ab, table, ISO_U32, 0);
+    case ISO_I32: return place_vertices_as(job, ab, table, ISO_I32, 0);
+    case ISO_F32: return place_vertices_as(job, ab, table, ISO_F32, 0);
+    case ISO_F64: return place_vertices_as(job, ab, table, ISO_F64, 0);
     }
     return 0;
+}
+
+/* The index in job->active of the brick at grid index at, or -1: from the slot array, or
+ * for listed bricks by bisection of the list (iso_march_label: a few lookups per brick
+ * with triangles, against a pass over the whole grid to fill an array). */
+static int32_t slot_at(const march_job *job, size_t at)
+{
+    if (job->slot)
+        return job->slot[at];
+    size_t lo = 0, hi = job->listed_count;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (job->listed[mid] < at)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo < job->listed_count && job->listed[lo] == at ? (int32_t)lo : -1;
 }
 
 /* The brick and its upper neighbours, by k = up_x | up_y << 1 | up_z << 2 (NULL where
@@ -778,7 +886,7 @@ static void neighbours_of(const march_job *job, const active_brick *ab, const ac
                          ab->brick[2] + (uint32_t)(k >> 2 & 1)};
         out[k] = NULL;
         if (b[0] < g->count[0] && b[1] < g->count[1] && b[2] < g->count[2]) {
-            int32_t slot = job->slot[((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0]];
+            int32_t slot = slot_at(job, ((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0]);
             out[k] = slot >= 0 ? &job->active[slot] : NULL;
         }
     }
@@ -845,7 +953,7 @@ static int vertex_of(const march_job *job, const uint32_t p[3], int axis, uint32
             b[d] = g->count[d] - 1; /* the last brick owns the volume's last sample plane */
         local[d] = p[d] - b[d] * ISO_BRICK_CELLS;
     }
-    int32_t slot = job->slot[((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0]];
+    int32_t slot = slot_at(job, ((size_t)b[2] * g->count[1] + b[1]) * g->count[0] + b[0]);
     if (slot < 0)
         return 0;
     const active_brick *ab = &job->active[slot];
@@ -1168,10 +1276,33 @@ static size_t number_marked(const march_job *job, int32_t *slot, uint32_t *order
     return n;
 }
 
+/* iso_march_label's bricks: the list as given. */
+static int select_listed(march_job *job)
+{
+    const iso_bricks *g = job->bricks;
+    size_t n = job->listed_count;
+    job->active = malloc((n ? n : 1) * sizeof *job->active);
+    if (!job->active)
+        return ISO_E_NOMEM;
+    for (size_t i = 0; i < n; i++) {
+        active_brick *ab = &job->active[i];
+        uint32_t at = job->listed[i];
+        assert(at < iso_bricks_total(g) && (i == 0 || job->listed[i - 1] < at));
+        ab->brick[0] = at % g->count[0];
+        ab->brick[1] = at / g->count[0] % g->count[1];
+        ab->brick[2] = at / g->count[0] / g->count[1];
+        ab->partial = 0;
+    }
+    job->active_count = n;
+    return 0;
+}
+
 static int select_bricks(march_job *job, int prune)
 {
     const iso_bricks *g = job->bricks;
     size_t total = iso_bricks_total(g);
+    if (job->listed)
+        return select_listed(job);
     job->slot = malloc(total * sizeof *job->slot);
     uint32_t *order = malloc(total * sizeof *order);
     if (!job->slot || !order) {
@@ -1254,8 +1385,16 @@ static void march_free(march_job *job)
     free(job);
 }
 
+/* Which bricks a march visits and what it classifies, beyond the min/max default. */
+typedef struct march_choice {
+    const uint8_t *marked;   /* iso_march_selected */
+    const uint32_t *listed;  /* iso_march_label: its bricks and label */
+    size_t listed_count;
+    int64_t label;
+} march_choice;
+
 /* Runs the passes on a new job; *out keeps it (for iso_march_part_vertex) if not NULL. */
-static int march(const iso_volume *vol, const iso_bricks *bricks, double level, int prune, const uint8_t *marked,
+static int march(const iso_volume *vol, const iso_bricks *bricks, double level, int prune, const march_choice *choice,
                  int world, int threads, iso_mesh *mesh, iso_march_stats *stats, march_job **out, iso_error *err)
 {
     static pthread_once_t once = PTHREAD_ONCE_INIT;
@@ -1270,8 +1409,14 @@ static int march(const iso_volume *vol, const iso_bricks *bricks, double level, 
     job->vol = vol;
     job->bricks = bricks;
     job->level = level;
-    job->marked = marked;
-    make_threshold(vol->type, level, &job->threshold);
+    job->marked = choice ? choice->marked : NULL;
+    job->listed = choice ? choice->listed : NULL;
+    job->listed_count = choice ? choice->listed_count : 0;
+    job->indicator = job->listed != NULL;
+    if (job->indicator)
+        make_label(vol->type, choice->label, &job->threshold);
+    else
+        make_threshold(vol->type, level, &job->threshold);
     job->mesh = mesh;
     job->world = world;
     job->axis_aligned = 1;
@@ -1300,11 +1445,20 @@ int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double lev
     return march(vol, bricks, level, prune, NULL, world, threads, mesh, stats, NULL, err);
 }
 
+int iso_march_label(const iso_volume *vol, const iso_bricks *bricks, int64_t label, const uint32_t *listed,
+                    size_t count, int world, int threads, iso_mesh *mesh, iso_march_stats *stats, iso_error *err)
+{
+    static const uint32_t none[1] = {0};
+    march_choice choice = {.listed = count ? listed : none, .listed_count = count, .label = label};
+    return march(vol, bricks, 0.5, 1, &choice, world, threads, mesh, stats, NULL, err);
+}
+
 int iso_march_selected(const iso_volume *vol, const iso_bricks *bricks, double level, const uint8_t *marked,
                        int threads, iso_mesh *mesh, iso_march_stats *stats, iso_march_part **part,
                        iso_error *err)
 {
-    return march(vol, bricks, level, 0, marked, 0, threads, mesh, stats, part, err);
+    march_choice choice = {.marked = marked};
+    return march(vol, bricks, level, 0, &choice, 0, threads, mesh, stats, part, err);
 }
 
 int iso_march_part_vertex(const iso_march_part *job, const uint32_t p[3], int axis, uint32_t *id)

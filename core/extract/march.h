@@ -29,6 +29,16 @@ typedef struct iso_march_stats {
 int iso_march_bricks(const iso_volume *vol, const iso_bricks *bricks, double level, int prune,
                      int world, int threads, iso_mesh *mesh, iso_march_stats *stats, iso_error *err);
 
+/* The surface of one label's indicator (1 where the sample equals label, else 0) at 0.5,
+ * marching cubes' surface of that 0/1 volume: every crossing at its edge's midpoint
+ * (error_bound 0), the same case table, winding (normals out of the label) and
+ * numbering as above. Only the listed bricks (grid indices, ascending, count > 0 or not)
+ * are visited: they must include every brick whose samples hold label and another value
+ * (hierarchy/labels.h lists them); others listed add nothing. An integer volume's label;
+ * float volumes give an empty mesh. */
+int iso_march_label(const iso_volume *vol, const iso_bricks *bricks, int64_t label, const uint32_t *listed,
+                    size_t count, int world, int threads, iso_mesh *mesh, iso_march_stats *stats, iso_error *err);
+
 /* The surface of the blocks marked in index space, for the tolerance path (lod.h):
  * marked[b] per brick of the grid (x fastest), bit x | y << 1 | z << 2 for its block of
  * ISO_TREE_BLOCK cells per axis at (x, y, z) (0xFF: the whole brick); marching cubes as

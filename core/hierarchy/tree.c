@@ -26,6 +26,7 @@
 #include <zlib.h>
 
 #include "base/base.h"
+#include "labels.h"
 #include "levels.h"
 #include "volume/volume.h"
 
@@ -241,6 +242,7 @@ typedef struct fit_ctx {
     layout *l;
     uint32_t count[3];          /* bricks per axis */
     float *oct_min, *oct_max;   /* 8 per brick, x fastest, rounded outward */
+    iso_label_builder *labels;  /* a label volume's sets, collected from the same samples */
 } fit_ctx;
 
 typedef struct fit_job {
@@ -276,13 +278,15 @@ static iso_box octant(const iso_box *box, int o)
 }
 
 /* A brick's octants' min and max (NaN samples ignored: the bounds that read them are used
- * only where no NaN is). */
+ * only where no NaN is); and a label volume's labels in the brick, from the same read. */
 static void leaf_octants(fit_ctx *f, const iso_box *box)
 {
     double samples[ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES * ISO_BRICK_SAMPLES];
     size_t lo[3] = {box->lo[0], box->lo[1], box->lo[2]}, hi[3] = {box->hi[0], box->hi[1], box->hi[2]};
     iso_vol_read_box(f->vol, lo, hi, samples);
     size_t nx = hi[0] - lo[0] + 1, ny = hi[1] - lo[1] + 1, at = brick_of(f->count, box) * 8;
+    if (f->labels)
+        iso_label_collect(f->labels, brick_of(f->count, box), samples, nx * ny * (hi[2] - lo[2] + 1));
     for (int o = 0; o < 8; o++) {
         iso_box b = octant(box, o);
         double mn = INFINITY, mx = -INFINITY;
@@ -457,9 +461,10 @@ static void fit_round(void *context, int t, int threads)
 /* Depth by depth from the deepest (children come after their parent in the breadth-first
  * order, so each depth is a run of nodes and the one below it is done); a depth's nodes
  * are independent and shared by the threads. */
-static int fit_all(const iso_volume *vol, layout *l, int threads, iso_progress_fn progress, void *context)
+static int fit_all(const iso_volume *vol, layout *l, int threads, iso_progress_fn progress, void *context,
+                   iso_label_builder *labels)
 {
-    fit_ctx f = {.vol = vol, .l = l};
+    fit_ctx f = {.vol = vol, .l = l, .labels = labels};
     iso_bricks_count(vol, f.count);
     size_t bricks = (size_t)f.count[0] * f.count[1] * f.count[2];
     unsigned char *depth = malloc(l->count);
@@ -528,13 +533,29 @@ int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress,
     for (int d = 0; d < 3; d++)
         if (vol->dims[d] < 2 || vol->dims[d] > UINT32_MAX)
             return iso_error_set(err, ISO_E_ARGUMENT, "volume dimension %zu out of range", vol->dims[d]);
+    if (vol->labels && iso_vol_type_is_float(vol->type))
+        return iso_error_set(err, ISO_E_UNSUPPORTED, "a label volume holds integers, not %s samples",
+                             iso_vol_type_name(vol->type));
     if (lay_out(vol, &l))
         goto nomem;
     if (l.count > UINT32_MAX)
         goto nomem;
     threads = iso_parallel_threads(threads);
-    if (fit_all(vol, &l, threads, progress, context))
+    iso_label_builder *labels = NULL;
+    if (vol->labels) {
+        uint32_t count[3];
+        iso_bricks_count(vol, count);
+        if (!(labels = iso_label_builder_create((size_t)count[0] * count[1] * count[2])))
+            goto nomem;
+    }
+    if (fit_all(vol, &l, threads, progress, context, labels)) {
+        if (labels) {
+            iso_label_sets none;
+            iso_label_builder_finish(labels, &none, NULL);
+            iso_label_free(&none);
+        }
         goto nomem;
+    }
 
     tree = calloc(1, sizeof *tree);
     if (!tree)
@@ -544,7 +565,20 @@ int iso_tree_build(const iso_volume *vol, int threads, iso_progress_fn progress,
     tree->node_count = l.count;
     tree->volume_crc = iso_tree_volume_crc(vol);
     l.nodes = NULL;
-    int rc = bricks_from_leaves(vol, tree, &l, threads, &tree->bricks, err);
+    int rc = 0;
+    if (labels) {
+        tree->labels = calloc(1, sizeof *tree->labels);
+        if (!tree->labels) {
+            iso_label_sets none;
+            iso_label_builder_finish(labels, &none, NULL);
+            iso_label_free(&none);
+            rc = iso_error_set(err, ISO_E_NOMEM, "out of memory building the label sets");
+        } else {
+            rc = iso_label_builder_finish(labels, tree->labels, err);
+        }
+    }
+    if (!rc)
+        rc = bricks_from_leaves(vol, tree, &l, threads, &tree->bricks, err);
     iso_tree_scale_make((double)tree->nodes[0].max - (double)tree->nodes[0].min, &tree->scale);
     if (!rc)
         rc = iso_levels_build(vol, &tree->bricks, &tree->scale, threads, &tree->level_code, err);
@@ -571,6 +605,8 @@ void iso_tree_destroy(iso_tree *tree)
         free(tree->nodes);
     iso_bricks_free(&tree->bricks);
     free(tree->level_code);
+    iso_label_free(tree->labels);
+    free(tree->labels);
     free(tree);
 }
 
@@ -582,7 +618,7 @@ size_t iso_tree_bytes(const iso_tree *tree)
 size_t iso_tree_memory(const iso_tree *tree)
 {
     return iso_tree_bytes(tree) + iso_bricks_total(&tree->bricks) * (2 * sizeof(float) + ISO_TREE_CODES) +
-           sizeof tree->scale;
+           sizeof tree->scale + iso_label_memory(tree->labels);
 }
 
 uint32_t iso_tree_volume_crc(const iso_volume *vol)
@@ -607,9 +643,9 @@ uint32_t iso_tree_volume_crc(const iso_volume *vol)
  * the nodes; 4: the bricks' level errors instead (tree.h), so that loading need not
  * compute them again; 5: those errors in 2 bytes each; 6: one-byte codes, per block at
  * levels 1 and 2 and per brick at level 3; 7: nodes of 12 bytes (no child index: the
- * layout follows from the dims). An older file is refused as stale, and the
- * caller rebuilds it. */
-#define TREE_VERSION 7
+ * layout follows from the dims); 8: a label volume's per-brick label sets after
+ * the level codes (labels.h). An older file is refused as stale, and the caller rebuilds it. */
+#define TREE_VERSION 8
 
 typedef struct tree_header {
     char magic[8];          /* "ISOTREE\0" */
@@ -619,7 +655,7 @@ typedef struct tree_header {
     uint32_t type;
     uint32_t volume_crc;    /* iso_tree_volume_crc of the volume it was built from */
     uint64_t node_count;
-    uint32_t node_crc;      /* CRC-32 of the bytes after the header: nodes, then level codes */
+    uint32_t node_crc;      /* CRC-32 of the bytes after the header: nodes, level codes, labels */
     uint32_t header_crc;    /* CRC-32 of the header with this field zero */
 } tree_header;
 
@@ -644,14 +680,24 @@ int iso_tree_save(const iso_tree *tree, const char *path, iso_error *err)
     h.volume_crc = tree->volume_crc;
     h.node_count = tree->node_count;
     size_t code_bytes = iso_bricks_total(&tree->bricks) * ISO_TREE_CODES;
+    size_t label_bytes = tree->labels ? iso_label_section_bytes(tree->labels) : 0;
+    unsigned char *label_section = label_bytes ? malloc(label_bytes) : NULL;
+    if (label_bytes && !label_section)
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory writing %s", path);
+    if (label_section)
+        iso_label_section_write(tree->labels, label_section);
     uLong crc = crc32(0L, (const Bytef *)tree->nodes, (uInt)iso_tree_bytes(tree));
-    h.node_crc = (uint32_t)crc32(crc, (const Bytef *)tree->level_code, (uInt)code_bytes);
+    crc = crc32(crc, (const Bytef *)tree->level_code, (uInt)code_bytes);
+    h.node_crc = (uint32_t)crc32(crc, label_section ? label_section : (const Bytef *)"", (uInt)label_bytes);
     h.header_crc = header_crc(h);
 
     iso_file_part parts[] = {{&h, sizeof h},
                              {tree->nodes, iso_tree_bytes(tree)},
-                             {tree->level_code, code_bytes}};
-    return iso_file_replace(path, parts, sizeof parts / sizeof *parts, err);
+                             {tree->level_code, code_bytes},
+                             {label_section, label_bytes}};
+    int rc = iso_file_replace(path, parts, sizeof parts / sizeof *parts, err);
+    free(label_section);
+    return rc;
 }
 
 /* The nodes must be as many as lay_out gives for these dims, with sane values: a file
@@ -719,10 +765,12 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
                            path, (unsigned long long)h.dims[0], (unsigned long long)h.dims[1],
                            (unsigned long long)h.dims[2]);
     else if (h.node_count > (bytes - sizeof h) / sizeof(iso_tree_node) ||
-             sizeof h + h.node_count * sizeof(iso_tree_node) + codes != bytes)
+             sizeof h + h.node_count * sizeof(iso_tree_node) + codes > bytes)
         rc = iso_error_set(err, ISO_E_CORRUPT,
                            "%s: %zu bytes do not hold the %llu nodes the header announces and %zu level errors",
                            path, bytes, (unsigned long long)h.node_count, codes);
+    else if (vol->labels && sizeof h + h.node_count * sizeof(iso_tree_node) + codes == bytes)
+        rc = iso_error_set(err, ISO_E_STALE, "%s: built without the label sets this label volume needs", path);
     else if ((uint32_t)crc32(0L, (const Bytef *)map + sizeof h, (uInt)(bytes - sizeof h)) != h.node_crc)
         rc = iso_error_set(err, ISO_E_CORRUPT, "%s: node checksum mismatch", path);
     else if (h.volume_crc != iso_tree_volume_crc(vol))
@@ -751,6 +799,19 @@ int iso_tree_load(const iso_volume *vol, const char *path, iso_tree **out, iso_e
         return iso_error_set(err, ISO_E_NOMEM, "out of memory loading %s", path);
     }
     memcpy(tree->level_code, (const char *)map + sizeof h + h.node_count * sizeof(iso_tree_node), codes);
+    size_t label_at = sizeof h + h.node_count * sizeof(iso_tree_node) + codes;
+    if (label_at < bytes && vol->labels) {
+        tree->labels = calloc(1, sizeof *tree->labels);
+        if (!tree->labels) {
+            iso_tree_destroy(tree);
+            return iso_error_set(err, ISO_E_NOMEM, "out of memory loading %s", path);
+        }
+        if ((rc = iso_label_read((const unsigned char *)map + label_at, bytes - label_at, codes / ISO_TREE_CODES,
+                                 path, tree->labels, err))) {
+            iso_tree_destroy(tree);
+            return rc;
+        }
+    }
     iso_tree_scale_make((double)tree->nodes[0].max - (double)tree->nodes[0].min, &tree->scale);
     if ((rc = iso_bricks_build(vol, 0, &tree->bricks, err))) {
         iso_tree_destroy(tree);

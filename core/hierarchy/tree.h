@@ -130,6 +130,8 @@ typedef struct iso_tree {
     iso_bricks bricks;      /* regular min/max grid for exact extraction; computed, not saved */
     uint8_t *level_code;    /* per brick, ISO_TREE_CODES codes (iso_tree_level_error); saved */
     iso_tree_scale scale;   /* what the codes stand for */
+    struct iso_label_sets *labels; /* per brick the labels held, for a label volume
+                                    * (vol->labels; hierarchy/labels.h), else NULL; saved */
     void *mapping;          /* file mapping when loaded with iso_tree_load, else NULL */
     size_t mapping_bytes;
 } iso_tree;

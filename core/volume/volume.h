@@ -42,6 +42,8 @@ typedef struct iso_volume {
     int has_nan;             /* float volumes: 1 if any sample is NaN (see iso_vol_update_stats) */
     char modality[17];       /* what the file says acquired it ("CT", "MR"; DICOM's Modality), or "" */
     char description[65];    /* the file's own words for it (DICOM's SeriesDescription), or "" */
+    int labels;              /* 1: an integer label volume, each value naming a segment: its
+                              * hierarchy keeps per brick the labels held (hierarchy/labels.h) */
 } iso_volume;
 
 /* Default cap on the bytes of one volume's samples: 8 GiB. */
