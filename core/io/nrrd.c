@@ -516,10 +516,13 @@ static int finish_header(parser *p)
         return missing(p, "encoding");
     p->line_no = p->line_of[F_SIZES];
     a0 = p->dimension - 3;
-    if (a0 == 1 && p->sizes[0] != 1)
+    h->components = 1;
+    if (a0 == 1 && (p->sizes[0] < 1 || p->sizes[0] > ISO_NRRD_MAX_COMPONENTS))
         return field_error(p, ISO_E_UNSUPPORTED, "sizes",
-                           "4-D data with %" PRId64 " values per sample (only 1 is supported)",
-                           p->sizes[0]);
+                           "4-D data with %" PRId64 " values per sample (1 to %d are read)",
+                           p->sizes[0], ISO_NRRD_MAX_COMPONENTS);
+    if (a0 == 1)
+        h->components = (size_t)p->sizes[0];
     for (int d = 0; d < 3; d++) {
         if (p->sizes[a0 + d] < 2)
             return field_error(p, ISO_E_UNSUPPORTED, "sizes",
@@ -530,10 +533,12 @@ static int finish_header(parser *p)
                                p->sizes[a0 + d]);
         h->dims[d] = (size_t)p->sizes[a0 + d];
     }
-    if (iso_vol_check_size(h->dims, h->type, UINT64_MAX, &h->data_bytes, NULL) != ISO_OK)
+    if (iso_vol_check_size(h->dims, h->type, UINT64_MAX, &h->data_bytes, NULL) != ISO_OK ||
+        h->data_bytes > UINT64_MAX / h->components)
         return field_error(p, ISO_E_LIMIT, "sizes",
                            "%zux%zux%zu samples of type %s overflow 64 bits", h->dims[0],
                            h->dims[1], h->dims[2], iso_vol_type_name(h->type));
+    h->data_bytes *= h->components;
     if (!p->have_endian && iso_vol_type_size(h->type) > 1)
         return missing(p, "endian");
     if (h->byte_skip == -1 && h->encoding != ISO_NRRD_RAW) {
@@ -870,7 +875,10 @@ int iso_nrrd_load_samples(const char *path, const iso_nrrd_header *hdr,
         rc = check_raw_length(f, hdr, name, err);
     if (rc != ISO_OK)
         goto fail;
-    vol = iso_vol_create(hdr->dims, hdr->type, max_bytes, NULL);
+    /* Several values per sample (a .seg.nrrd's layers) come in as a volume that many
+     * times wider along x, interleaved as stored; the caller splits them. */
+    size_t dims[3] = {hdr->dims[0] * (hdr->components ? hdr->components : 1), hdr->dims[1], hdr->dims[2]};
+    vol = iso_vol_create(dims, hdr->type, max_bytes, NULL);
     if (!vol) {
         rc = iso_error_set(err, ISO_E_NOMEM, "%s: out of memory for %" PRIu64 " bytes of samples",
                            path, hdr->data_bytes);
@@ -906,6 +914,10 @@ int iso_nrrd_load(const char *path, const iso_load_options *opt, iso_volume **ou
     if (!hdr)
         return iso_error_set(err, ISO_E_NOMEM, "%s: out of memory", path);
     int rc = iso_nrrd_read_header(path, hdr, err);
+    if (rc == ISO_OK && hdr->components != 1)
+        rc = iso_error_set(err, ISO_E_UNSUPPORTED,
+                           "%s: 4-D data with %zu values per sample (a scalar volume has 1; a 3D Slicer "
+                           "segmentation's layers are read as a .seg.nrrd)", path, hdr->components);
     if (rc == ISO_OK)
         rc = iso_nrrd_load_samples(path, hdr, opt, out, err);
     free(hdr);

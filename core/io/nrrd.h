@@ -2,7 +2,8 @@
  * or detached (.nhdr + data file), raw or gzip-encoded.
  *
  * Supported: magic NRRD0001..NRRD0005; every NRRD spelling of the 8- to 32-bit integer
- * types, float and double; dimension 3, or 4 with a first axis of size 1; endian; encoding
+ * types, float and double; dimension 3, or 4 with a first axis of values per sample (1 for
+ * a scalar volume, a .seg.nrrd's layers); endian; encoding
  * raw, gzip (gz); spacings; space origin and space directions (spacing = column norms,
  * direction = normalised columns); byte skip (-1 for raw only) and line skip; a data file
  * path relative to the header's directory or absolute. Comments and key:=value pairs are
@@ -27,8 +28,16 @@
 typedef enum iso_nrrd_encoding { ISO_NRRD_RAW, ISO_NRRD_GZIP } iso_nrrd_encoding;
 
 /* What a header says about its samples, with the geometry already reduced to 3 axes. */
+/* Most values per sample a 4-D NRRD may hold (a .seg.nrrd's layers). */
+#define ISO_NRRD_MAX_COMPONENTS 256
+
 typedef struct iso_nrrd_header {
     size_t dims[3];
+    size_t components;           /* values per sample: 1, or a 4-D file's first axis (its
+                                  * samples then interleaved, value fastest); iso_nrrd_load
+                                  * refuses more than 1, iso_nrrd_load_samples reads them as a
+                                  * volume `components` times wider along x (0 counts as 1:
+                                  * the other formats' headers leave it so) */
     iso_voxel_type type;
     uint64_t data_bytes;         /* dims product times the type size, overflow-checked */
     int big_endian;              /* byte order of the stored samples */

@@ -5,6 +5,7 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "check.h"
 #include "io/io.h"
@@ -126,4 +127,30 @@ double surface_rounding_slack(const iso_volume *vol)
 double surface_tie_allowance(const iso_volume *vol)
 {
     return ISO_MC_END_GAP * (vol->value_max - vol->value_min);
+}
+
+static int compare_triangles(const void *a, const void *b)
+{
+    return memcmp(a, b, sizeof(surface_triangle));
+}
+
+surface_triangle *surface_canonical_triangles(const iso_mesh *m)
+{
+    surface_triangle *t = malloc((m->triangle_count ? m->triangle_count : 1) * sizeof *t);
+    CHECK(t != NULL);
+    if (!t)
+        return NULL;
+    for (size_t i = 0; i < m->triangle_count; i++) {
+        const float *c[3];
+        for (int k = 0; k < 3; k++)
+            c[k] = m->positions + 3 * m->indices[3 * i + k];
+        int first = 0;
+        for (int k = 1; k < 3; k++)
+            if (memcmp(c[k], c[first], 3 * sizeof(float)) < 0)
+                first = k;
+        for (int k = 0; k < 3; k++)
+            memcpy(t[i].p + 3 * k, c[(first + k) % 3], 3 * sizeof(float));
+    }
+    qsort(t, m->triangle_count, sizeof *t, compare_triangles);
+    return t;
 }

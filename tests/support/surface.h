@@ -35,4 +35,13 @@ double surface_rounding_slack(const iso_volume *vol);
  * moved ISO_MC_END_GAP of an edge off (mc.h), which costs at most this much. */
 double surface_tie_allowance(const iso_volume *vol);
 
+/* A triangle by its corners' positions. */
+typedef struct surface_triangle {
+    float p[9];
+} surface_triangle;
+/* The mesh's triangles by position, each rotated to start at its smallest corner (the
+ * winding kept), sorted (malloc'd, triangle_count of them): two meshes are the same
+ * surface iff these lists are equal. */
+surface_triangle *surface_canonical_triangles(const iso_mesh *m);
+
 #endif

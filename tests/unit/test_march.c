@@ -10,35 +10,6 @@
 #include "extract/mc.h"
 #include "surface.h"
 
-typedef struct triangle {
-    float p[9];
-} triangle;
-
-static int compare_triangles(const void *a, const void *b)
-{
-    return memcmp(a, b, sizeof(triangle));
-}
-
-/* The mesh's triangles by position, each rotated to start at its smallest corner (the
- * winding kept), sorted: two meshes are the same surface iff these lists are equal. */
-static triangle *canonical_triangles(const iso_mesh *m)
-{
-    triangle *t = malloc((m->triangle_count ? m->triangle_count : 1) * sizeof *t);
-    for (size_t i = 0; i < m->triangle_count; i++) {
-        const float *c[3];
-        for (int k = 0; k < 3; k++)
-            c[k] = m->positions + 3 * m->indices[3 * i + k];
-        int first = 0;
-        for (int k = 1; k < 3; k++)
-            if (memcmp(c[k], c[first], 3 * sizeof(float)) < 0)
-                first = k;
-        for (int k = 0; k < 3; k++)
-            memcpy(t[i].p + 3 * k, c[(first + k) % 3], 3 * sizeof(float));
-    }
-    qsort(t, m->triangle_count, sizeof *t, compare_triangles);
-    return t;
-}
-
 static void march(const iso_volume *vol, double level, int threads, iso_mesh *m, iso_march_stats *st)
 {
     iso_bricks bricks;
@@ -64,7 +35,7 @@ static void check_same_as_full_scan(const iso_volume *vol, double level)
            full.vertex_count);
     CHECK(st.error_bound == fs.error_bound);
     if (m.triangle_count == full.triangle_count) {
-        triangle *a = canonical_triangles(&m), *b = canonical_triangles(&full);
+        surface_triangle *a = surface_canonical_triangles(&m), *b = surface_canonical_triangles(&full);
         CHECK(memcmp(a, b, m.triangle_count * sizeof *a) == 0);
         free(a);
         free(b);
@@ -323,7 +294,7 @@ static void test_selected_bricks(void)
         CHECK_EQ(found, crossings);
         CHECK_EQ(m.triangle_count, soup.triangle_count);
         if (m.triangle_count == soup.triangle_count) {
-            triangle *a = canonical_triangles(&m), *b = canonical_triangles(&soup);
+            surface_triangle *a = surface_canonical_triangles(&m), *b = surface_canonical_triangles(&soup);
             CHECK(memcmp(a, b, m.triangle_count * sizeof *a) == 0);
             free(a);
             free(b);
