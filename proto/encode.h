@@ -11,6 +11,7 @@
 #define PROTO_ENCODE_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 /* core/'s headers have no C++ guards of their own; the Draco shim includes them through
  * this header. */
@@ -124,6 +125,23 @@ int proto_encode_glb(const iso_mesh *mesh, const proto_encode_options *opt,
  * gives the same empty glb as proto_encode_glb. O(V + T), single pass per stream. */
 int proto_encode_glb_meshopt(const iso_mesh *mesh, const proto_encode_options *opt,
                              unsigned char **out, size_t *out_size, iso_error *err);
+
+/* Several meshes in one glTF binary (a segmentation's segments): one part per mesh, each a
+ * glb of proto_encode_glb or proto_encode_glb_meshopt (all parts of one kind), joined
+ * (glb_scene.c): one node per part named after it (its number in the node's extras as
+ * "segment"), its mesh encoded as in its own glb, a material per part whose
+ * baseColorFactor is its colour in linear light; a part without triangles gives a node
+ * without a mesh. The scene's nodes are in the parts' order. O(bytes). Returns 0,
+ * ISO_E_NOMEM or ISO_E_LIMIT (over glTF's 4 GiB). */
+typedef struct proto_scene_part {
+    const unsigned char *glb;
+    size_t size;
+    const char *name;
+    uint32_t number;
+    float color[3];   /* sRGB, 0..1 */
+} proto_scene_part;
+int proto_glb_scene(const proto_scene_part *parts, size_t count, unsigned char **out, size_t *out_size,
+                    iso_error *err);
 
 /* proto_encode_glb_meshopt for a request pipeline (pipeline.c), with its steps overlapped
  * on two threads: the normals made first by a callback (the index view, which does not

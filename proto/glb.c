@@ -111,11 +111,12 @@ int proto_glb_encode_info(const iso_mesh *mesh, const proto_encode_options *opt,
     return rc;
 }
 
-size_t proto_glb_head(const proto_glb_json *json, size_t bin_size, unsigned char *out)
+/* The head for JSON text of any length (proto_glb_head's, and proto_glb_write_text's). */
+static size_t head_of_text(const char *text, size_t len, size_t bin_size, unsigned char *out)
 {
     /* Layout: header (12), JSON chunk (8 + text padded with spaces), BIN chunk (8 + bytes
      * padded with zeros) when there is one. Lengths are uint32 in the container. */
-    const size_t json_padded = proto_glb_pad4(json->len), bin_padded = proto_glb_pad4(bin_size);
+    const size_t json_padded = proto_glb_pad4(len), bin_padded = proto_glb_pad4(bin_size);
     const size_t size = 12 + 8 + json_padded + (bin_size ? 8 + bin_padded : 0);
     unsigned char *p = out;
     p = proto_put_u32(p, GLB_MAGIC);
@@ -123,8 +124,8 @@ size_t proto_glb_head(const proto_glb_json *json, size_t bin_size, unsigned char
     p = proto_put_u32(p, (uint32_t)size);
     p = proto_put_u32(p, (uint32_t)json_padded);
     p = proto_put_u32(p, GLB_CHUNK_JSON);
-    memcpy(p, json->text, json->len);
-    memset(p + json->len, ' ', json_padded - json->len);
+    memcpy(p, text, len);
+    memset(p + len, ' ', json_padded - len);
     p += json_padded;
     if (bin_size) {
         p = proto_put_u32(p, (uint32_t)bin_padded);
@@ -133,27 +134,43 @@ size_t proto_glb_head(const proto_glb_json *json, size_t bin_size, unsigned char
     return (size_t)(p - out);
 }
 
-int proto_glb_size(const proto_glb_json *json, size_t bin_size, size_t *size, iso_error *err)
+size_t proto_glb_head(const proto_glb_json *json, size_t bin_size, unsigned char *out)
 {
-    *size = 12 + 8 + proto_glb_pad4(json->len) + (bin_size ? 8 + proto_glb_pad4(bin_size) : 0);
+    return head_of_text(json->text, json->len, bin_size, out);
+}
+
+static int size_of_text(size_t len, size_t bin_size, size_t *size, iso_error *err)
+{
+    *size = 12 + 8 + proto_glb_pad4(len) + (bin_size ? 8 + proto_glb_pad4(bin_size) : 0);
     if (bin_size > UINT32_MAX - 64 || *size > UINT32_MAX)
         return iso_error_set(err, ISO_E_LIMIT, "glb of %zu bytes exceeds glTF's 4 GiB", *size);
     return 0;
 }
 
+int proto_glb_size(const proto_glb_json *json, size_t bin_size, size_t *size, iso_error *err)
+{
+    return size_of_text(json->len, bin_size, size, err);
+}
+
 int proto_glb_write(const proto_glb_json *json, const unsigned char *bin, size_t bin_size,
                     unsigned char **out, size_t *out_size, iso_error *err)
+{
+    return proto_glb_write_text(json->text, json->len, bin, bin_size, out, out_size, err);
+}
+
+int proto_glb_write_text(const char *text, size_t len, const unsigned char *bin, size_t bin_size,
+                         unsigned char **out, size_t *out_size, iso_error *err)
 {
     *out = NULL;
     *out_size = 0;
     size_t size;
-    int rc = proto_glb_size(json, bin_size, &size, err);
+    int rc = size_of_text(len, bin_size, &size, err);
     if (rc)
         return rc;
     unsigned char *buf = malloc(size);
     if (!buf)
         return iso_error_set(err, ISO_E_NOMEM, "no memory for a glb of %zu bytes", size);
-    size_t head = proto_glb_head(json, bin_size, buf);
+    size_t head = head_of_text(text, len, bin_size, buf);
     if (bin_size) {
         memcpy(buf + head, bin, bin_size);
         memset(buf + head + bin_size, 0, size - head - bin_size);

@@ -43,6 +43,10 @@ void proto_glb_json_empty(proto_glb_json *j);
 int proto_glb_write(const proto_glb_json *json, const unsigned char *bin, size_t bin_size,
                     unsigned char **out, size_t *out_size, iso_error *err);
 
+/* proto_glb_write with JSON text of any length (a scene of many meshes). */
+int proto_glb_write_text(const char *text, size_t len, const unsigned char *bin, size_t bin_size,
+                         unsigned char **out, size_t *out_size, iso_error *err);
+
 /* The container's bytes before the BIN chunk's data (header, JSON chunk, and the BIN
  * chunk's header when bin_size > 0) written to out, which holds PROTO_GLB_HEAD_MAX bytes;
  * returns how many. For encoders that write their BIN data in place after it. */

@@ -40,6 +40,29 @@ static double voxel_size(const iso_volume *vol, const proto_pipeline_request *re
     return req->extract.space == ISO_SPACE_INDEX ? 1 : iso_vol_min_spacing(vol);
 }
 
+/* The surface a request names: the level's (extract.h), or a segment's (segment.h). */
+static int surface(const iso_tree *tree, const proto_pipeline_request *req, iso_mesh *mesh,
+                   iso_extract_stats *stats, iso_error *err)
+{
+    if (!req->segmentation)
+        return iso_extract(tree, &req->extract, mesh, stats, err);
+    iso_seg_params sp = {.smoothing = req->smoothing, .cap = req->extract.cap, .space = req->extract.space,
+                         .threads = req->extract.threads};
+    return iso_seg_extract(req->segmentation, req->segment, &sp, mesh, stats, err);
+}
+
+/* The normals of a request's surface: the B-spline of the volume's samples, or of the
+ * segment's field (segment.h). */
+static int surface_normals(const iso_volume *vol, const proto_pipeline_request *req, iso_mesh *mesh, int threads,
+                           iso_error *err)
+{
+    if (!req->segmentation)
+        return iso_normals_compute(vol, mesh, req->normals, req->extract.space, threads, err);
+    iso_seg_params sp = {.smoothing = req->smoothing, .cap = req->extract.cap, .space = req->extract.space,
+                         .threads = threads};
+    return iso_seg_normals(req->segmentation, req->segment, &sp, mesh, req->normals, err);
+}
+
 /* An extraction's work added to the request's: cells and nodes visited count every
  * extraction a request ran, not only the one whose mesh answers. */
 static void add_work(iso_extract_stats *to, const iso_extract_stats *from)
@@ -108,7 +131,7 @@ static int from_chain(const iso_tree *tree, const iso_volume *vol,
     const iso_mesh_chain *chain = req->chain;
     int rc = 0;
     if (!chain) {
-        if ((rc = iso_extract(tree, &req->extract, &res->mesh, &res->stats, err)) ||
+        if ((rc = surface(tree, req, &res->mesh, &res->stats, err)) ||
             (rc = iso_mesh_chain_build(&res->mesh, voxel_size(vol, req), req->extract.threads,
                                        &res->chain_built, err)) ||
             (rc = complete_chain(tree, vol, req, res, res->chain_built, err)))
@@ -220,7 +243,7 @@ static int extract(const iso_tree *tree, const iso_volume *vol,
     if (req->full_scan)
         return iso_extract_full_scan(vol, p->level, p->space, &res->mesh, &res->stats, err);
     if (!req->budget)
-        return iso_extract(tree, p, &res->mesh, &res->stats, err);
+        return surface(tree, req, &res->mesh, &res->stats, err);
     if (req->budget_ladder_only)
         return iso_extract_budget(tree, p, req->budget, &res->mesh, &res->stats, &res->chosen,
                                   err);
@@ -304,7 +327,7 @@ typedef struct normals_job {
 static int make_normals(void *context, int threads, iso_error *err)
 {
     normals_job *n = context;
-    return iso_normals_compute(n->vol, n->mesh, n->req->normals, n->req->extract.space, threads, err);
+    return surface_normals(n->vol, n->req, n->mesh, threads, err);
 }
 
 /* Steps 4 and 5 for the meshopt glb: the encoder numbers and codes the index view (which
@@ -346,8 +369,7 @@ static int finish(const iso_volume *vol, const proto_pipeline_request *req,
         rc = meshopt_steps(vol, req, res, t0, err);
     } else {
         if (req->normals && res->mesh.vertex_count)
-            rc = iso_normals_compute(vol, &res->mesh, req->normals, req->extract.space,
-                                     req->extract.threads, err);
+            rc = surface_normals(vol, req, &res->mesh, req->extract.threads, err);
         double t1 = iso_clock_ms();
         if (!rc)
             rc = encode(req, res, err);

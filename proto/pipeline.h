@@ -24,6 +24,7 @@
 #include "hierarchy/tree.h"
 #include "mesh/mesh.h"
 #include "query.h"
+#include "segment/segment.h"
 
 typedef struct proto_pipeline_request {
     iso_extract_params extract; /* level, tolerance, cap, space, threads */
@@ -43,6 +44,12 @@ typedef struct proto_pipeline_request {
     proto_format format;        /* PROTO_FORMAT_NONE: keep the mesh, encode nothing */
     proto_encode_options encode;/* Draco and glb options */
     int gzip;                   /* 1: a meshopt glb's gzip member too (the others: ignored) */
+    /* A segment's surface instead of the level's (segment.h): extract.level and tolerance
+     * are then unused, cap, space and threads apply, normals come from the segment's
+     * field; the chain (distance) is the segment's. No budget (a caller's rule). */
+    const iso_segmentation *segmentation;
+    size_t segment;             /* its index in segmentation->segments */
+    double smoothing;           /* Gaussian sigma in mm, 0: none */
 } proto_pipeline_request;
 
 typedef struct proto_pipeline_result {

@@ -14,6 +14,7 @@
 #include "base/base.h"
 #include "io/io.h"
 #include "volume/volume.h"
+#include "query.h"
 
 int srv_fail(const char *fmt, ...)
 {
@@ -191,4 +192,38 @@ void srv_keep_freed_memory(void)
 {
     mallopt(M_MMAP_THRESHOLD, 32 << 20);
     mallopt(M_TRIM_THRESHOLD, 1 << 30);
+}
+
+static int ends_with(const char *s, const char *suffix)
+{
+    size_t n = strlen(s), m = strlen(suffix);
+    return n >= m && !strcmp(s + n - m, suffix);
+}
+
+int srv_format_of_path(const char *path)
+{
+    static const struct { const char *suffix; proto_format format; } formats[] = {
+        {".ply", PROTO_FORMAT_PLY}, {".obj", PROTO_FORMAT_OBJ}, {".drc", PROTO_FORMAT_DRACO},
+        {".meshopt.glb", PROTO_FORMAT_GLB_MESHOPT}, {".glb", PROTO_FORMAT_GLB},
+        {".stl", PROTO_FORMAT_STL}};
+    if (!path)
+        return PROTO_FORMAT_NONE;
+    for (size_t i = 0; i < sizeof formats / sizeof formats[0]; i++)
+        if (ends_with(path, formats[i].suffix))
+            return (int)formats[i].format;
+    return -1;
+}
+
+int srv_write_file(const unsigned char *bytes, size_t size, const char *path)
+{
+    size_t len = strlen(path) + 8;
+    char *tmp = malloc(len);
+    FILE *f = tmp ? (snprintf(tmp, len, "%s.tmp", path), fopen(tmp, "wb")) : NULL;
+    int ok = f && fwrite(bytes, 1, size, f) == size;
+    ok = f && fclose(f) == 0 && ok;
+    ok = ok && rename(tmp, path) == 0;
+    if (!ok && tmp)
+        remove(tmp);
+    free(tmp);
+    return ok ? 0 : srv_fail("%s: cannot write the mesh", path);
 }

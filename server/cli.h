@@ -62,7 +62,7 @@ void srv_usage(const srv_command *cmd, FILE *to);
 extern const char srv_volume_help[];
 
 extern const srv_command srv_info_command, srv_build_command, srv_extract_command,
-    srv_bench_command, srv_serve_command;
+    srv_bench_command, srv_serve_command, srv_segments_command;
 
 /* "--threads N": N in 1..256 into *threads; 0, or prints the problem and returns 1. */
 int srv_parse_threads(const char *command, const char *text, int *threads);
@@ -93,6 +93,13 @@ int srv_fail(const char *fmt, ...)
     __attribute__((format(printf, 1, 2)))
 #endif
     ;
+
+/* The format an output file's suffix names (.ply, .obj, .drc, .meshopt.glb, .glb, .stl),
+ * PROTO_FORMAT_NONE for no path; -1 for a suffix isoserve does not write. */
+int srv_format_of_path(const char *path);
+/* Writes bytes to path through a temporary file and rename, so that a reader never sees
+ * half a file; 0, or prints the problem and returns 1. */
+int srv_write_file(const unsigned char *bytes, size_t size, const char *path);
 
 /* Progress for long steps: drawn on stderr only when it is a terminal. */
 void srv_progress(void *label, double fraction);

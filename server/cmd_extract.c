@@ -11,44 +11,6 @@
 #include "cli.h"
 #include "pipeline.h"
 
-static int ends_with(const char *s, const char *suffix)
-{
-    size_t n = strlen(s), m = strlen(suffix);
-    return n >= m && !strcmp(s + n - m, suffix);
-}
-
-/* The format an output file's suffix names, or PROTO_FORMAT_NONE for no output; -1 for a
- * suffix isoserve does not write. */
-static int format_of(const char *path)
-{
-    static const struct { const char *suffix; proto_format format; } formats[] = {
-        {".ply", PROTO_FORMAT_PLY}, {".obj", PROTO_FORMAT_OBJ}, {".drc", PROTO_FORMAT_DRACO},
-        {".meshopt.glb", PROTO_FORMAT_GLB_MESHOPT}, {".glb", PROTO_FORMAT_GLB},
-        {".stl", PROTO_FORMAT_STL}};
-    if (!path)
-        return PROTO_FORMAT_NONE;
-    for (size_t i = 0; i < sizeof formats / sizeof formats[0]; i++)
-        if (ends_with(path, formats[i].suffix))
-            return (int)formats[i].format;
-    return -1;
-}
-
-/* Writes the encoded mesh to path through a temporary file and rename, so a reader never
- * sees half a mesh. */
-static int write_mesh(const unsigned char *bytes, size_t size, const char *path)
-{
-    size_t len = strlen(path) + 8;
-    char *tmp = malloc(len);
-    FILE *f = tmp ? (snprintf(tmp, len, "%s.tmp", path), fopen(tmp, "wb")) : NULL;
-    int ok = f && fwrite(bytes, 1, size, f) == size;
-    ok = f && fclose(f) == 0 && ok;
-    ok = ok && rename(tmp, path) == 0;
-    if (!ok && tmp)
-        remove(tmp);
-    free(tmp);
-    return ok ? 0 : srv_fail("%s: cannot write the mesh", path);
-}
-
 /* The measured distance between the exact and the simplified surface (mesh.h), in the
  * mesh's units: "from_exact" samples the exact surface, "to_exact" the simplified one;
  * "drawn_*": the points drawn by area for the percentile (0: every centroid). */
@@ -201,7 +163,7 @@ static int srv_cmd_extract(int argc, char **argv)
                         budget ? "--budget" : simplify ? "--simplify" : "--full-scan");
     if (no_simplify && !budget)
         return srv_fail("extract: --no-simplify goes with --budget");
-    int format = format_of(out);
+    int format = srv_format_of_path(out);
     if (format < 0)
         return srv_fail("%s: unknown output format (use .ply, .stl, .obj, .drc, .glb or .meshopt.glb)", out);
     opt.want_tree = !full_scan;
@@ -229,7 +191,7 @@ static int srv_cmd_extract(int argc, char **argv)
     }
     const iso_extract_stats st = res.stats;
     const iso_budget_result chosen = res.chosen;
-    int status = out ? write_mesh(res.bytes, res.size, out) : 0;
+    int status = out ? srv_write_file(res.bytes, res.size, out) : 0;
     if (as_json && status == 0) {
         size_t volume_bytes = iso_vol_count(s.vol) * iso_vol_type_size(s.vol->type);
         int world = params.space == ISO_SPACE_WORLD;

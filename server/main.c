@@ -7,7 +7,7 @@
 #include "cli.h"
 
 static const srv_command *const commands[] = {&srv_info_command, &srv_build_command, &srv_extract_command,
-                                              &srv_serve_command, &srv_bench_command};
+                                              &srv_serve_command, &srv_segments_command, &srv_bench_command};
 #define COMMAND_COUNT (sizeof commands / sizeof commands[0])
 
 static const srv_command *find_command(const char *name)

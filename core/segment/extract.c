@@ -266,6 +266,8 @@ int iso_seg_extract(const iso_segmentation *seg, size_t s, const iso_seg_params 
 
 typedef struct all_job {
     const iso_segmentation *seg;
+    const size_t *which;
+    size_t count;
     iso_seg_params params;
     iso_mesh *meshes;
     iso_extract_stats *stats;
@@ -279,10 +281,11 @@ static void extract_share(void *context, int t, int threads)
     (void)threads;
     all_job *job = context;
     for (;;) {
-        size_t s = atomic_fetch_add(&job->next, 1);
-        if (s >= job->seg->segment_count || atomic_load(&job->rc))
+        size_t k = atomic_fetch_add(&job->next, 1);
+        if (k >= job->count || atomic_load(&job->rc))
             return;
-        int rc = iso_seg_extract(job->seg, s, &job->params, &job->meshes[s], &job->stats[s], &job->err[t]);
+        size_t s = job->which ? job->which[k] : k;
+        int rc = iso_seg_extract(job->seg, s, &job->params, &job->meshes[k], &job->stats[k], &job->err[t]);
         if (rc) {
             int none = 0;
             atomic_compare_exchange_strong(&job->rc, &none, rc);
@@ -291,25 +294,29 @@ static void extract_share(void *context, int t, int threads)
     }
 }
 
-int iso_seg_extract_all(const iso_segmentation *seg, const iso_seg_params *params, iso_mesh *meshes,
-                        iso_extract_stats *stats, iso_error *err)
+int iso_seg_extract_all(const iso_segmentation *seg, const size_t *which, size_t count, const iso_seg_params *params,
+                        iso_mesh *meshes, iso_extract_stats *stats, iso_error *err)
 {
+    if (!which)
+        count = seg->segment_count;
     iso_extract_stats *own = NULL;
-    if (!stats && !(stats = own = calloc(seg->segment_count ? seg->segment_count : 1, sizeof *stats)))
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory for %zu segments' stats", seg->segment_count);
+    if (!stats && !(stats = own = calloc(count ? count : 1, sizeof *stats)))
+        return iso_error_set(err, ISO_E_NOMEM, "out of memory for %zu segments' stats", count);
     all_job *job = calloc(1, sizeof *job);
     if (!job) {
         free(own);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the segments");
     }
     job->seg = seg;
+    job->which = which;
+    job->count = count;
     job->params = *params;
     job->params.threads = 1; /* the segments are the parallel work */
     job->meshes = meshes;
     job->stats = stats;
     int threads = iso_parallel_threads(params->threads);
-    if ((size_t)threads > seg->segment_count)
-        threads = seg->segment_count ? (int)seg->segment_count : 1;
+    if ((size_t)threads > count)
+        threads = count ? (int)count : 1;
     iso_parallel_run(threads, extract_share, job);
     int rc = atomic_load(&job->rc);
     if (rc) {
@@ -319,8 +326,8 @@ int iso_seg_extract_all(const iso_segmentation *seg, const iso_seg_params *param
                     *err = job->err[t];
                 break;
             }
-        for (size_t s = 0; s < seg->segment_count; s++)
-            iso_mesh_free(&meshes[s]);
+        for (size_t k = 0; k < count; k++)
+            iso_mesh_free(&meshes[k]);
     }
     free(job);
     free(own);

@@ -60,7 +60,9 @@ static int distinct_values(const iso_volume *vol, int64_t **values, size_t *coun
 
 /* ITK-SNAP's label description file: '#' comments, then per line
  *     IDX  R  G  B  A  VIS  MSH  "LABEL"
- * (colours 0..255, A opacity 0..1). Applies each line to the segment whose value is IDX. */
+ * (colours 0..255, A opacity 0..1); or the two-column lists atlases ship (MRIcron's
+ * .nii.txt), "IDX NAME", which name without colouring. Applies each line to the segment
+ * whose value is IDX. */
 static int read_descriptions(const char *path, iso_segmentation *seg, iso_error *err)
 {
     FILE *f = fopen(path, "r");
@@ -81,11 +83,22 @@ static int read_descriptions(const char *path, iso_segmentation *seg, iso_error 
             continue;
         long idx, r, g, b, vis, mesh;
         double alpha;
-        int used = 0;
+        int used = 0, named = 0;
         if (sscanf(p, "%ld %ld %ld %ld %lf %ld %ld %n", &idx, &r, &g, &b, &alpha, &vis, &mesh, &used) != 7 ||
             p[used] != '"') {
-            rc = iso_error_set(err, ISO_E_FORMAT, "%s:%d: expected IDX R G B A VIS MSH \"LABEL\"", path, line_no);
-            break;
+            /* The two-column form: "IDX NAME" (a value and the rest of the line). */
+            if (sscanf(p, "%ld %n", &idx, &named) != 1 || named == 0 || p[named] == '\0' || p[named] == '\n' ||
+                (p[named] >= '0' && p[named] <= '9') || p[named] == '"') {
+                rc = iso_error_set(err, ISO_E_FORMAT, "%s:%d: expected IDX R G B A VIS MSH \"LABEL\" or IDX NAME",
+                                   path, line_no);
+                break;
+            }
+            char *name = p + named;
+            name[strcspn(name, "\r\n")] = '\0';
+            for (size_t s = 0; s < seg->segment_count; s++)
+                if (seg->segments[s].value == idx)
+                    snprintf(seg->segments[s].name, sizeof seg->segments[s].name, "%s", name);
+            continue;
         }
         char *name = p + used + 1, *end = strrchr(name, '"');
         if (!end || idx < 0 || r < 0 || r > 255 || g < 0 || g > 255 || b < 0 || b > 255) {

@@ -96,8 +96,9 @@ float iso_seg_srgb_to_linear(float c);
 /* A label map's table: one segment per distinct non-zero value of vol (0 is the
  * background), numbered and named by its value ("Segment 7") with the palette's colours,
  * unless `descriptions` names an ITK-SNAP label description file (lines "IDX R G B A VIS
- * MSH \"LABEL\"", colours 0..255), whose labels name and colour the values it lists (the
- * others keep the defaults; its label 0 is the background). Takes vol (sets vol->labels;
+ * MSH \"LABEL\"", colours 0..255) or a two-column "IDX NAME" list (atlases' .txt), whose
+ * labels name (and colour) the values it lists (the others keep the defaults; its label 0
+ * is the background). Takes vol (sets vol->labels;
  * freed on failure too). Returns 0, ISO_E_UNSUPPORTED (not integers, too many labels),
  * ISO_E_FORMAT (a bad description file, with its line) or ISO_E_IO. */
 int iso_seg_from_labels(iso_volume *vol, const char *descriptions, iso_segmentation **out, iso_error *err);
@@ -142,11 +143,12 @@ typedef struct iso_seg_params {
  * ISO_E_ARGUMENT (no such segment, a bad smoothing), ISO_E_LIMIT or ISO_E_NOMEM. */
 int iso_seg_extract(const iso_segmentation *seg, size_t s, const iso_seg_params *params, iso_mesh *mesh,
                     iso_extract_stats *stats, iso_error *err);
-/* Every segment's surface at once: meshes[s] for s < segment_count (each emptied
- * first), the segments shared among the threads, one per thread at a time; stats per
- * segment (may be NULL). On failure every mesh is freed. */
-int iso_seg_extract_all(const iso_segmentation *seg, const iso_seg_params *params, iso_mesh *meshes,
-                        iso_extract_stats *stats, iso_error *err);
+/* Many segments' surfaces at once: those of the `count` indices in `which` (NULL: every
+ * segment, count ignored) into meshes[k] (each emptied first), the segments shared among
+ * params->threads, one per thread at a time; stats per mesh (may be NULL). On failure
+ * every mesh is freed. */
+int iso_seg_extract_all(const iso_segmentation *seg, const size_t *which, size_t count, const iso_seg_params *params,
+                        iso_mesh *meshes, iso_extract_stats *stats, iso_error *err);
 /* Normals of segment s's mesh (from iso_seg_extract with the same params): the gradient of
  * the order-`order` B-spline (mesh.h) of the field its surface comes from (the indicator,
  * smoothed when asked; a fractional layer's values), pointing out of the segment. */

@@ -214,7 +214,7 @@ static void test_all_segments_at_once(void)
     iso_mesh *all = calloc(seg->segment_count, sizeof *all);
     iso_error err;
     iso_seg_params p = {.cap = 1, .threads = 2};
-    CHECK_OK(iso_seg_extract_all(seg, &p, all, NULL, &err), &err);
+    CHECK_OK(iso_seg_extract_all(seg, NULL, 0, &p, all, NULL, &err), &err);
     for (size_t s = 0; s < seg->segment_count; s++) {
         iso_mesh one;
         iso_mesh_init(&one);
@@ -398,6 +398,18 @@ static void test_itksnap_descriptions(void)
         CHECK(strcmp(seg->segments[1].name, "Spleen, \\\"the\\\" one") == 0);
         CHECK_NEAR(seg->segments[1].color[2], 1, 0);
         CHECK(strcmp(seg->segments[2].name, "Segment 7") == 0); /* not described */
+        iso_seg_destroy(seg);
+    }
+    /* The two-column form atlases ship (MRIcron's .nii.txt). */
+    const char *columns = "0\tUnclassified\n1\tMiddle_cerebellar_peduncle\n7 Fornix (body)\n";
+    check_write_file(path, columns, strlen(columns), NULL, 0);
+    vol = surface_make_volume(n[0], n[1], n[2], ISO_U8);
+    iso_vol_set(vol, 1, 1, 1, 1);
+    iso_vol_set(vol, 2, 2, 2, 7);
+    CHECK_OK(iso_seg_from_labels(vol, path, &seg, &err), &err);
+    if (seg) {
+        CHECK(strcmp(seg->segments[0].name, "Middle_cerebellar_peduncle") == 0);
+        CHECK(strcmp(seg->segments[1].name, "Fornix (body)") == 0);
         iso_seg_destroy(seg);
     }
     const char *broken = "1 255 0 0 1 1 1 \"ok\"\n2 300 0 0 1 1 1 \"too red\"\n";
