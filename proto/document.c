@@ -2,6 +2,7 @@
 #include "document.h"
 
 #include <jansson.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "extract/extract.h"
@@ -85,6 +86,10 @@ static json_t *volume_object(const proto_volume_doc *doc, int detail)
                           "suggested_levels", levels, "version", doc->version);
     if (o && doc->shard)
         json_object_set_new(o, "shard", json_string(doc->shard));
+    if (o && doc->segmentation) {
+        json_object_set_new(o, "segments", json_integer((json_int_t)doc->segmentation->segment_count));
+        json_object_set_new(o, "segmentation", json_string(doc->segmentation->source));
+    }
     if (!o || !detail)
         return o;
     json_t *counts = json_array();
@@ -106,6 +111,25 @@ static json_t *volume_object(const proto_volume_doc *doc, int detail)
 char *proto_json_volume(const proto_volume_doc *doc, int detail)
 {
     return dump(volume_object(doc, detail));
+}
+
+char *proto_json_segments(const char *id, const iso_segmentation *seg)
+{
+    json_t *list = json_array();
+    for (size_t i = 0; list && i < seg->segment_count; i++) {
+        const iso_segment *s = &seg->segments[i];
+        char hex[8];
+        snprintf(hex, sizeof hex, "#%02x%02x%02x", (unsigned)(s->color[0] * 255 + 0.5f),
+                 (unsigned)(s->color[1] * 255 + 0.5f), (unsigned)(s->color[2] * 255 + 0.5f));
+        json_array_append_new(list, json_pack("{s:I, s:s, s:s, s:s, s:[f,f,f], s:s, s:I, s:f, s:I}", "number",
+                                              (json_int_t)s->number, "name", s->name, "category", s->category,
+                                              "type", s->type, "color", (double)s->color[0], (double)s->color[1],
+                                              (double)s->color[2], "color_hex", hex, "voxels", (json_int_t)s->voxels,
+                                              "volume_ml", iso_seg_volume_mm3(seg, i) / 1000, "layer",
+                                              (json_int_t)s->layer));
+    }
+    return dump(json_pack("{s:s, s:s, s:I, s:o}", "volume", id, "source", seg->source, "layers",
+                          (json_int_t)seg->layer_count, "segments", list));
 }
 
 char *proto_json_volume_list(const proto_volume_doc *docs, size_t count)

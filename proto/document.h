@@ -8,6 +8,7 @@
 #include <stdint.h>
 
 #include "query.h"
+#include "segment/segment.h"
 #include "volume/volume.h"
 
 /* What the API says about one volume. Strings are borrowed. */
@@ -25,12 +26,20 @@ typedef struct proto_volume_doc {
     size_t hierarchy_nodes, hierarchy_bytes;
     double hierarchy_ms;          /* build, or load and verify, time */
     int hierarchy_from_file;      /* 1: read from the cache dir */
+    const iso_segmentation *segmentation; /* a segmentation's, else NULL */
 } proto_volume_doc;
 
 /* One volume: id, name, modality, dims, spacing, origin, index_to_world (row-major 4x4,
- * LPS mm), value_type, value_range, suggested_levels, version; with detail also histogram
+ * LPS mm), value_type, value_range, suggested_levels, version; a segmentation's also
+ * "segments" (how many) and "segmentation" (its source: labels, seg.nrrd, dicom-seg); with detail also histogram
  * {min, max, counts} and hierarchy {nodes, bytes, ms, from_file}. */
 char *proto_json_volume(const proto_volume_doc *doc, int detail);
+/* A segmentation's segments: {"volume": id, "source", "layers", "segments": [{"number",
+ * "name", "category", "type", "color" (sRGB 0..1), "color_hex" ("#rrggbb"), "voxels",
+ * "volume_ml", "layer"}...]}, in the table's order. Volumes in mL: voxels times a voxel's
+ * volume (segment.h). */
+char *proto_json_segments(const char *id, const iso_segmentation *seg);
+
 /* {"volumes": [...]} of the summaries (catalog summaries for docs without vol). */
 char *proto_json_volume_list(const proto_volume_doc *docs, size_t count);
 /* {"status": "ready", "volumes": loaded, "in_catalog": total} or

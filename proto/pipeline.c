@@ -111,12 +111,16 @@ static int complete_chain(const iso_tree *tree, const iso_volume *vol,
                           const proto_pipeline_request *req, proto_pipeline_result *res,
                           iso_mesh_chain *chain, iso_error *err)
 {
-    int rc = faithful_triangles(tree, req, res, err);
+    int rc = req->segmentation ? 0 : faithful_triangles(tree, req, res, err); /* budgets only */
     chain->faithful_triangles = res->faithful_triangles;
     iso_mesh m;
     iso_mesh_init(&m);
+    /* A segment's surface is not on a level of the samples: its moved vertices' distance
+     * is what the chain measures, and their value error is not defined (0). */
     for (int k = 1; !rc && k < chain->levels; k++)
-        if (chain->level[k].value_error < 0 && !(rc = iso_mesh_chain_mesh(chain, k, &m, err)))
+        if (chain->level[k].value_error < 0 && req->segmentation)
+            chain->level[k].value_error = 0;
+        else if (chain->level[k].value_error < 0 && !(rc = iso_mesh_chain_mesh(chain, k, &m, err)))
             chain->level[k].value_error = iso_mesh_value_error(vol, &m, req->extract.space,
                                                                req->extract.level);
     iso_mesh_free(&m);

@@ -98,10 +98,10 @@ const char *proto_format_extension(proto_format format) { return format_extensio
 
 /* The parameters, in the order the key lists them. */
 enum { P_LEVEL, P_TOLERANCE, P_NORMALS, P_FORMAT, P_QP, P_QN, P_SPEED, P_BUDGET, P_CAP, P_MEASURES,
-       P_DISTANCE, P_COUNT };
+       P_DISTANCE, P_SMOOTHING, P_COUNT };
 static const char *const param_names[P_COUNT] = {"level", "tolerance", "normals", "format",
                                                  "qp", "qn", "speed", "budget", "cap",
-                                                 "measures", "distance"};
+                                                 "measures", "distance", "smoothing"};
 
 static int parse_one(int which, const char *value, proto_mesh_request *out, proto_problem *problem)
 {
@@ -127,6 +127,14 @@ static int parse_one(int which, const char *value, proto_mesh_request *out, prot
         *v += 0.0; /* -0 and 0 are one request */
         return 0;
     }
+    case P_SMOOTHING:
+        if (parse_decimal(key, value, &out->smoothing, problem))
+            return -1;
+        if (!(out->smoothing >= 0) || out->smoothing > PROTO_SMOOTHING_MAX)
+            return proto_problem_set(problem, 400, key, "smoothing must be from 0 to %g mm, not %s",
+                                     PROTO_SMOOTHING_MAX, shown(value, buf, sizeof buf));
+        out->smoothing += 0.0;
+        return 0;
     case P_NORMALS:
         out->normals = value ? iso_normals_order_from_name(value) : -1;
         if (out->normals < 0)
@@ -182,13 +190,28 @@ static int parse_one(int which, const char *value, proto_mesh_request *out, prot
     }
 }
 
-int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh_request *out,
-                             proto_problem *problem)
+/* The parameters one route takes: the level's mesh, a segment's, or every segment's. */
+typedef enum route_kind { ROUTE_LEVEL, ROUTE_SEGMENT, ROUTE_SEGMENTS } route_kind;
+
+static int takes(route_kind route, int which)
 {
+    if (route == ROUTE_LEVEL)
+        return which != P_SMOOTHING;
+    if (which == P_LEVEL || which == P_TOLERANCE || which == P_BUDGET)
+        return 0;
+    return route == ROUTE_SEGMENT || (which != P_DISTANCE && which != P_MEASURES);
+}
+
+static int parse_params(route_kind route, const proto_param *params, size_t count, proto_mesh_request *out,
+                        int seen[P_COUNT], proto_problem *problem)
+{
+    static const char *const taken[] = {
+        "level, tolerance, normals, format, qp, qn, speed, budget, cap, measures and distance",
+        "normals, format, qp, qn, speed, cap, measures, distance and smoothing",
+        "normals, format (glb or glb-meshopt), qp, qn, speed, cap and smoothing"};
     char buf[40];
-    int seen[P_COUNT] = {0};
     *out = (proto_mesh_request){.normals = PROTO_NORMALS_DEFAULT,
-                                .format = PROTO_FORMAT_DRACO,
+                                .format = route == ROUTE_SEGMENTS ? PROTO_FORMAT_GLB : PROTO_FORMAT_DRACO,
                                 .position_bits = PROTO_POSITION_BITS_DEFAULT,
                                 .normal_bits = PROTO_NORMAL_BITS_DEFAULT,
                                 .speed = PROTO_DRACO_SPEED_DEFAULT, .distance = -1};
@@ -197,16 +220,39 @@ int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh
         int which = 0;
         while (which < P_COUNT && strcmp(key, param_names[which]))
             which++;
+        if (which < P_COUNT && !takes(route, which))
+            return proto_problem_set(problem, 400, key,
+                                     "%s does not apply here: a segment's surface is its indicator's 0.5 "
+                                     "iso-surface; this route takes %s", key, taken[route]);
         if (which == P_COUNT)
             return proto_problem_set(problem, 400, NULL,
-                                     "unknown parameter \"%s\"; the mesh takes level, tolerance, "
-                                     "normals, format, qp, qn, speed, budget, cap, measures and distance",
-                                     shown(key, buf, sizeof buf));
+                                     "unknown parameter \"%s\"; %s takes %s",
+                                     shown(key, buf, sizeof buf), route == ROUTE_LEVEL ? "the mesh" : "this route",
+                                     taken[route]);
         if (seen[which]++)
             return proto_problem_set(problem, 400, key, "%s is given more than once", key);
         if (parse_one(which, params[i].value, out, problem))
             return -1;
     }
+    if (route == ROUTE_SEGMENTS && out->format != PROTO_FORMAT_GLB && out->format != PROTO_FORMAT_GLB_MESHOPT)
+        return proto_problem_set(problem, 400, "format", "every segment comes as one glTF scene: format must be "
+                                 "glb (Draco) or glb-meshopt, not %s", format_names[out->format]);
+    return 0;
+}
+
+int proto_segment_request_parse(const proto_param *params, size_t count, int all, proto_mesh_request *out,
+                                proto_problem *problem)
+{
+    int seen[P_COUNT] = {0};
+    return parse_params(all ? ROUTE_SEGMENTS : ROUTE_SEGMENT, params, count, out, seen, problem);
+}
+
+int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh_request *out,
+                             proto_problem *problem)
+{
+    int seen[P_COUNT] = {0};
+    if (parse_params(ROUTE_LEVEL, params, count, out, seen, problem))
+        return -1;
     if (!seen[P_LEVEL])
         return proto_problem_set(problem, 400, "level", "level is required, e.g. ?level=700");
     if (seen[P_DISTANCE] && seen[P_BUDGET])
@@ -237,6 +283,11 @@ size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t s
     if (n >= 0 && req->distance >= 0) {
         size_t used = (size_t)n < size ? (size_t)n : size;
         int more = snprintf(buf ? buf + used : NULL, size - used, "&distance=%.17g", req->distance);
+        n = more < 0 ? more : n + more;
+    }
+    if (n >= 0 && req->smoothing > 0) {
+        size_t used = (size_t)n < size ? (size_t)n : size;
+        int more = snprintf(buf ? buf + used : NULL, size - used, "&smoothing=%.17g", req->smoothing);
         n = more < 0 ? more : n + more;
     }
     return n < 0 ? 0 : (size_t)n;

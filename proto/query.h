@@ -33,6 +33,7 @@ typedef struct proto_param {
 #define PROTO_BUDGET_MAX 100000000u  /* triangles */
 #define PROTO_TOLERANCE_MAX 1e30     /* beyond this a tolerance means nothing for any volume */
 #define PROTO_VALUE_MAX 1e300        /* |level| */
+#define PROTO_SMOOTHING_MAX 100.0    /* mm: a segment's Gaussian sigma */
 
 typedef struct proto_mesh_request {
     double level;
@@ -47,6 +48,7 @@ typedef struct proto_mesh_request {
     int cap;               /* cap=true: closed at the volume's border; default false */
     int measures;          /* measures=true: area, enclosed volume and the edge census in the
                             * headers; they cost more than the extraction, so only on request */
+    double smoothing;      /* the segment routes: Gaussian sigma in mm, 0 (default) none */
 } proto_mesh_request;
 
 /* What went wrong with a request, for an application/problem+json body (RFC 9457). */
@@ -64,6 +66,14 @@ typedef struct proto_problem {
  * of range, unknown value, unknown parameter, given twice). Safe on any input. */
 int proto_mesh_request_parse(const proto_param *params, size_t count, proto_mesh_request *out,
                              proto_problem *problem);
+
+/* Parses the parameters of /v1/volumes/{id}/segments/{n}/mesh (all = 0) or
+ * /v1/volumes/{id}/segments/mesh (all = 1): the mesh's parameters but level, tolerance and
+ * budget (the segment defines its surface), plus smoothing; the all-segments route takes
+ * neither distance nor measures, and formats glb (its default) and glb-meshopt only.
+ * Returns 0 or -1 with a 400 problem naming the parameter. */
+int proto_segment_request_parse(const proto_param *params, size_t count, int all, proto_mesh_request *out,
+                                proto_problem *problem);
 
 /* The normalised form of a request ("level=700&tolerance=0&normals=tricubic&..."), every
  * parameter present, numbers printed so that they round-trip. Writes at most size bytes

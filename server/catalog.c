@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "io/io.h"
+#include "segment/segment.h"
 #include "dicomweb.h"
 #include "fetch.h"
 #include "hash.h"
@@ -24,21 +25,26 @@ int srv_catalog_id_valid(const char *id)
     return strspn(id, "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789._-") == n;
 }
 
+static void free_entry(srv_catalog_entry *e)
+{
+    free(e->path);
+    free(e->name);
+    free(e->modality);
+    free(e->orthanc_url);
+    free(e->orthanc_series);
+    free(e->dicomweb_url);
+    free(e->dicomweb_study);
+    free(e->dicomweb_series);
+    free(e->dicomweb_credentials);
+    free(e->labels_file);
+}
+
 void srv_catalog_free(srv_catalog *catalog)
 {
     if (!catalog)
         return;
-    for (size_t i = 0; i < catalog->count; i++) {
-        free(catalog->entries[i].path);
-        free(catalog->entries[i].name);
-        free(catalog->entries[i].modality);
-        free(catalog->entries[i].orthanc_url);
-        free(catalog->entries[i].orthanc_series);
-        free(catalog->entries[i].dicomweb_url);
-        free(catalog->entries[i].dicomweb_study);
-        free(catalog->entries[i].dicomweb_series);
-        free(catalog->entries[i].dicomweb_credentials);
-    }
+    for (size_t i = 0; i < catalog->count; i++)
+        free_entry(&catalog->entries[i]);
     free(catalog->entries);
     free(catalog->slots);
     memset(catalog, 0, sizeof *catalog);
@@ -127,6 +133,27 @@ static int add(srv_catalog *catalog, const char *id, const char *path, const cha
         s = (s + 1) & (catalog->slot_count - 1);
     catalog->slots[s] = ++catalog->count;
     return 0;
+}
+
+/* Removes the last entry added (its strings, its slot in the index). */
+static void drop_last(srv_catalog *catalog)
+{
+    srv_catalog_entry *e = &catalog->entries[catalog->count - 1];
+    size_t mask = catalog->slot_count - 1, s = srv_catalog_hash(e->id) & mask;
+    while (catalog->slots[s] != catalog->count)
+        s = (s + 1) & mask;
+    /* Open addressing: the entries after it in its run are put back. */
+    catalog->slots[s] = 0;
+    for (size_t t = (s + 1) & mask; catalog->slots[t]; t = (t + 1) & mask) {
+        size_t moved = catalog->slots[t];
+        catalog->slots[t] = 0;
+        size_t u = srv_catalog_hash(catalog->entries[moved - 1].id) & mask;
+        while (catalog->slots[u])
+            u = (u + 1) & mask;
+        catalog->slots[u] = moved;
+    }
+    free_entry(e);
+    catalog->count--;
 }
 
 /* ---------------------------------------------------------------- catalog files */
@@ -329,6 +356,25 @@ static int read_entry(const char *file, size_t index, json_t *item, srv_catalog 
     return rc;
 }
 
+/* The item's "labels" (true, false, or a descriptions file) on the entries it added. */
+static int read_labels(const char *file, size_t index, json_t *item, srv_catalog *out, size_t first,
+                       iso_error *err)
+{
+    json_t *labels = json_object_get(item, "labels");
+    if (!labels || json_is_false(labels))
+        return 0;
+    if (!json_is_true(labels) && !json_is_string(labels))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: volume %zu: \"labels\" is true, false or a label "
+                             "descriptions file", file, index);
+    for (size_t i = first; i < out->count; i++) {
+        srv_catalog_entry *e = &out->entries[i];
+        e->labels = 1;
+        if (json_is_string(labels) && !(e->labels_file = resolve(file, json_string_value(labels))))
+            return iso_error_set(err, ISO_E_NOMEM, "out of memory reading %s", file);
+    }
+    return 0;
+}
+
 int srv_catalog_read(const char *file, srv_catalog *out, iso_error *err)
 {
     memset(out, 0, sizeof *out);
@@ -346,7 +392,13 @@ int srv_catalog_read(const char *file, srv_catalog *out, iso_error *err)
     int rc = 0;
     for (size_t i = 0; i < json_array_size(list) && !rc; i++) {
         iso_error entry_err = {0};
+        size_t first = out->count;
         rc = read_entry(file, i, json_array_get(list, i), out, &entry_err);
+        if (!rc)
+            rc = read_labels(file, i, json_array_get(list, i), out, first, &entry_err);
+        if (rc == ISO_E_FORMAT) /* a bad "labels" takes back what its item added */
+            while (out->count > first)
+                drop_last(out);
         if (rc == ISO_E_FORMAT) { /* one bad entry does not hide the others */
             fprintf(stderr, "isoserve: %s; skipped\n", entry_err.message);
             rc = 0;
@@ -406,8 +458,8 @@ int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err)
         else if (!srv_catalog_id_valid(id) || has_id(out, id))
             fprintf(stderr, "isoserve: %s: id \"%s\" is %s; skipped\n", path, id,
                     has_id(out, id) ? "taken by another file" : "not [A-Za-z0-9._-]{1,64}");
-        else
-            rc = add(out, id, path, NULL, NULL, NULL, 0, err);
+        else if (!(rc = add(out, id, path, NULL, NULL, NULL, 0, err)))
+            out->entries[out->count - 1].labels = iso_seg_nrrd_recognises(path);
         free(path);
     }
     closedir(d);

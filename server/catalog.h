@@ -26,6 +26,9 @@ typedef struct srv_catalog_entry {
     char *modality;           /* "CT", "MR", "phantom", ... or "" */
     double levels[SRV_LEVELS_MAX];
     size_t level_count;       /* 0: suggest levels from the histogram */
+    int labels;               /* a segmentation (segment/segment.h): a label map ("labels":
+                                 true or a descriptions file), a .seg.nrrd, a DICOM SEG */
+    char *labels_file;        /* its label descriptions (ITK-SNAP's, or "IDX NAME"), or NULL */
 } srv_catalog_entry;
 
 typedef struct srv_catalog {
@@ -38,8 +41,9 @@ typedef struct srv_catalog {
 /* 1 if id matches [A-Za-z0-9._-]{1,64}. */
 int srv_catalog_id_valid(const char *id);
 
-/* Reads a catalog file: {"volumes": [{"id", "path", "name"?, "modality"?, "levels"?}, ...]}
- * (or the array alone). Relative paths are taken from the catalog's directory. Instead of
+/* Reads a catalog file: {"volumes": [{"id", "path", "name"?, "modality"?, "levels"?,
+ * "labels"?}, ...]} (or the array alone); "labels": true declares a label map (or a DICOM
+ * SEG) a segmentation, a string names its label descriptions too (relative to the catalog). Relative paths are taken from the catalog's directory. Instead of
  * "path", "orthanc": {"url": "http://host:8042", "series": "ORTHANC-SERIES-ID"} names a
  * series on an Orthanc server (orthanc.h), and "dicomweb": {"url", "credentials"?, "study"?,
  * "series"} one on a DICOMweb archive (dicomweb.h); with "query" (a QIDO-RS query string)
@@ -55,7 +59,8 @@ void srv_catalog_id_of(const char *file_name, char *id, size_t size);
 
 /* Every loadable file of dir (not hidden, not the data file of a detached header) becomes
  * a volume whose id is its file name without its extension(s): "head.nhdr" -> "head",
- * "brain.nii.gz" -> "brain"; so does every subdirectory holding DICOM files (a series,
+ * "brain.nii.gz" -> "brain"; a 3D Slicer segmentation ("liver.seg.nrrd" -> "liver.seg") is a
+ * segmentation; so does every subdirectory holding DICOM files (a series,
  * named by the subdirectory). Files whose id is not valid or is taken are reported and
  * skipped. Entries are sorted by id. */
 int srv_catalog_scan(const char *dir, srv_catalog *out, iso_error *err);

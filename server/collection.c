@@ -59,6 +59,21 @@ err:
     return ISO_E_NOMEM;
 }
 
+/* A loaded volume's memory: its segmentation's (which holds the volume and tree), or the
+ * volume and tree themselves. */
+static void free_loaded(srv_volume *v)
+{
+    if (v->seg) {
+        iso_seg_destroy(v->seg);
+    } else {
+        iso_tree_destroy(v->tree);
+        iso_vol_destroy(v->vol);
+    }
+    v->seg = NULL;
+    v->tree = NULL;
+    v->vol = NULL;
+}
+
 void srv_collection_free(srv_collection *c)
 {
     if (!c->volumes)
@@ -66,8 +81,7 @@ void srv_collection_free(srv_collection *c)
     for (size_t i = 0; i < c->total; i++) {
         if (c->state[i] != SRV_ENTRY_LOADED)
             continue;
-        iso_tree_destroy(c->volumes[i].tree);
-        iso_vol_destroy(c->volumes[i].vol);
+        free_loaded(&c->volumes[i]);
     }
     free(c->volumes);
     free(c->state);
@@ -115,6 +129,30 @@ void srv_collection_release(srv_collection *c, const srv_volume *v)
     pthread_mutex_unlock(&c->lock);
 }
 
+/* A segmentation's identity beyond its first layer's samples: its other layers' samples,
+ * and its table (numbers, names, colours, layers, values), which the scenes carry: "s" and
+ * 8 hex digits (FNV-1a). */
+static const char *table_hash(const iso_segmentation *seg)
+{
+    static _Thread_local char text[16];
+    uint32_t h = 2166136261u;
+    for (size_t s = 0; s < seg->segment_count; s++) {
+        const iso_segment *sg = &seg->segments[s];
+        const unsigned char *parts[5] = {(const unsigned char *)&sg->number, (const unsigned char *)sg->name,
+                                         (const unsigned char *)sg->color, (const unsigned char *)&sg->layer,
+                                         (const unsigned char *)&sg->value};
+        const size_t sizes[5] = {sizeof sg->number, strlen(sg->name), sizeof sg->color, sizeof sg->layer,
+                                 sizeof sg->value};
+        for (int p = 0; p < 5; p++)
+            for (size_t i = 0; i < sizes[p]; i++)
+                h = (h ^ parts[p][i]) * 16777619u;
+    }
+    for (size_t l = 1; l < seg->layer_count; l++)
+        h = (h ^ seg->layers[l].tree->volume_crc) * 16777619u;
+    snprintf(text, sizeof text, "s%08x", (unsigned)h);
+    return text;
+}
+
 /* FNV-1a over the geometry: spacing, origin and direction move every vertex. */
 static uint32_t geometry_hash(const iso_volume *vol)
 {
@@ -132,8 +170,8 @@ static uint32_t geometry_hash(const iso_volume *vol)
 void srv_volume_describe(srv_volume *v, uint32_t volume_crc)
 {
     const srv_catalog_entry *e = v->entry;
-    snprintf(v->version, sizeof v->version, "%08x%08x-%d", (unsigned)volume_crc, (unsigned)geometry_hash(v->vol),
-             SRV_MESH_ALGORITHM_VERSION);
+    snprintf(v->version, sizeof v->version, "%08x%08x%s-%d", (unsigned)volume_crc, (unsigned)geometry_hash(v->vol),
+             v->seg ? table_hash(v->seg) : "", SRV_MESH_ALGORITHM_VERSION);
     iso_hist_compute(v->vol, SRV_HISTOGRAM_BINS, v->histogram);
     if (e->level_count) {
         memcpy(v->levels, e->levels, e->level_count * sizeof *v->levels);
@@ -153,7 +191,7 @@ proto_volume_doc srv_volume_doc(const srv_volume *v, const char *shard)
         .shard = shard, .id = e->id, .name = e->name && *e->name ? e->name : v->vol->description,
         .modality = e->modality && *e->modality ? e->modality : v->vol->modality,
         .version = v->version, .vol = v->vol, .levels = v->levels, .level_count = v->level_count,
-        .histogram = v->histogram, .histogram_bins = SRV_HISTOGRAM_BINS};
+        .histogram = v->histogram, .histogram_bins = SRV_HISTOGRAM_BINS, .segmentation = v->seg};
     if (v->tree) {
         doc.hierarchy_nodes = v->tree->node_count;
         doc.hierarchy_bytes = iso_tree_memory(v->tree);
@@ -198,6 +236,17 @@ static int load_tree(srv_volume *v, const srv_preload_options *opt, char *label,
     return 0;
 }
 
+/* The entry's segmentation: from its path (a label map with its descriptions, a .seg.nrrd,
+ * a DICOM SEG beside its CT). */
+static int load_segmentation(const srv_catalog_entry *e, const srv_preload_options *opt, char *label,
+                             iso_segmentation **seg, iso_error *err, int *upstream)
+{
+    iso_load_options lopt = {.max_bytes = opt->max_volume_bytes, .progress = srv_progress,
+                             .progress_context = label};
+    *upstream = 0;
+    return iso_seg_load(e->path, e->labels_file, &lopt, seg, err);
+}
+
 /* The entry's volume: from its archive (DICOMweb or Orthanc, and the cache dir), or its path. */
 static int load_volume(const srv_catalog_entry *e, const srv_preload_options *opt, char *label,
                        iso_volume **vol, iso_error *err, int *upstream)
@@ -223,18 +272,36 @@ static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload
     double start = iso_clock_ms();
     char label[160];
     snprintf(label, sizeof label, "isoserve: [%zu/%zu] %s: loading", index + 1, total, e->id);
-    int rc = load_volume(e, opt, label, &v->vol, err, upstream);
+    int rc = e->labels ? load_segmentation(e, opt, label, &v->seg, err, upstream)
+                       : load_volume(e, opt, label, &v->vol, err, upstream);
     if (rc) {
         fprintf(stderr, "isoserve: volume \"%s\": %s; skipped\n", e->id, err->message);
         return rc;
     }
+    if (v->seg)
+        v->vol = v->seg->layers[0].vol;
     snprintf(label, sizeof label, "isoserve: [%zu/%zu] %s: hierarchy", index + 1, total, e->id);
     rc = load_tree(v, opt, label, err);
+    if (!rc && v->seg) {
+        v->seg->layers[0].tree = v->tree;
+        if ((rc = iso_seg_build_trees(v->seg, 1, 0, srv_progress, label, err)))
+            fprintf(stderr, "isoserve: %s: building a layer's hierarchy: %s; skipped\n", e->id, err->message);
+        else
+            iso_seg_count_voxels(v->seg);
+    }
     if (rc) {
-        iso_vol_destroy(v->vol);
+        if (v->seg && !v->seg->layers[0].tree)
+            iso_tree_destroy(v->tree);
+        v->tree = v->seg ? NULL : v->tree;
+        free_loaded(v);
         return rc;
     }
-    v->bytes = iso_vol_count(v->vol) * iso_vol_type_size(v->vol->type) + iso_tree_memory(v->tree);
+    v->bytes = 0;
+    for (size_t l = 0; l < (v->seg ? v->seg->layer_count : 1); l++) {
+        const iso_volume *vol = v->seg ? v->seg->layers[l].vol : v->vol;
+        const iso_tree *tree = v->seg ? v->seg->layers[l].tree : v->tree;
+        v->bytes += iso_vol_count(vol) * iso_vol_type_size(vol->type) + iso_tree_memory(tree);
+    }
     srv_volume_describe(v, v->tree->volume_crc);
     fprintf(stderr, "isoserve: [%zu/%zu] %s: %zux%zux%zu %s, hierarchy %s in %.0f ms (%zu KB)\n",
             index + 1, total, e->id, v->vol->dims[0], v->vol->dims[1], v->vol->dims[2],
@@ -347,8 +414,7 @@ static void evict_over_cap(srv_collection *c)
         pthread_mutex_unlock(&c->lock);
         fprintf(stderr, "isoserve: %s: evicted (%zu KB; resident %zu KB, cap %" PRIu64 " KB)\n",
                 v.entry->id, v.bytes / 1024, atomic_load(&c->resident) / 1024, cap / 1024);
-        iso_tree_destroy(v.tree);
-        iso_vol_destroy(v.vol);
+        free_loaded(&v);
         give_back_freed_memory();
         pthread_mutex_lock(&c->lock);
     }

@@ -24,6 +24,7 @@
 #include "catalog.h"
 #include "document.h"
 #include "hierarchy/tree.h"
+#include "segment/segment.h"
 #include "volume/volume.h"
 
 #define SRV_HISTOGRAM_BINS 256
@@ -41,7 +42,11 @@ typedef struct srv_volume {
     const srv_catalog_entry *entry;   /* borrowed from the catalog */
     iso_volume *vol;
     iso_tree *tree;
-    char version[40];                 /* samples, geometry and algorithm: the ETag base */
+    iso_segmentation *seg;            /* a segmentation (catalog "labels", .seg.nrrd, DICOM
+                                         SEG), else NULL: it owns vol and tree then (its
+                                         first layer's) */
+    char version[48];                 /* samples, geometry, segment table and algorithm: the
+                                         ETag base */
     uint64_t histogram[SRV_HISTOGRAM_BINS];
     double levels[SRV_LEVELS_MAX];    /* the catalog's, else Otsu's */
     size_t level_count;

@@ -443,6 +443,28 @@ static int etag_matches(const char *header, const char *etag)
     return 0;
 }
 
+/* A segmentation's segments: cacheable like its meshes (the document changes with the
+ * volume's version, which covers the segment table). */
+static enum MHD_Result route_segments(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                                      const srv_volume *v)
+{
+    char etag[96];
+    mesh_etag(v, "segments", etag, sizeof etag);
+    const char *if_none_match = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_IF_NONE_MATCH);
+    if (etag_matches(if_none_match, etag)) {
+        struct MHD_Response *r = MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
+        if (r)
+            add_header(r, MHD_HTTP_HEADER_ETAG, etag);
+        return send_response(s, c, req, 304, r, 0);
+    }
+    size_t size = 0;
+    struct MHD_Response *r = text_response(proto_json_segments(v->entry->id, v->seg), "application/json",
+                                           "no-cache", &size);
+    if (r)
+        add_header(r, MHD_HTTP_HEADER_ETAG, etag);
+    return send_response(s, c, req, 200, r, size);
+}
+
 static void add_number(struct MHD_Response *r, const char *name, const char *fmt, double value)
 {
     char text[48];
@@ -569,8 +591,10 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
     return send_response(s, c, req, 200, r, gzip ? body->gzip_size : body->size);
 }
 
+/* A mesh route: the level's mesh (segment SRV_JOB_LEVEL), a segment's (its index) or
+ * every segment's (SRV_JOB_SEGMENTS): parameters, ETag and 304, cache, the job. */
 static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_request *req,
-                                  const srv_volume *v, const char *path)
+                                  const srv_volume *v, const char *path, long segment)
 {
     param_list params = {0};
     MHD_get_connection_values(c, MHD_GET_ARGUMENT_KIND, collect_param, &params);
@@ -578,15 +602,25 @@ static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_r
         return fail(s, c, req, path, 400, "more than %d query parameters", MAX_PARAMS);
     proto_mesh_request mr;
     proto_problem problem = {0};
-    if (proto_mesh_request_parse(params.items, params.count, &mr, &problem))
+    if (segment == SRV_JOB_LEVEL ? proto_mesh_request_parse(params.items, params.count, &mr, &problem)
+                                 : proto_segment_request_parse(params.items, params.count, segment == SRV_JOB_SEGMENTS,
+                                                               &mr, &problem))
         return send_problem(s, c, req, &problem, path);
 
-    char normalised[256], key[512], etag[96], gz_etag[112], file_name[128];
-    proto_mesh_request_key(&mr, normalised, sizeof normalised);
+    char normalised[320], key[512], etag[96], gz_etag[112], file_name[160];
+    size_t used = proto_mesh_request_key(&mr, normalised, sizeof normalised);
+    if (segment != SRV_JOB_LEVEL && used < sizeof normalised)
+        snprintf(normalised + used, sizeof normalised - used, segment >= 0 ? "&segment=%u" : "&segments=all",
+                 segment >= 0 ? v->seg->segments[segment].number : 0);
     snprintf(key, sizeof key, "%s/%s?%s", v->entry->id, v->version, normalised);
     mesh_etag(v, normalised, etag, sizeof etag);
-    snprintf(file_name, sizeof file_name, "%s-%g.%s", v->entry->id, mr.level,
-             proto_format_extension(mr.format));
+    if (segment == SRV_JOB_LEVEL)
+        snprintf(file_name, sizeof file_name, "%s-%g.%s", v->entry->id, mr.level, proto_format_extension(mr.format));
+    else if (segment >= 0)
+        snprintf(file_name, sizeof file_name, "%s-segment-%u.%s", v->entry->id, v->seg->segments[segment].number,
+                 proto_format_extension(mr.format));
+    else
+        snprintf(file_name, sizeof file_name, "%s-segments.%s", v->entry->id, proto_format_extension(mr.format));
 
     /* Either representation the client holds is current. */
     const char *if_none_match = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_IF_NONE_MATCH);
@@ -613,6 +647,7 @@ static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_r
     work->cache = s->cache;
     work->max_triangles = s->config.max_triangles;
     work->accept_gzip = accepts_gzip(c);
+    work->segment = segment;
     int coalesced;
     srv_job *job = srv_pool_submit(s->pool, key, srv_mesh_job_run, work, srv_mesh_job_free, &coalesced);
     if (!job)
@@ -665,8 +700,27 @@ static enum MHD_Result add_length(void *cls, enum MHD_ValueKind kind, const char
     return MHD_YES;
 }
 
-/* Splits "/v1/volumes/{id}[/mesh]"; returns 1 for a volume, 2 for its mesh, 0 otherwise. */
-static int volume_path(const char *path, char *id, size_t size)
+/* The resources under a volume. */
+enum { PATH_NONE, PATH_VOLUME, PATH_MESH, PATH_SEGMENTS, PATH_SEGMENTS_MESH, PATH_SEGMENT_MESH };
+
+/* "/segments/{n}/mesh": n a segment number (digits, no sign or leading zero past one
+ * digit), into *number; 0 when the path is not that. */
+static int segment_mesh_path(const char *rest, unsigned long *number)
+{
+    static const char prefix[] = "/segments/";
+    if (strncmp(rest, prefix, sizeof prefix - 1))
+        return 0;
+    const char *digits = rest + sizeof prefix - 1;
+    size_t n = strspn(digits, "0123456789");
+    if (n == 0 || n > 10 || (n > 1 && digits[0] == '0') || strcmp(digits + n, "/mesh"))
+        return 0;
+    *number = strtoul(digits, NULL, 10);
+    return *number <= UINT32_MAX;
+}
+
+/* Splits "/v1/volumes/{id}[/mesh | /segments | /segments/mesh | /segments/{n}/mesh]" into
+ * the id and the resource (PATH_*; *number for a segment's mesh). */
+static int volume_path(const char *path, char *id, size_t size, unsigned long *number)
 {
     static const char prefix[] = "/v1/volumes/";
     if (strncmp(path, prefix, sizeof prefix - 1))
@@ -679,8 +733,14 @@ static int volume_path(const char *path, char *id, size_t size)
     memcpy(id, start, len);
     id[len] = '\0';
     if (!slash)
-        return 1;
-    return !strcmp(slash, "/mesh") ? 2 : 0;
+        return PATH_VOLUME;
+    if (!strcmp(slash, "/mesh"))
+        return PATH_MESH;
+    if (!strcmp(slash, "/segments"))
+        return PATH_SEGMENTS;
+    if (!strcmp(slash, "/segments/mesh"))
+        return PATH_SEGMENTS_MESH;
+    return segment_mesh_path(slash, number) ? PATH_SEGMENT_MESH : PATH_NONE;
 }
 
 /* 1 when a and b (b_len bytes) are equal, in a time that depends on b_len only: the
@@ -752,11 +812,14 @@ static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_reques
         return route_volumes(s, c, req);
     }
     char id[SRV_ID_MAX + 2];
-    int kind = volume_path(path, id, sizeof id);
+    unsigned long number = 0;
+    int kind = volume_path(path, id, sizeof id, &number);
     if (!kind)
         return fail(s, c, req, path, 404, "no such resource; the API is /v1/volumes, "
-                    "/v1/volumes/{id} and /v1/volumes/{id}/mesh");
-    req->route = kind == 1 ? SRV_ROUTE_VOLUME : SRV_ROUTE_MESH;
+                    "/v1/volumes/{id}, /v1/volumes/{id}/mesh, /v1/volumes/{id}/segments, "
+                    "/v1/volumes/{id}/segments/mesh and /v1/volumes/{id}/segments/{n}/mesh");
+    req->route = kind == PATH_VOLUME ? SRV_ROUTE_VOLUME : kind == PATH_MESH ? SRV_ROUTE_MESH
+               : kind == PATH_SEGMENTS ? SRV_ROUTE_SEGMENTS : SRV_ROUTE_SEGMENT_MESH;
     if (!srv_catalog_id_valid(id))
         return fail(s, c, req, path, 404, "no volume \"(not a valid id)\"; /v1/volumes lists them");
     const srv_volume *v;
@@ -770,7 +833,22 @@ static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_reques
                     id, why, req->retry_after_s ? "; its source is asked again after Retry-After" : "");
     }
     req->volume = v;
-    return kind == 1 ? route_volume(s, c, req, v) : route_mesh(s, c, req, v, path);
+    if (kind == PATH_VOLUME)
+        return route_volume(s, c, req, v);
+    if (kind == PATH_MESH)
+        return route_mesh(s, c, req, v, path, SRV_JOB_LEVEL);
+    if (!v->seg)
+        return fail(s, c, req, path, 404, "volume \"%s\" is not a segmentation (the catalog's \"labels\": true "
+                    "declares a label map one)", id);
+    if (kind == PATH_SEGMENTS)
+        return route_segments(s, c, req, v);
+    if (kind == PATH_SEGMENTS_MESH)
+        return route_mesh(s, c, req, v, path, SRV_JOB_SEGMENTS);
+    long segment = iso_seg_find(v->seg, (uint32_t)number);
+    if (segment < 0)
+        return fail(s, c, req, path, 404, "volume \"%s\" has no segment %lu; /v1/volumes/%s/segments lists them",
+                    id, number, id);
+    return route_mesh(s, c, req, v, path, segment);
 }
 
 /* ---------------------------------------------------------------- life cycle */

@@ -9,6 +9,7 @@
 #include "base/base.h"
 #include "hash.h"
 #include "pipeline.h"
+#include "segments.h"
 #include "status.h"
 
 void srv_mesh_job_free(void *arg)
@@ -42,6 +43,22 @@ static void pipeline_request(const srv_mesh_job *job, proto_pipeline_request *re
     req->encode.normal_bits = r->normal_bits;
     req->encode.speed = r->speed;
     req->gzip = job->accept_gzip && r->format == PROTO_FORMAT_GLB_MESHOPT;
+    if (job->segment >= 0) {
+        req->segmentation = job->volume->seg;
+        req->segment = (size_t)job->segment;
+        req->smoothing = r->smoothing;
+    }
+}
+
+/* What a chain is of: the level's surface, or a segment's (its number and smoothing). */
+static void chain_params(const srv_mesh_job *job, char *params, size_t size)
+{
+    const proto_mesh_request *r = &job->request;
+    if (job->segment >= 0)
+        snprintf(params, size, "segment=%u&smoothing=%.17g&cap=%d", job->volume->seg->segments[job->segment].number,
+                 r->smoothing, r->cap);
+    else
+        snprintf(params, size, "level=%.17g&tolerance=%.17g&cap=%d", r->level, r->tolerance, r->cap);
 }
 
 /* The problem body of a failed step, its status from status.h. An allocation that failed
@@ -126,9 +143,9 @@ int srv_mesh_body_gzip(srv_body *body)
  * level, tolerance, cap), whatever the distance, budget or format. */
 static void chain_key(const srv_mesh_job *job, char *key, size_t size)
 {
-    const proto_mesh_request *r = &job->request;
-    snprintf(key, size, "chain:%s/%s?level=%.17g&tolerance=%.17g&cap=%d", job->volume->entry->id,
-             job->volume->version, r->level, r->tolerance, r->cap);
+    char params[160];
+    chain_params(job, params, sizeof params);
+    snprintf(key, size, "chain:%s/%s?%s", job->volume->entry->id, job->volume->version, params);
 }
 
 /* The chain's file beside the volume's hierarchy file in the cache dir:
@@ -141,9 +158,8 @@ static int chain_file(const srv_mesh_job *job, const char *key, char *path, size
     const char *dir = job->collection ? job->collection->options.cache_dir : NULL;
     if (!dir)
         return 0;
-    const proto_mesh_request *r = &job->request;
-    char params[128];
-    snprintf(params, sizeof params, "level=%.17g&tolerance=%.17g&cap=%d", r->level, r->tolerance, r->cap);
+    char params[160];
+    chain_params(job, params, sizeof params);
     int n = snprintf(path, size, "%s/%s.%016llx.isochain", dir, job->volume->entry->id,
                      (unsigned long long)srv_hash64(params));
     *identity = srv_hash64(key);
@@ -200,14 +216,58 @@ static srv_body *chain_from_file(const srv_mesh_job *job, const char *key)
     return cache_chain(job, key, chain);
 }
 
+/* Every segment as one glb scene (segments.h). */
+static srv_body *segments_run(srv_mesh_job *job, proto_problem *problem)
+{
+    const iso_segmentation *seg = job->volume->seg;
+    const proto_mesh_request *r = &job->request;
+    size_t *which = malloc((seg->segment_count ? seg->segment_count : 1) * sizeof *which);
+    iso_error err = {0};
+    if (!which)
+        return failed(job, iso_error_set(&err, ISO_E_NOMEM, "out of memory for the segments"), &err, problem);
+    for (size_t s = 0; s < seg->segment_count; s++)
+        which[s] = s;
+    proto_segments_request req = {.segmentation = seg, .which = which, .count = seg->segment_count,
+                                  .params = {.smoothing = r->smoothing, .cap = r->cap}, .normals = r->normals,
+                                  .format = r->format, .max_triangles = job->max_triangles};
+    proto_encode_options_init(&req.encode);
+    req.encode.position_bits = r->position_bits;
+    req.encode.normal_bits = r->normal_bits;
+    req.encode.speed = r->speed;
+    proto_segments_result res;
+    int rc = proto_segments_run(&req, &res, &err);
+    free(which);
+    if (rc)
+        return failed(job, rc, &err, problem);
+    srv_body *body = srv_body_create(res.bytes, res.size);
+    if (!body)
+        return failed(job, iso_error_set(&err, ISO_E_NOMEM, "out of memory keeping the body"), &err, problem);
+    body->content_type = proto_format_content_type(r->format);
+    body->gzip_wanted = gzip_wanted(body, r->format);
+    body->triangles = res.triangles;
+    body->vertices = res.vertices;
+    body->cells_visited = res.cells_visited;
+    body->extract_ms = res.extract_ms;
+    body->normals_ms = res.normals_ms;
+    body->encode_ms = res.encode_ms;
+    body->draco_speed = -1;
+    body->budget_fits = -1;
+    body->chain_level = -1;
+    if (job->cache)
+        srv_cache_put(job->cache, job->key, body);
+    return body;
+}
+
 srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
 {
     srv_mesh_job *job = arg;
+    if (job->segment == SRV_JOB_SEGMENTS)
+        return segments_run(job, problem);
     proto_pipeline_request req;
     proto_pipeline_result res;
     iso_error err = {0};
     pipeline_request(job, &req);
-    char key[256] = "";
+    char key[400] = "";
     srv_body *chain = NULL;
     if (job->cache && (req.distance >= 0 || req.budget)) {
         chain_key(job, key, sizeof key);

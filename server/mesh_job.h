@@ -1,6 +1,7 @@
 /* mesh_job.h: one mesh request's work on a pool thread: the request pipeline
- * (pipeline.h: extract, simplify, normals, measures, encode), then the body and its facts
- * into the cache, without any HTTP. */
+ * (pipeline.h: extract, simplify, normals, measures, encode; or segments.h for every
+ * segment of a segmentation as one scene), then the body and its facts into the cache,
+ * without any HTTP. */
 #ifndef SRV_MESH_JOB_H
 #define SRV_MESH_JOB_H
 
@@ -17,7 +18,12 @@ typedef struct srv_mesh_job {
     size_t max_triangles;   /* serve --max-triangles: a larger mesh is refused (422); 0: none */
     int accept_gzip;        /* the request accepts gzip: a meshopt body's gzip form is made
                              * with it, beside its encode, instead of after it */
+    long segment;           /* the level's mesh (SRV_JOB_LEVEL), a segment's (its index in the
+                             * volume's segmentation) or every segment's (SRV_JOB_SEGMENTS) */
 } srv_mesh_job;
+
+#define SRV_JOB_LEVEL (-2)
+#define SRV_JOB_SEGMENTS (-1)
 
 /* A job for the pool (see pool.h's srv_job_fn): arg is a srv_mesh_job. */
 srv_body *srv_mesh_job_run(void *arg, proto_problem *problem);
