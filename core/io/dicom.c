@@ -35,6 +35,7 @@ typedef struct series {
     const char *spec;   /* the name the caller gave, for messages */
     dfile *files;
     size_t count;
+    size_t segmentations; /* Segmentation objects skipped: not images of the series */
     dframe *frames;
     size_t frame_count;
     double normal[3];
@@ -204,6 +205,11 @@ static int read_headers(const char *spec, name_list *l, series *all, const iso_l
             continue;
         if (rc != ISO_GDCM_OK)
             return iso_error_set(err, ISO_E_FORMAT, "%s: %s", l->names[i], why);
+        if (!strcmp(f->h.sop_class, ISO_GDCM_SEG_SOP_CLASS) || !strcmp(f->h.sop_class, ISO_GDCM_SEG_LABELMAP_SOP_CLASS)) {
+            iso_gdcm_header_free(&f->h); /* a segmentation of the images, loaded as one (segment.h) */
+            all->segmentations++;
+            continue;
+        }
         f->path = l->names[i];
         l->names[i] = NULL;
         all->count++;
@@ -234,6 +240,9 @@ static int choose_series(const char *spec, const char *uid, series *all, series 
 {
     char list[400], wanted[sizeof all->files[0].h.series_uid];
     describe_series(all, list, sizeof list);
+    if (all->count == 0 && all->segmentations)
+        return iso_error_set(err, ISO_E_UNSUPPORTED, "%s: a DICOM Segmentation, no image series: load it as a segmentation "
+                             "(the catalog's \"labels\": true, or isoserve segments)", spec);
     if (all->count == 0)
         return iso_error_set(err, ISO_E_UNSUPPORTED, "%s: no DICOM image files (with the DICM preamble): not a volume isoserve reads",
                              spec); /* a folder of anything else is no format of ours */
@@ -575,8 +584,10 @@ static void copy_label(char *out, size_t size, const char *text)
 /* ---------------------------------------------------------------- the loader */
 
 /* From the chosen series to the volume: geometry first, so that a bad series fails
- * before anything big is allocated or decoded. */
-static int build_volume(series *s, const iso_load_options *opt, iso_volume **out, iso_error *err)
+ * before anything big is allocated or decoded. With shape, the geometry alone goes there
+ * (no sample read). */
+static int build_volume(series *s, const iso_load_options *opt, iso_volume **out, iso_volume *shape,
+                        iso_error *err)
 {
     int rc = check_consistent(s, err);
     if (!rc)
@@ -593,6 +604,10 @@ static int build_volume(series *s, const iso_load_options *opt, iso_volume **out
     iso_volume probe = {.dims = {dims[0], dims[1], dims[2]}};
     if ((rc = set_geometry(s, &probe, err)))
         return rc;
+    if (shape) {
+        *shape = probe;
+        return 0;
+    }
     uint64_t bytes, max_bytes = opt && opt->max_bytes ? opt->max_bytes : ISO_VOL_DEFAULT_MAX_BYTES;
     iso_error size_err;
     iso_voxel_type type = stored_type(h);
@@ -614,10 +629,9 @@ static int build_volume(series *s, const iso_load_options *opt, iso_volume **out
     return 0;
 }
 
-int iso_dicom_load(const char *path, const iso_load_options *opt, iso_volume **out, iso_error *err)
+/* iso_dicom_load, or with shape its geometry alone. */
+static int load(const char *path, const iso_load_options *opt, iso_volume **out, iso_volume *shape, iso_error *err)
 {
-    assert(path && out);
-    *out = NULL;
     char source[4096];
     const char *uid;
     if (split_spec(path, source, sizeof source, &uid))
@@ -632,7 +646,22 @@ int iso_dicom_load(const char *path, const iso_load_options *opt, iso_volume **o
         rc = choose_series(path, uid, &all, &chosen, err);
     free_series(&all);
     if (!rc)
-        rc = build_volume(&chosen, opt, out, err);
+        rc = build_volume(&chosen, opt, out, shape, err);
     free_series(&chosen);
     return rc;
+}
+
+int iso_dicom_load(const char *path, const iso_load_options *opt, iso_volume **out, iso_error *err)
+{
+    assert(path && out);
+    *out = NULL;
+    return load(path, opt, out, NULL, err);
+}
+
+int iso_dicom_geometry(const char *path, const iso_load_options *opt, iso_volume *shape, iso_error *err)
+{
+    assert(path && shape);
+    memset(shape, 0, sizeof *shape);
+    iso_volume *none = NULL;
+    return load(path, opt, &none, shape, err);
 }

@@ -1,5 +1,6 @@
 // dicom_gdcm.cc: the GDCM shim behind dicom_gdcm.h. Reads one file's header fields (plain
-// tags and the enhanced multi-frame functional groups) and decodes its pixels. Every entry
+// tags and the enhanced multi-frame functional groups) and decodes its pixels; reads a
+// Segmentation object (its segments, frames and pixel data) through GDCM's dataset API. Every entry
 // point catches everything: GDCM throws on some malformed input, and C must never see it.
 #include "dicom_gdcm.h"
 
@@ -216,6 +217,7 @@ int read_header(const char *path, unsigned max_frames, iso_gdcm_header *h, char 
     read_copy(f, ds, gdcm::Tag(0x0020, 0x000e), h->series_uid, sizeof h->series_uid);
     read_copy(f, ds, gdcm::Tag(0x0008, 0x0060), h->modality, sizeof h->modality);
     read_copy(f, ds, gdcm::Tag(0x0008, 0x103e), h->series_description, sizeof h->series_description);
+    read_copy(f, ds, gdcm::Tag(0x0008, 0x0016), h->sop_class, sizeof h->sop_class);
     std::snprintf(h->transfer_syntax, sizeof h->transfer_syntax, "%s",
                   reader.GetFile().GetHeader().GetDataSetTransferSyntax().GetString());
     h->frame = static_cast<iso_gdcm_frame *>(std::calloc(h->frames, sizeof *h->frame));
@@ -324,4 +326,220 @@ extern "C" int iso_gdcm_read_pixels(const char *path, const iso_gdcm_header *exp
         say(why, why_size, "GDCM failed decoding the pixel data");
     }
     return -1;
+}
+
+namespace {
+
+// DICOM Segmentation objects (dicom_gdcm.h's iso_gdcm_seg_*).
+const gdcm::Tag kSopClass(0x0008, 0x0016), kSeriesUid(0x0020, 0x000e);
+const gdcm::Tag kReferencedSeries(0x0008, 0x1115), kSegmentationType(0x0062, 0x0001);
+const gdcm::Tag kSegmentSequence(0x0062, 0x0002), kSegmentNumber(0x0062, 0x0004), kSegmentLabel(0x0062, 0x0005);
+const gdcm::Tag kCategory(0x0062, 0x0003), kType(0x0062, 0x000f), kCodeMeaning(0x0008, 0x0104);
+const gdcm::Tag kLab(0x0062, 0x000d), kMaxFraction(0x0062, 0x000e);
+const gdcm::Tag kSegmentIdentification(0x0062, 0x000a), kReferencedSegment(0x0062, 0x000b);
+
+// The Segment Sequence.
+bool read_segments(const Fields &f, const gdcm::DataSet &ds, iso_gdcm_seg *out, char *why, size_t why_size)
+{
+    if (!ds.FindDataElement(kSegmentSequence)) {
+        say(why, why_size, "no Segment Sequence (0062,0002)");
+        return false;
+    }
+    gdcm::SmartPointer<gdcm::SequenceOfItems> sq = ds.GetDataElement(kSegmentSequence).GetValueAsSQ();
+    unsigned n = sq ? (unsigned)sq->GetNumberOfItems() : 0;
+    if (n == 0 || n > 65535) {
+        std::snprintf(why, why_size, "the Segment Sequence (0062,0002) has %u items", n);
+        return false;
+    }
+    out->segments = static_cast<iso_gdcm_seg_segment *>(std::calloc(n, sizeof *out->segments));
+    if (!out->segments) {
+        say(why, why_size, "out of memory");
+        return false;
+    }
+    out->segment_count = n;
+    for (unsigned i = 0; i < n; i++) {
+        const gdcm::DataSet &item = sq->GetItem(i + 1).GetNestedDataSet();
+        iso_gdcm_seg_segment *s = &out->segments[i];
+        s->number = f.whole(item, kSegmentNumber);
+        read_copy(f, item, kSegmentLabel, s->label, sizeof s->label);
+        first_item(item, kCategory, [&](const gdcm::DataSet &c) { read_copy(f, c, kCodeMeaning, s->category, sizeof s->category); });
+        first_item(item, kType, [&](const gdcm::DataSet &c) { read_copy(f, c, kCodeMeaning, s->type, sizeof s->type); });
+        double lab[3];
+        if (f.numbers(item, kLab, lab, 3) == 3 && lab[0] >= 0 && lab[0] <= 65535 && lab[1] >= 0 && lab[1] <= 65535 &&
+            lab[2] >= 0 && lab[2] <= 65535) {
+            for (int c = 0; c < 3; c++)
+                s->lab[c] = (uint16_t)lab[c];
+            s->has_lab = 1;
+        }
+    }
+    return true;
+}
+
+// The shared and per-frame functional groups.
+void read_groups(const Fields &f, const gdcm::DataSet &ds, iso_gdcm_seg *out)
+{
+    first_item(ds, kSharedGroups, [&](const gdcm::DataSet &g) {
+        first_item(g, kPixelMeasures, [&](const gdcm::DataSet &m) { f.numbers(m, kPixelSpacing, out->pixel_spacing, 2); });
+        first_item(g, kPlaneOrientation, [&](const gdcm::DataSet &m) {
+            out->has_orientation = f.numbers(m, kOrientation, out->orientation, 6) == 6;
+        });
+    });
+    if (!ds.FindDataElement(kPerFrameGroups))
+        return;
+    gdcm::SmartPointer<gdcm::SequenceOfItems> sq = ds.GetDataElement(kPerFrameGroups).GetValueAsSQ();
+    if (!sq)
+        return;
+    out->per_frame_items = (unsigned)sq->GetNumberOfItems();
+    for (unsigned i = 0; i < out->frames && i < out->per_frame_items; i++) {
+        const gdcm::DataSet &g = sq->GetItem(i + 1).GetNestedDataSet();
+        iso_gdcm_seg_frame *fr = &out->frame[i];
+        first_item(g, kPlanePosition, [&](const gdcm::DataSet &m) {
+            fr->has_position = f.numbers(m, kPosition, fr->position, 3) == 3;
+        });
+        first_item(g, kSegmentIdentification, [&](const gdcm::DataSet &m) { fr->segment = f.whole(m, kReferencedSegment); });
+        // A frame may say its own plane geometry (not shared): the first one found counts.
+        if (!out->has_orientation)
+            first_item(g, kPlaneOrientation, [&](const gdcm::DataSet &m) {
+                out->has_orientation = f.numbers(m, kOrientation, out->orientation, 6) == 6;
+            });
+        if (!out->pixel_spacing[0])
+            first_item(g, kPixelMeasures, [&](const gdcm::DataSet &m) { f.numbers(m, kPixelSpacing, out->pixel_spacing, 2); });
+    }
+}
+
+// The pixel data: native bytes as stored, or GDCM's decode of encapsulated ones.
+bool read_pixel_data(const char *path, const gdcm::DataSet &ds, iso_gdcm_seg *out, char *why, size_t why_size)
+{
+    if (!ds.FindDataElement(kPixelData)) {
+        say(why, why_size, "no Pixel Data (7FE0,0010)");
+        return false;
+    }
+    const gdcm::DataElement &de = ds.GetDataElement(kPixelData);
+    const gdcm::ByteValue *bv = de.GetByteValue();
+    if (bv) {
+        out->pixel_bytes = bv->GetLength();
+        out->pixels = static_cast<unsigned char *>(std::malloc(out->pixel_bytes ? out->pixel_bytes : 1));
+        if (!out->pixels) {
+            say(why, why_size, "out of memory for the pixel data");
+            return false;
+        }
+        std::memcpy(out->pixels, bv->GetPointer(), out->pixel_bytes);
+        return true;
+    }
+    gdcm::ImageReader reader;
+    reader.SetFileName(path);
+    if (!reader.Read()) {
+        say(why, why_size, "GDCM cannot decode the encapsulated pixel data");
+        return false;
+    }
+    const gdcm::Image &img = reader.GetImage();
+    out->pixel_bytes = img.GetBufferLength();
+    out->pixels = static_cast<unsigned char *>(std::malloc(out->pixel_bytes ? out->pixel_bytes : 1));
+    if (!out->pixels || !img.GetBuffer(reinterpret_cast<char *>(out->pixels))) {
+        say(why, why_size, "GDCM cannot decode the encapsulated pixel data");
+        return false;
+    }
+    return true;
+}
+
+bool read_all(const char *path, unsigned max_frames, iso_gdcm_seg *out, char *why, size_t why_size)
+{
+    gdcm::Reader reader;
+    reader.SetFileName(path);
+    if (!reader.Read()) {
+        say(why, why_size, "GDCM cannot parse the file (truncated or malformed)");
+        return false;
+    }
+    gdcm::StringFilter sf;
+    sf.SetFile(reader.GetFile());
+    Fields f{sf};
+    const gdcm::DataSet &ds = reader.GetFile().GetDataSet();
+    read_copy(f, ds, kSopClass, out->sop_class, sizeof out->sop_class);
+    read_copy(f, ds, kSeriesUid, out->series_uid, sizeof out->series_uid);
+    read_copy(f, ds, kSegmentationType, out->type, sizeof out->type);
+    first_item(ds, kReferencedSeries, [&](const gdcm::DataSet &r) {
+        read_copy(f, r, kSeriesUid, out->referenced_series, sizeof out->referenced_series);
+    });
+    out->rows = f.whole(ds, gdcm::Tag(0x0028, 0x0010));
+    out->columns = f.whole(ds, gdcm::Tag(0x0028, 0x0011));
+    out->bits_allocated = f.whole(ds, gdcm::Tag(0x0028, 0x0100));
+    unsigned frames = f.whole(ds, gdcm::Tag(0x0028, 0x0008));
+    out->frames = frames ? frames : 1;
+    out->max_fraction = 0;
+    f.numbers(ds, kMaxFraction, &out->max_fraction, 1);
+    if (out->frames > max_frames) {
+        std::snprintf(why, why_size, "NumberOfFrames %u exceeds the limit of %u", out->frames, max_frames);
+        return false;
+    }
+    out->frame = static_cast<iso_gdcm_seg_frame *>(std::calloc(out->frames, sizeof *out->frame));
+    if (!out->frame) {
+        say(why, why_size, "out of memory");
+        return false;
+    }
+    if (std::strcmp(out->type, "LABELMAP") && !read_segments(f, ds, out, why, why_size))
+        return false;
+    if (!std::strcmp(out->type, "LABELMAP") && ds.FindDataElement(kSegmentSequence) &&
+        !read_segments(f, ds, out, why, why_size))
+        return false;
+    read_groups(f, ds, out);
+    return read_pixel_data(path, ds, out, why, why_size);
+}
+
+} // namespace
+
+extern "C" int iso_gdcm_seg_probe(const char *path, char *sop_class, size_t sop_size, char *series_uid,
+                                   size_t series_size, char *why, size_t why_size)
+{
+    sop_class[0] = series_uid[0] = '\0';
+    if (!has_magic(path))
+        return 1;
+    quiet();
+    try {
+        gdcm::Reader reader;
+        reader.SetFileName(path);
+        if (!reader.ReadUpToTag(gdcm::Tag(0x0020, 0x000f))) {
+            say(why, why_size, "GDCM cannot parse the DICOM header (truncated or malformed)");
+            return -1;
+        }
+        gdcm::StringFilter sf;
+        sf.SetFile(reader.GetFile());
+        Fields f{sf};
+        const gdcm::DataSet &ds = reader.GetFile().GetDataSet();
+        read_copy(f, ds, kSopClass, sop_class, sop_size);
+        read_copy(f, ds, kSeriesUid, series_uid, series_size);
+        return 0;
+    } catch (const std::exception &e) {
+        std::snprintf(why, why_size, "GDCM: %s", e.what());
+    } catch (...) {
+        say(why, why_size, "GDCM failed on the header");
+    }
+    return -1;
+}
+
+extern "C" int iso_gdcm_seg_read(const char *path, unsigned max_frames, iso_gdcm_seg *out, char *why,
+                                  size_t why_size)
+{
+    std::memset(out, 0, sizeof *out);
+    quiet();
+    bool ok = false;
+    try {
+        ok = read_all(path, max_frames, out, why, why_size);
+    } catch (const std::exception &e) {
+        std::snprintf(why, why_size, "GDCM: %s", e.what());
+    } catch (...) {
+        say(why, why_size, "GDCM failed reading the segmentation");
+    }
+    if (!ok)
+        iso_gdcm_seg_free(out);
+    return ok ? 0 : -1;
+}
+
+extern "C" void iso_gdcm_seg_free(iso_gdcm_seg *seg)
+{
+    std::free(seg->segments);
+    std::free(seg->frame);
+    std::free(seg->pixels);
+    seg->segments = nullptr;
+    seg->frame = nullptr;
+    seg->pixels = nullptr;
 }

@@ -103,7 +103,12 @@ int iso_field_load(const char *path, const iso_load_options *opt, iso_volume **o
 int iso_dicom_recognises(const char *path);
 /* 1 if dir holds at least one file with the DICOM preamble (for directory scans). */
 int iso_dicom_dir_has_files(const char *dir);
-/* Loads the series (see above). Safe on untrusted files; respects opt->max_bytes. */
+/* Loads the series (see above). Safe on untrusted files; respects opt->max_bytes.
+ * Segmentation objects in a folder are not images of its series: they are skipped (and a
+ * folder of nothing else is refused, saying it is a segmentation). */
 int iso_dicom_load(const char *path, const iso_load_options *opt, iso_volume **out, iso_error *err);
+/* What iso_dicom_load would give path's volume, without decoding a pixel: dims, spacing,
+ * origin and direction into *shape (data NULL, no stats). The same checks and errors. */
+int iso_dicom_geometry(const char *path, const iso_load_options *opt, iso_volume *shape, iso_error *err);
 
 #endif
