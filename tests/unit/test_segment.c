@@ -4,11 +4,14 @@
  * for triangle, on random label maps across brick boundaries; the cap closing segments at
  * the border; enclosed volumes within 1% of the voxel count on shapes built by hand;
  * smoothing closed; every segment at once equal to one at a time; Slicer's .seg.nrrd keys
- * and ITK-SNAP's label descriptions; CIELab colours. */
+ * and ITK-SNAP's label descriptions; CIELab colours; DICOM SEGs (BINARY, FRACTIONAL,
+ * LABELMAP, overlapping) written by tests/support/dicom_seg.py give the label map's own
+ * meshes, and bad ones precise errors. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "check.h"
 #include "hierarchy/labels.h"
@@ -443,6 +446,162 @@ static void test_cielab_to_srgb(void)
     CHECK_NEAR(iso_seg_srgb_to_linear(0.5f), 0.214, 0.001);
 }
 
+
+/* The phantom's SEG written by dicom_seg.py into a fresh folder (flags: its options);
+ * NULL after a skip line without pydicom. */
+static const char *write_seg(const char *flags)
+{
+    static char dir[4096];
+    static int serial;
+    if (system("/usr/bin/python3 -c 'import pydicom, numpy' > /dev/null 2>&1") != 0) {
+        check_skip("needs Debian's python3-pydicom and python3-numpy");
+        return NULL;
+    }
+    snprintf(dir, sizeof dir, "%s/seg%d", check_temp_dir(), serial++);
+    char cmd[8192];
+    snprintf(cmd, sizeof cmd, "/usr/bin/python3 tests/support/dicom_seg.py phantom %s %s > /dev/null 2>&1", dir, flags);
+    CHECK_EQ(system(cmd), 0);
+    return dir;
+}
+
+/* Every segment of a and b (by number) has the same mesh, triangle for triangle. */
+static void check_same_segmentations(iso_segmentation *a, iso_segmentation *b, int cap)
+{
+    iso_error err;
+    CHECK_OK(iso_seg_build_trees(a, 0, 1, NULL, NULL, &err), &err);
+    CHECK_OK(iso_seg_build_trees(b, 0, 1, NULL, NULL, &err), &err);
+    for (size_t s = 0; s < a->segment_count && !check_failed(); s++) {
+        long t = iso_seg_find(b, a->segments[s].number);
+        CHECK(t >= 0);
+        if (t < 0)
+            continue;
+        iso_mesh x, y;
+        iso_mesh_init(&x);
+        iso_mesh_init(&y);
+        iso_seg_params p = {.cap = cap};
+        CHECK_OK(iso_seg_extract(a, s, &p, &x, NULL, &err), &err);
+        CHECK_OK(iso_seg_extract(b, (size_t)t, &p, &y, NULL, &err), &err);
+        CHECK(x.triangle_count > 0);
+        check_same(&x, &y, a->segments[s].name);
+        iso_mesh_free(&x);
+        iso_mesh_free(&y);
+    }
+}
+
+static iso_segmentation *load_or_fail(const char *path, const char *descriptions)
+{
+    iso_segmentation *seg = NULL;
+    iso_error err;
+    CHECK_OK(iso_seg_load(path, descriptions, NULL, &seg, &err), &err);
+    return seg;
+}
+
+static void test_dicom_seg_gives_the_label_maps_meshes(void)
+{
+    static const char *const kinds[] = {"", "--fractional", "--labelmap"};
+    static const char *const sources[] = {"BINARY", "FRACTIONAL", "LABELMAP"};
+    for (int k = 0; k < 3 && !check_failed(); k++) {
+        const char *dir = write_seg(kinds[k]);
+        if (!dir)
+            return;
+        char ct[4200], labels[4200], names[4200];
+        snprintf(ct, sizeof ct, "%s/ct", dir);
+        snprintf(labels, sizeof labels, "%s/labels.nrrd", dir);
+        snprintf(names, sizeof names, "%s/labels.txt", dir);
+        CHECK(iso_seg_dicom_recognises(ct));
+        CHECK(!iso_seg_dicom_recognises(labels));
+        iso_segmentation *seg = load_or_fail(ct, NULL), *map = load_or_fail(labels, names);
+        if (!seg || !map)
+            return;
+        CHECK(strcmp(seg->source, "dicom-seg") == 0);
+        CHECKF(seg->segment_count == 3, "%s: %zu segments", sources[k], seg->segment_count);
+        CHECK(strcmp(seg->segments[0].name, "shell") == 0 && strcmp(seg->segments[1].name, "core") == 0);
+        CHECK(strcmp(seg->segments[1].type, "Bone marrow") == 0 && strcmp(seg->segments[2].category, "Physical object") == 0);
+        CHECK_EQ(seg->layer_count, k == 1 ? 3 : 1);
+        /* CIELab (34885, 53151, 50000) is sRGB (253, 13, 2): the shell's colour. */
+        CHECK_NEAR(seg->segments[0].color[0] * 255, 253, 1.5);
+        CHECK_NEAR(seg->segments[0].color[1] * 255, 13, 1.5);
+        /* The grid is the CT's: origin, spacing. */
+        CHECK_NEAR(seg->layers[0].vol->origin[2], 30, 1e-9);
+        CHECK_NEAR(seg->layers[0].vol->spacing[2], 1.25, 1e-9);
+        iso_seg_count_voxels(seg);
+        iso_seg_count_voxels(map);
+        for (size_t s = 0; s < 3; s++)
+            CHECK_EQ(seg->segments[s].voxels, map->segments[s].voxels);
+        check_same_segmentations(seg, map, 0);
+        check_same_segmentations(seg, map, 1);
+        iso_seg_destroy(seg);
+        iso_seg_destroy(map);
+    }
+}
+
+static void test_overlapping_binary_segments_take_layers(void)
+{
+    const char *dir = write_seg("--overlap");
+    if (!dir)
+        return;
+    char ct[4200];
+    snprintf(ct, sizeof ct, "%s/ct", dir);
+    iso_segmentation *seg = load_or_fail(ct, NULL);
+    if (!seg)
+        return;
+    CHECK_EQ(seg->segment_count, 4);
+    CHECK_EQ(seg->layer_count, 2);
+    CHECK(seg->segments[3].layer != seg->segments[1].layer && seg->segments[3].layer != seg->segments[0].layer);
+    iso_seg_count_voxels(seg);
+    CHECK_EQ(seg->segments[3].voxels, 8 * 8 * 8);
+    iso_error err;
+    CHECK_OK(iso_seg_build_trees(seg, 0, 1, NULL, NULL, &err), &err);
+    iso_mesh m;
+    iso_mesh_init(&m);
+    iso_seg_params p = {.cap = 1};
+    CHECK_OK(iso_seg_extract(seg, 3, &p, &m, NULL, &err), &err);
+    CHECK(census_of(seg, &m, ISO_SPACE_WORLD).closed);
+    /* An 8^3 box: marching cubes bevels its 12 edges (1/8 voxel of section each) and its
+     * corners, 12.5 of 512 voxels. */
+    double bevelled = (512 - 12 * 8 * 0.125 + 8 * (0.125 - 1.0 / 48)) / 512 * iso_seg_volume_mm3(seg, 3);
+    CHECK_NEAR(fabs(iso_mesh_enclosed_volume(&m)), bevelled, 0.002 * bevelled);
+    iso_mesh_free(&m);
+    iso_seg_destroy(seg);
+}
+
+static void test_bad_segs_are_precise_errors(void)
+{
+    static const struct {
+        const char *flag, *says;
+        int code;
+    } cases[] = {{"--bad=frames", "missing frames", ISO_E_TRUNCATED},
+                 {"--bad=segment", "refers to segment 9", ISO_E_FORMAT},
+                 {"--bad=position", "lies on no slice of the referenced series", ISO_E_FORMAT},
+                 {"--bad=spacing", "does not match the referenced series", ISO_E_FORMAT},
+                 {"--bad=overlap", "overlapping segments in a label map SEG", ISO_E_FORMAT}};
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        const char *dir = write_seg(cases[i].flag);
+        if (!dir)
+            return;
+        char ct[4200];
+        snprintf(ct, sizeof ct, "%s/ct", dir);
+        iso_segmentation *seg = NULL;
+        iso_error err = {0};
+        int rc = iso_seg_load(ct, NULL, NULL, &seg, &err);
+        CHECKF(rc == cases[i].code && strstr(err.message, cases[i].says) && strstr(err.message, "seg.dcm"),
+               "%s: %d %s", cases[i].flag, rc, err.message);
+        CHECK(seg == NULL);
+    }
+    /* The SEG's CT must be there: without it, the error names the series it needs. */
+    const char *dir = write_seg("");
+    if (!dir)
+        return;
+    char cmd[16384], lone[4200];
+    snprintf(lone, sizeof lone, "%s/lone", dir);
+    snprintf(cmd, sizeof cmd, "mkdir -p %s && mv %s/ct/seg.dcm %s/", lone, dir, lone);
+    CHECK_EQ(system(cmd), 0);
+    iso_segmentation *seg = NULL;
+    iso_error err = {0};
+    CHECK(iso_seg_load(lone, NULL, NULL, &seg, &err) != 0);
+    CHECKF(strstr(err.message, "must be beside it") != NULL, "%s", err.message);
+}
+
 int main(void)
 {
     CHECK_RUN(test_label_sets_match_scans);
@@ -454,5 +613,8 @@ int main(void)
     CHECK_RUN(test_seg_nrrd_keys_and_layers);
     CHECK_RUN(test_itksnap_descriptions);
     CHECK_RUN(test_cielab_to_srgb);
+    CHECK_RUN(test_dicom_seg_gives_the_label_maps_meshes);
+    CHECK_RUN(test_overlapping_binary_segments_take_layers);
+    CHECK_RUN(test_bad_segs_are_precise_errors);
     return check_finish();
 }
