@@ -236,7 +236,8 @@ static int load_tree(srv_volume *v, const srv_preload_options *opt, char *label,
     return 0;
 }
 
-/* The entry's segmentation: from its path (a label map with its descriptions, a .seg.nrrd,
+/* The entry's segmentation: a DICOM SEG from its archive (DICOMweb or Orthanc, with the
+ * series it references), or from its path (a label map with its descriptions, a .seg.nrrd,
  * a DICOM SEG beside its CT). */
 static int load_segmentation(const srv_catalog_entry *e, const srv_preload_options *opt, char *label,
                              iso_segmentation **seg, iso_error *err, int *upstream)
@@ -244,6 +245,11 @@ static int load_segmentation(const srv_catalog_entry *e, const srv_preload_optio
     iso_load_options lopt = {.max_bytes = opt->max_volume_bytes, .progress = srv_progress,
                              .progress_context = label};
     *upstream = 0;
+    if (e->dicomweb_url)
+        return srv_dicomweb_load_segmentation(e->dicomweb_url, e->dicomweb_study, e->dicomweb_series,
+                                              e->dicomweb_credentials, opt->cache_dir, &lopt, seg, err, upstream);
+    if (e->orthanc_url)
+        return srv_orthanc_load_segmentation(e->orthanc_url, e->orthanc_series, opt->cache_dir, &lopt, seg, err, upstream);
     return iso_seg_load(e->path, e->labels_file, &lopt, seg, err);
 }
 

@@ -15,6 +15,7 @@
 #include "base/base.h"
 #include "fetch.h"
 #include "multipart.h"
+#include "segment/segment.h"
 
 /* A QIDO-RS answer: a few hundred bytes per series. */
 #define QIDO_JSON_MAX ((uint64_t)64 << 20)
@@ -92,10 +93,12 @@ int srv_dicomweb_find(const char *url, const char *query, const char *credential
 
 typedef struct wado_series {
     const char *url, *study, *series, *credentials;
+    const char *prefix;  /* of the instances' file names ("" or NULL: none) */
+    int with_reference;  /* a SEG: the series it references is fetched beside it */
 } wado_series;
 
 typedef struct part_writer {
-    const char *dir;
+    const char *dir, *prefix;
     size_t written;
     iso_error *err;
 } part_writer;
@@ -110,7 +113,7 @@ static int write_part(void *context, const char *headers, size_t header_len, con
         return iso_error_set(w->err, ISO_E_FORMAT, "part %zu is %s, not application/dicom", w->written + 1, type);
     if (w->written == INSTANCES_MAX)
         return iso_error_set(w->err, ISO_E_LIMIT, "more than %d instances", INSTANCES_MAX);
-    snprintf(file, sizeof file, "%s/%06zu.dcm", w->dir, w->written);
+    snprintf(file, sizeof file, "%s/%s%06zu.dcm", w->dir, w->prefix, w->written);
     FILE *out = fopen(file, "wb");
     int ok = out && fwrite(body, 1, len, out) == len;
     if (out && fclose(out))
@@ -122,8 +125,8 @@ static int write_part(void *context, const char *headers, size_t header_len, con
 }
 
 /* Splits the multipart answer in file into the instances' files of dir. */
-static int split_answer(const char *file, const char *content_type, const char *dir, const char *target,
-                        iso_error *err, int *upstream)
+static int split_answer(const char *file, const char *content_type, const char *dir, const char *prefix,
+                        const char *target, iso_error *err, int *upstream)
 {
     char boundary[PROTO_BOUNDARY_MAX + 1];
     *upstream = 1; /* what the archive sent is not what it should be */
@@ -141,7 +144,7 @@ static int split_answer(const char *file, const char *content_type, const char *
     close(fd);
     if (map == MAP_FAILED)
         return iso_error_set(err, ISO_E_IO, "%s: cannot map: %s", file, strerror(errno));
-    part_writer w = {.dir = dir, .err = err};
+    part_writer w = {.dir = dir, .prefix = prefix ? prefix : "", .err = err};
     iso_error why = {0};
     size_t where = 0;
     w.err = &why;
@@ -203,12 +206,41 @@ static int fetch_series(void *context, const char *dir, const iso_load_options *
         rc = iso_error_set(err, ISO_E_IO, "%s: cannot write: %s", file, strerror(errno));
     srv_fetch_close(&f);
     if (!rc)
-        rc = split_answer(file, s.content_type, dir, target, err, upstream);
+        rc = split_answer(file, s.content_type, dir, w->prefix, target, err, upstream);
     unlink(file);
     if (!rc)
         fprintf(stderr, "isoserve: dicomweb %s: %llu bytes fetched in %.0f ms\n", target,
                 (unsigned long long)s.written, iso_clock_ms() - start);
-    return rc;
+    if (rc || !w->with_reference)
+        return rc;
+    /* A segmentation: the series it was derived from, found by QIDO-RS, beside it. */
+    char reference[SRV_UID_MAX + 1];
+    if ((rc = iso_seg_dicom_referenced_series(dir, reference, sizeof reference, err)))
+        return rc;
+    if (!srv_dicomweb_uid_valid(reference))
+        return iso_error_set(err, ISO_E_FORMAT, "dicomweb %s: the segmentation references \"%s\", not a UID", target,
+                             reference);
+    wado_series ref = {.url = w->url, .series = reference, .credentials = w->credentials, .prefix = "ref-"};
+    return fetch_series(&ref, dir, opt, err, upstream);
+}
+
+static int load_segmentation(void *out, const char *dir, const iso_load_options *opt, iso_error *err)
+{
+    return iso_seg_load(dir, NULL, opt, (iso_segmentation **)out, err);
+}
+
+int srv_dicomweb_load_segmentation(const char *url, const char *study, const char *series, const char *credentials,
+                                   const char *cache_dir, const iso_load_options *opt, iso_segmentation **out,
+                                   iso_error *err, int *upstream)
+{
+    *out = NULL;
+    *upstream = 0;
+    if (!srv_fetch_url_valid(url) || !srv_dicomweb_uid_valid(series) || (study && study[0] && !srv_dicomweb_uid_valid(study)))
+        return iso_error_set(err, ISO_E_ARGUMENT, "dicomweb \"%s\" series \"%s\": not an http(s) URL and DICOM UIDs",
+                             url, series);
+    wado_series w = {url, study, series, credentials, "", 1};
+    return srv_fetch_load_with("dicomweb", url, series, cache_dir, fetch_series, &w, opt, load_segmentation, out, err,
+                               upstream);
 }
 
 int srv_dicomweb_load(const char *url, const char *study, const char *series, const char *credentials,
@@ -220,6 +252,6 @@ int srv_dicomweb_load(const char *url, const char *study, const char *series, co
     if (!srv_fetch_url_valid(url) || !srv_dicomweb_uid_valid(series) || (study && study[0] && !srv_dicomweb_uid_valid(study)))
         return iso_error_set(err, ISO_E_ARGUMENT, "dicomweb \"%s\" series \"%s\": not an http(s) URL and DICOM UIDs",
                              url, series);
-    wado_series w = {url, study, series, credentials};
+    wado_series w = {url, study, series, credentials, "", 0};
     return srv_fetch_load("dicomweb", url, series, cache_dir, fetch_series, &w, opt, out, err, upstream);
 }

@@ -14,6 +14,7 @@
 #include <stddef.h>
 
 #include "io/io.h"
+#include "segment/segment.h"
 #include "volume/volume.h"
 
 #define SRV_UID_MAX 64
@@ -38,5 +39,11 @@ int srv_dicomweb_find(const char *url, const char *query, const char *credential
 int srv_dicomweb_load(const char *url, const char *study, const char *series, const char *credentials,
                       const char *cache_dir, const iso_load_options *opt, iso_volume **out,
                       iso_error *err, int *upstream);
+
+/* srv_dicomweb_load for a DICOM SEG series: the SEG, then (found by QIDO-RS) the series it
+ * references, fetched into one folder and loaded as a segmentation (segment.h). */
+int srv_dicomweb_load_segmentation(const char *url, const char *study, const char *series, const char *credentials,
+                                   const char *cache_dir, const iso_load_options *opt, iso_segmentation **out,
+                                   iso_error *err, int *upstream);
 
 #endif

@@ -190,14 +190,27 @@ static int fetch_into_cache(const char *final, srv_fetch_series_fn fetch, void *
     return rc;
 }
 
+/* The volume loader of srv_fetch_load. */
+static int load_volume(void *out, const char *dir, const iso_load_options *opt, iso_error *err)
+{
+    return iso_load(dir, opt, (iso_volume **)out, err);
+}
+
 int srv_fetch_load(const char *kind, const char *url, const char *name, const char *cache_dir,
                    srv_fetch_series_fn fetch, void *context, const iso_load_options *opt,
                    iso_volume **out, iso_error *err, int *upstream)
 {
+    *out = NULL;
+    return srv_fetch_load_with(kind, url, name, cache_dir, fetch, context, opt, load_volume, out, err, upstream);
+}
+
+int srv_fetch_load_with(const char *kind, const char *url, const char *name, const char *cache_dir,
+                        srv_fetch_series_fn fetch, void *context, const iso_load_options *opt,
+                        srv_fetch_loader_fn load, void *out, iso_error *err, int *upstream)
+{
     char dir[4096];
     int rc;
     struct stat st;
-    *out = NULL;
     *upstream = 0;
     if (cache_dir) {
         char key[17];
@@ -211,7 +224,7 @@ int srv_fetch_load(const char *kind, const char *url, const char *name, const ch
                           : iso_error_set(err, ISO_E_IO, "%s: cannot create: %s", dir, strerror(errno));
     }
     if (!rc)
-        rc = iso_load(dir, opt, out, err);
+        rc = load(out, dir, opt, err);
     if (!cache_dir)
         remove_dir(dir);
     return rc;

@@ -53,6 +53,13 @@ int srv_fetch_load(const char *kind, const char *url, const char *name, const ch
                    srv_fetch_series_fn fetch, void *context, const iso_load_options *opt,
                    iso_volume **out, iso_error *err, int *upstream);
 
+/* srv_fetch_load with another loader of the folder (a segmentation, say): load(out, dir,
+ * opt, err) makes what the caller gets. */
+typedef int (*srv_fetch_loader_fn)(void *out, const char *dir, const iso_load_options *opt, iso_error *err);
+int srv_fetch_load_with(const char *kind, const char *url, const char *name, const char *cache_dir,
+                        srv_fetch_series_fn fetch, void *context, const iso_load_options *opt,
+                        srv_fetch_loader_fn load, void *out, iso_error *err, int *upstream);
+
 /* 1 if url is http:// or https:// followed by a host (no spaces, quotes, control bytes,
  * query or fragment; at most 1024 bytes). */
 int srv_fetch_url_valid(const char *url);

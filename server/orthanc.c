@@ -11,6 +11,7 @@
 #include "cli.h"
 #include "base/base.h"
 #include "fetch.h"
+#include "segment/segment.h"
 
 /* The series document lists ids only: a few hundred bytes per instance. */
 #define SERIES_JSON_MAX ((size_t)16 << 20)
@@ -89,7 +90,48 @@ static int fetch_instances(srv_fetch *f, const char *url, const char *series, js
 
 typedef struct orthanc_series {
     const char *url, *series;
+    int with_reference;   /* a SEG: the series it references is fetched beside it */
 } orthanc_series;
+
+/* The Orthanc id of the series whose SeriesInstanceUID is uid, in the study of series
+ * `beside` (GET {url}/series/{beside} for its ParentStudy, then GET
+ * {url}/studies/{study}/series). */
+static int find_in_study(srv_fetch *f, const char *url, const char *beside, const char *uid, char *id, size_t size,
+                         iso_error *err, int *upstream)
+{
+    char target[1200];
+    snprintf(target, sizeof target, "%s/series/%s", url, beside);
+    srv_fetch_sink s = {.limit = SERIES_JSON_MAX};
+    int rc = srv_fetch_get(f, "orthanc", target, NULL, &s, err, upstream);
+    json_t *doc = rc ? NULL : json_loads(s.buf ? s.buf : "", 0, NULL);
+    free(s.buf);
+    const char *study = json_string_value(json_object_get(doc, "ParentStudy"));
+    if (!rc && (!study || !srv_orthanc_id_valid(study)))
+        rc = iso_error_set(err, ISO_E_FORMAT, "orthanc %s: no \"ParentStudy\"", target);
+    if (!rc) {
+        snprintf(target, sizeof target, "%s/studies/%s/series", url, study);
+        s = (srv_fetch_sink){.limit = SERIES_JSON_MAX};
+        rc = srv_fetch_get(f, "orthanc", target, NULL, &s, err, upstream);
+    }
+    json_t *list = rc ? NULL : json_loads(s.buf ? s.buf : "", 0, NULL);
+    if (!rc)
+        free(s.buf);
+    json_decref(doc);
+    size_t i;
+    json_t *item;
+    id[0] = '\0';
+    json_array_foreach(list, i, item) {
+        const char *series_uid = json_string_value(json_object_get(json_object_get(item, "MainDicomTags"), "SeriesInstanceUID"));
+        const char *series_id = json_string_value(json_object_get(item, "ID"));
+        if (series_uid && series_id && !strcmp(series_uid, uid) && srv_orthanc_id_valid(series_id))
+            snprintf(id, size, "%s", series_id);
+    }
+    json_decref(list);
+    if (!rc && !id[0])
+        rc = iso_error_set(err, ISO_E_FORMAT, "orthanc %s: the segmentation's study holds no series %s (the images it "
+                           "segments)", target, uid);
+    return rc;
+}
 
 /* Lists and fetches the series into dir (which exists): an srv_fetch_series_fn. */
 static int fetch_series(void *context, const char *dir, const iso_load_options *opt, iso_error *err,
@@ -111,6 +153,14 @@ static int fetch_series(void *context, const char *dir, const iso_load_options *
         fprintf(stderr, "isoserve: orthanc %s/series/%s: %zu instances fetched in %.0f ms\n", o->url, o->series,
                 json_array_size(ids), iso_clock_ms() - start);
     json_decref(ids);
+    /* A segmentation: the series it was derived from, beside it. */
+    char reference[80], id[80];
+    if (!rc && o->with_reference && !(rc = iso_seg_dicom_referenced_series(dir, reference, sizeof reference, err)) &&
+        !(rc = find_in_study(&f, o->url, o->series, reference, id, sizeof id, err, upstream)) &&
+        !(rc = list_instances(&f, o->url, id, &ids, err, upstream))) {
+        rc = fetch_instances(&f, o->url, id, ids, dir, cap + HEADER_ALLOWANCE * json_array_size(ids), err, upstream);
+        json_decref(ids);
+    }
     srv_fetch_close(&f);
     return rc;
 }
@@ -123,6 +173,24 @@ int srv_orthanc_load(const char *url, const char *series, const char *cache_dir,
     if (!srv_orthanc_url_valid(url) || !srv_orthanc_id_valid(series))
         return iso_error_set(err, ISO_E_ARGUMENT, "orthanc \"%s\" series \"%s\": not an http(s) URL and an Orthanc id",
                              url, series);
-    orthanc_series o = {url, series};
+    orthanc_series o = {url, series, 0};
     return srv_fetch_load("orthanc", url, series, cache_dir, fetch_series, &o, opt, out, err, upstream);
+}
+
+static int load_segmentation(void *out, const char *dir, const iso_load_options *opt, iso_error *err)
+{
+    return iso_seg_load(dir, NULL, opt, (iso_segmentation **)out, err);
+}
+
+int srv_orthanc_load_segmentation(const char *url, const char *series, const char *cache_dir,
+                                  const iso_load_options *opt, iso_segmentation **out, iso_error *err, int *upstream)
+{
+    *out = NULL;
+    *upstream = 0;
+    if (!srv_orthanc_url_valid(url) || !srv_orthanc_id_valid(series))
+        return iso_error_set(err, ISO_E_ARGUMENT, "orthanc \"%s\" series \"%s\": not an http(s) URL and an Orthanc id",
+                             url, series);
+    orthanc_series o = {url, series, 1};
+    return srv_fetch_load_with("orthanc", url, series, cache_dir, fetch_series, &o, opt, load_segmentation, out, err,
+                               upstream);
 }

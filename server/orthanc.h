@@ -12,6 +12,7 @@
 #define SRV_ORTHANC_H
 
 #include "io/io.h"
+#include "segment/segment.h"
 #include "volume/volume.h"
 
 /* 1 if url is http:// or https:// followed by a host (no spaces, quotes or control bytes). */
@@ -24,5 +25,10 @@ int srv_orthanc_id_valid(const char *id);
  * came but did not make a volume. Progress on the terminal through opt->progress. */
 int srv_orthanc_load(const char *url, const char *series, const char *cache_dir,
                      const iso_load_options *opt, iso_volume **out, iso_error *err, int *upstream);
+
+/* srv_orthanc_load for a DICOM SEG series: the SEG, then the series of its study it
+ * references, fetched into one folder and loaded as a segmentation (segment.h). */
+int srv_orthanc_load_segmentation(const char *url, const char *series, const char *cache_dir,
+                                  const iso_load_options *opt, iso_segmentation **out, iso_error *err, int *upstream);
 
 #endif

@@ -98,6 +98,22 @@ static int find_seg_file(const char *path, const char *dir, const char *uid, cha
     return rc;
 }
 
+int iso_seg_dicom_referenced_series(const char *dir, char *uid, size_t size, iso_error *err)
+{
+    char file[4096], why[400] = "";
+    int rc = find_seg_file(dir, dir, "", file, sizeof file, err);
+    if (rc)
+        return rc;
+    iso_gdcm_seg s;
+    if (iso_gdcm_seg_read(file, MAX_FRAMES, &s, why, sizeof why))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: %s", file, why);
+    snprintf(uid, size, "%s", s.referenced_series);
+    iso_gdcm_seg_free(&s);
+    if (!uid[0])
+        return iso_error_set(err, ISO_E_FORMAT, "%s: no Referenced Series Sequence: which images does it segment?", file);
+    return 0;
+}
+
 int iso_seg_dicom_recognises(const char *path)
 {
     char dir[4096], file[4096], uid[128];

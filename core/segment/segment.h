@@ -119,6 +119,10 @@ int iso_seg_dicom_recognises(const char *path);
  * docs/dicom.md. */
 int iso_seg_dicom_load(const char *path, const iso_load_options *opt, iso_segmentation **out, iso_error *err);
 
+/* The SeriesInstanceUID of the series the one DICOM SEG in dir references (what an
+ * archive must send beside it). 0, or an error naming the file. */
+int iso_seg_dicom_referenced_series(const char *dir, char *uid, size_t size, iso_error *err);
+
 /* Any segmentation source: a .seg.nrrd, a DICOM SEG, or any other volume as a label map
  * (with ITK-SNAP descriptions when `descriptions` is not NULL). */
 int iso_seg_load(const char *path, const char *descriptions, const iso_load_options *opt,
