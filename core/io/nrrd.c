@@ -916,7 +916,7 @@ int iso_nrrd_load(const char *path, const iso_load_options *opt, iso_volume **ou
     int rc = iso_nrrd_read_header(path, hdr, err);
     if (rc == ISO_OK && hdr->components != 1)
         rc = iso_error_set(err, ISO_E_UNSUPPORTED,
-                           "%s: 4-D data with %zu values per sample (a scalar volume has 1; a 3D Slicer "
+                           "%s: field 'sizes': 4-D data with %zu values per sample (a scalar volume has 1; a 3D Slicer "
                            "segmentation's layers are read as a .seg.nrrd)", path, hdr->components);
     if (rc == ISO_OK)
         rc = iso_nrrd_load_samples(path, hdr, opt, out, err);

@@ -158,3 +158,26 @@ if [ -d "$shared" ]; then
 else
     echo "SKIP cli.cthead_tolerance0_is_full_scan: needs $shared"
 fi
+
+# segments: Debian's JHU white-matter atlas as a label map with its names: every segment at
+# once (their triangles add up to the scene's), one segment closed to an STL, and refusals.
+jhu=/usr/share/mricron/templates/JHU-WhiteMatter-labels-1mm.nii.gz
+if [ -f "$jhu" ]; then
+    if $bin segments "$jhu" --labels-file "${jhu%.gz}.txt" --json -o "$tmp/jhu.glb" > "$tmp/jhu.json" &&
+       [ "$(json "$tmp/jhu.json" "len(d['segments'])")" = 48 ] &&
+       [ "$(json "$tmp/jhu.json" "d['segments'][2]['name']")" = Genu_of_corpus_callosum ] &&
+       [ "$(json "$tmp/jhu.json" "sum(s['triangles'] for s in d['segments']) == d['triangles'] > 100000")" = True ] &&
+       [ "$(head -c 4 "$tmp/jhu.glb")" = glTF ]; then
+        pass segments_all
+    else fail segments_all "$(head -c 600 "$tmp/jhu.json")"; fi
+    if $bin segments "$jhu" --segment 3 --cap --smoothing 1 --json -o "$tmp/genu.stl" > "$tmp/genu.json" &&
+       [ "$(json "$tmp/genu.json" "d['closed'] and d['triangles'] > 1000")" = True ] &&
+       [ "$(stat -c %s "$tmp/genu.stl")" -eq $((84 + 50 * $(json "$tmp/genu.json" "d['triangles']"))) ]; then
+        pass segments_one_closed
+    else fail segments_one_closed "$(cat "$tmp/genu.json")"; fi
+    check_refusal segments_unknown_number "no segment numbered 99" $bin segments "$jhu" --segment 99
+    check_refusal segments_scene_format "one .glb or .meshopt.glb" $bin segments "$jhu" -o "$tmp/all.ply"
+else
+    echo "SKIP cli.segments: needs Debian's mricron-data"
+fi
+check_refusal segments_float_volume "holds integers" $bin segments field:sphere:16
