@@ -224,11 +224,6 @@ static int fetch_series(void *context, const char *dir, const iso_load_options *
     return fetch_series(&ref, dir, opt, err, upstream);
 }
 
-static int load_segmentation(void *out, const char *dir, const iso_load_options *opt, iso_error *err)
-{
-    return iso_seg_load(dir, NULL, opt, (iso_segmentation **)out, err);
-}
-
 int srv_dicomweb_load_segmentation(const char *url, const char *study, const char *series, const char *credentials,
                                    const char *cache_dir, const iso_load_options *opt, iso_segmentation **out,
                                    iso_error *err, int *upstream)
@@ -239,7 +234,7 @@ int srv_dicomweb_load_segmentation(const char *url, const char *study, const cha
         return iso_error_set(err, ISO_E_ARGUMENT, "dicomweb \"%s\" series \"%s\": not an http(s) URL and DICOM UIDs",
                              url, series);
     wado_series w = {url, study, series, credentials, "", 1};
-    return srv_fetch_load_with("dicomweb", url, series, cache_dir, fetch_series, &w, opt, load_segmentation, out, err,
+    return srv_fetch_load_with("dicomweb", url, series, cache_dir, fetch_series, &w, opt, srv_fetch_segmentation, out, err,
                                upstream);
 }
 

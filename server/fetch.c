@@ -11,6 +11,7 @@
 
 #include "base/base.h"
 #include "hash.h"
+#include "segment/segment.h"
 
 int srv_fetch_url_valid(const char *url)
 {
@@ -194,6 +195,11 @@ static int fetch_into_cache(const char *final, srv_fetch_series_fn fetch, void *
 static int load_volume(void *out, const char *dir, const iso_load_options *opt, iso_error *err)
 {
     return iso_load(dir, opt, (iso_volume **)out, err);
+}
+
+int srv_fetch_segmentation(void *out, const char *dir, const iso_load_options *opt, iso_error *err)
+{
+    return iso_seg_load(dir, NULL, opt, (iso_segmentation **)out, err);
 }
 
 int srv_fetch_load(const char *kind, const char *url, const char *name, const char *cache_dir,

@@ -60,6 +60,10 @@ int srv_fetch_load_with(const char *kind, const char *url, const char *name, con
                         srv_fetch_series_fn fetch, void *context, const iso_load_options *opt,
                         srv_fetch_loader_fn load, void *out, iso_error *err, int *upstream);
 
+/* The loader of a segmentation's folder (a DICOM SEG beside the series it references):
+ * out is an iso_segmentation ** (segment/segment.h). */
+int srv_fetch_segmentation(void *out, const char *dir, const iso_load_options *opt, iso_error *err);
+
 /* 1 if url is http:// or https:// followed by a host (no spaces, quotes, control bytes,
  * query or fragment; at most 1024 bytes). */
 int srv_fetch_url_valid(const char *url);

@@ -177,11 +177,6 @@ int srv_orthanc_load(const char *url, const char *series, const char *cache_dir,
     return srv_fetch_load("orthanc", url, series, cache_dir, fetch_series, &o, opt, out, err, upstream);
 }
 
-static int load_segmentation(void *out, const char *dir, const iso_load_options *opt, iso_error *err)
-{
-    return iso_seg_load(dir, NULL, opt, (iso_segmentation **)out, err);
-}
-
 int srv_orthanc_load_segmentation(const char *url, const char *series, const char *cache_dir,
                                   const iso_load_options *opt, iso_segmentation **out, iso_error *err, int *upstream)
 {
@@ -191,6 +186,6 @@ int srv_orthanc_load_segmentation(const char *url, const char *series, const cha
         return iso_error_set(err, ISO_E_ARGUMENT, "orthanc \"%s\" series \"%s\": not an http(s) URL and an Orthanc id",
                              url, series);
     orthanc_series o = {url, series, 1};
-    return srv_fetch_load_with("orthanc", url, series, cache_dir, fetch_series, &o, opt, load_segmentation, out, err,
+    return srv_fetch_load_with("orthanc", url, series, cache_dir, fetch_series, &o, opt, srv_fetch_segmentation, out, err,
                                upstream);
 }

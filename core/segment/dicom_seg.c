@@ -134,22 +134,6 @@ typedef struct grid {
     double inverse[3][3];   /* world direction to index, per unit of world offset */
 } grid;
 
-static int invert(const iso_volume *v, double inv[3][3])
-{
-    double a[3][4];
-    iso_vol_affine(v, a);
-    double det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
-                 a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
-    if (!(fabs(det) > 0))
-        return -1;
-    for (int r = 0; r < 3; r++)
-        for (int c = 0; c < 3; c++) {
-            int r1 = (c + 1) % 3, r2 = (c + 2) % 3, c1 = (r + 1) % 3, c2 = (r + 2) % 3;
-            inv[r][c] = (a[r1][c1] * a[r2][c2] - a[r1][c2] * a[r2][c1]) / det;
-        }
-    return 0;
-}
-
 /* PASS 2's checks of the plane geometry against the grid. */
 static int check_planes(const char *file, const iso_gdcm_seg *s, const grid *g, iso_error *err)
 {
@@ -469,7 +453,8 @@ int iso_seg_dicom_load(const char *path, const iso_load_options *opt, iso_segmen
         rc = iso_error_set(err, ref_err.code == ISO_E_ARGUMENT ? ISO_E_FORMAT : ref_err.code,
                            "%s: the series it references (%s) must be beside it in %s: %s", file, s.referenced_series, dir,
                            ref_err.message);
-    if (!rc && invert(&g.shape, g.inverse))
+    double frame[3][3];
+    if (!rc && iso_vol_frame(&g.shape, frame, g.inverse, NULL))
         rc = iso_error_set(err, ISO_E_FORMAT, "%s: the referenced series' geometry is singular", reference);
     if (!rc)
         rc = check_frames(file, &s, labelmap, err);

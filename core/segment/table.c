@@ -120,8 +120,7 @@ void iso_seg_count_voxels(iso_segmentation *seg)
 double iso_seg_volume_mm3(const iso_segmentation *seg, size_t s)
 {
     const iso_volume *vol = seg->layers[seg->segments[s].layer].vol;
-    const double (*d)[3] = vol->direction;
-    double det = d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) - d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
-                 d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]);
-    return (double)seg->segments[s].voxels * vol->spacing[0] * vol->spacing[1] * vol->spacing[2] * fabs(det);
+    double a[3][3], inv[3][3], det = 0;
+    iso_vol_frame(vol, a, inv, &det); /* det A is a voxel's volume (spacing and shear) */
+    return (double)seg->segments[s].voxels * fabs(det);
 }

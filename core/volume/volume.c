@@ -358,3 +358,25 @@ int iso_vol_set_affine(iso_volume *vol, const double affine[3][4], const char *w
         vol->origin[r] = affine[r][3];
     return 0;
 }
+
+int iso_vol_frame(const iso_volume *vol, double a[3][3], double inv[3][3], double *det)
+{
+    double affine[3][4];
+    iso_vol_affine(vol, affine);
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++)
+            a[r][c] = affine[r][c];
+    double d = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
+               a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+    if (det)
+        *det = d;
+    if (!(fabs(d) > 1e-300))
+        return -1;
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++) {
+            /* Cofactor of (c, r) over det: the adjugate's transpose. */
+            int r1 = (c + 1) % 3, r2 = (c + 2) % 3, c1 = (r + 1) % 3, c2 = (r + 2) % 3;
+            inv[r][c] = (a[r1][c1] * a[r2][c2] - a[r1][c2] * a[r2][c1]) / d;
+        }
+    return 0;
+}

@@ -164,6 +164,10 @@ static inline void iso_vol_index_to_world(const iso_volume *vol, const double in
  * The volume is unchanged on error. */
 int iso_vol_set_affine(iso_volume *vol, const double affine[3][4], const char *what,
                        iso_error *err);
+/* The linear part A of index-to-world (A's columns: the world steps of i, j, k), its
+ * inverse (world offsets to index offsets) and det A. Returns 0, or -1 when A is singular
+ * (|det| <= 1e-300); inv is then unset. */
+int iso_vol_frame(const iso_volume *vol, double a[3][3], double inv[3][3], double *det);
 /* The same map as a 3x4 affine matrix [A | origin], world = A * index + origin, read off
  * iso_vol_index_to_world so that the two always agree. */
 void iso_vol_affine(const iso_volume *vol, double affine[3][4]);
