@@ -16,6 +16,9 @@ label maps made here, beside the CT series they segment.
         --bad=position    a frame half a slice off the CT's slices
         --bad=spacing     Pixel Spacing other than the CT's
         --bad=overlap     a LABELMAP SEG whose two frames on one slice give one voxel two segments
+    dicom_seg.py variants OUTDIR
+        every one of those in OUTDIR/NAME (binary, fractional, labelmap, overlap, and
+        bad-frames, bad-segment, bad-position, bad-spacing, bad-overlap), in one process.
 Uses Debian's python3-pydicom and python3-numpy only."""
 
 import os
@@ -166,12 +169,24 @@ def write_seg(masks, spacing, ct_uid, out, kind, bad):
     ds.save_as(out, write_like_original=False)
 
 
+VARIANTS = {"binary": [], "fractional": ["--fractional"], "labelmap": ["--labelmap"], "overlap": ["--overlap"],
+            "bad-frames": ["--bad=frames"], "bad-segment": ["--bad=segment"], "bad-position": ["--bad=position"],
+            "bad-spacing": ["--bad=spacing"], "bad-overlap": ["--bad=overlap"]}
+
+
 def main(argv):
     flags = [a for a in argv if a.startswith("--")]
     args = [a for a in argv if not a.startswith("--")]
+    if len(args) == 2 and args[0] == "variants":
+        for name, variant in VARIANTS.items():
+            phantom(os.path.join(args[1], name), variant)
+        return
     if len(args) != 2 or args[0] != "phantom":
         sys.exit(__doc__)
-    out = args[1]
+    phantom(args[1], flags)
+
+
+def phantom(out, flags):
     bad = next((a.split("=", 1)[1] for a in flags if a.startswith("--bad=")), None)
     kind = "FRACTIONAL" if "--fractional" in flags else "LABELMAP" if "--labelmap" in flags or bad == "overlap" else "BINARY"
     data, spacing = dicom_series.phantom()

@@ -447,20 +447,28 @@ static void test_cielab_to_srgb(void)
 }
 
 
-/* The phantom's SEG written by dicom_seg.py into a fresh folder (flags: its options);
- * NULL after a skip line without pydicom. */
-static const char *write_seg(const char *flags)
+/* The folder of the phantom's SEG variant `name` (dicom_seg.py variants: binary,
+ * fractional, labelmap, overlap, bad-*), every variant written once by one run of the
+ * script; NULL after a skip line without pydicom. Tests may move files out of a copy. */
+static const char *write_seg(const char *name)
 {
-    static char dir[4096];
-    static int serial;
-    if (system("/usr/bin/python3 -c 'import pydicom, numpy' > /dev/null 2>&1") != 0) {
+    static char root[4096], dir[4400];
+    static int state; /* 0 not tried, 1 written, -1 cannot */
+    if (!state) {
+        state = -1;
+        if (system("/usr/bin/python3 -c 'import pydicom, numpy' > /dev/null 2>&1") == 0) {
+            snprintf(root, sizeof root, "%s/segs", check_temp_dir());
+            char cmd[8192];
+            snprintf(cmd, sizeof cmd, "/usr/bin/python3 tests/support/dicom_seg.py variants %s > /dev/null 2>&1", root);
+            CHECK_EQ(system(cmd), 0);
+            state = 1;
+        }
+    }
+    if (state < 0) {
         check_skip("needs Debian's python3-pydicom and python3-numpy");
         return NULL;
     }
-    snprintf(dir, sizeof dir, "%s/seg%d", check_temp_dir(), serial++);
-    char cmd[8192];
-    snprintf(cmd, sizeof cmd, "/usr/bin/python3 tests/support/dicom_seg.py phantom %s %s > /dev/null 2>&1", dir, flags);
-    CHECK_EQ(system(cmd), 0);
+    snprintf(dir, sizeof dir, "%s/%s", root, name);
     return dir;
 }
 
@@ -498,7 +506,7 @@ static iso_segmentation *load_or_fail(const char *path, const char *descriptions
 
 static void test_dicom_seg_gives_the_label_maps_meshes(void)
 {
-    static const char *const kinds[] = {"", "--fractional", "--labelmap"};
+    static const char *const kinds[] = {"binary", "fractional", "labelmap"};
     static const char *const sources[] = {"BINARY", "FRACTIONAL", "LABELMAP"};
     for (int k = 0; k < 3 && !check_failed(); k++) {
         const char *dir = write_seg(kinds[k]);
@@ -537,7 +545,7 @@ static void test_dicom_seg_gives_the_label_maps_meshes(void)
 
 static void test_overlapping_binary_segments_take_layers(void)
 {
-    const char *dir = write_seg("--overlap");
+    const char *dir = write_seg("overlap");
     if (!dir)
         return;
     char ct[4200];
@@ -570,11 +578,11 @@ static void test_bad_segs_are_precise_errors(void)
     static const struct {
         const char *flag, *says;
         int code;
-    } cases[] = {{"--bad=frames", "missing frames", ISO_E_TRUNCATED},
-                 {"--bad=segment", "refers to segment 9", ISO_E_FORMAT},
-                 {"--bad=position", "lies on no slice of the referenced series", ISO_E_FORMAT},
-                 {"--bad=spacing", "does not match the referenced series", ISO_E_FORMAT},
-                 {"--bad=overlap", "overlapping segments in a label map SEG", ISO_E_FORMAT}};
+    } cases[] = {{"bad-frames", "missing frames", ISO_E_TRUNCATED},
+                 {"bad-segment", "refers to segment 9", ISO_E_FORMAT},
+                 {"bad-position", "lies on no slice of the referenced series", ISO_E_FORMAT},
+                 {"bad-spacing", "does not match the referenced series", ISO_E_FORMAT},
+                 {"bad-overlap", "overlapping segments in a label map SEG", ISO_E_FORMAT}};
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         const char *dir = write_seg(cases[i].flag);
         if (!dir)
@@ -588,8 +596,9 @@ static void test_bad_segs_are_precise_errors(void)
                "%s: %d %s", cases[i].flag, rc, err.message);
         CHECK(seg == NULL);
     }
-    /* The SEG's CT must be there: without it, the error names the series it needs. */
-    const char *dir = write_seg("");
+    /* The SEG's CT must be there: without it, the error names the series it needs (a
+     * variant of its own, its SEG moved away from its CT). */
+    const char *dir = write_seg("bad-frames");
     if (!dir)
         return;
     char cmd[16384], lone[4200];
@@ -599,6 +608,7 @@ static void test_bad_segs_are_precise_errors(void)
     iso_segmentation *seg = NULL;
     iso_error err = {0};
     CHECK(iso_seg_load(lone, NULL, NULL, &seg, &err) != 0);
+    /* (That SEG is also a bad one: the missing CT is found first.) */
     CHECKF(strstr(err.message, "must be beside it") != NULL, "%s", err.message);
 }
 
