@@ -177,6 +177,29 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
     return march_and_finish(tree, params, mesh, stats, start, err);
 }
 
+int iso_extract_exact(const iso_volume *vol, double level, iso_space space, int threads, iso_mesh *mesh,
+                      iso_extract_stats *stats, iso_error *err)
+{
+    iso_extract_stats local;
+    double start = iso_clock_ms();
+    if (!stats)
+        stats = &local;
+    memset(stats, 0, sizeof *stats);
+    iso_bricks bricks;
+    int rc = iso_bricks_build(vol, threads, &bricks, err);
+    if (rc)
+        return rc;
+    iso_march_stats ms;
+    rc = iso_march_bricks(vol, &bricks, level, 1, space == ISO_SPACE_WORLD, threads, mesh, &ms, err);
+    iso_bricks_free(&bricks);
+    if (rc)
+        return rc;
+    stats->nodes_visited = ms.bricks_active;
+    stats->cells_visited = ms.cells_visited;
+    stats->error_bound = ms.error_bound;
+    return finish(vol, ISO_SPACE_INDEX, 0, mesh, stats, start, err);
+}
+
 int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,
                           iso_mesh *mesh, iso_extract_stats *stats, iso_error *err)
 {

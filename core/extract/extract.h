@@ -22,6 +22,7 @@
 #define ISO_EXTRACT_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 #include "base/base.h"
 #include "mesh/mesh.h"
@@ -71,6 +72,23 @@ typedef struct iso_extract_stats {
  * parameter (NaN, negative tolerance), or ISO_E_NOMEM. */
 int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh *mesh,
                 iso_extract_stats *stats, iso_error *err);
+
+/* The surface of one label of a label volume (vol->labels; hierarchy/labels.h): marching
+ * cubes' surface of its indicator (1 where a sample equals label) at 0.5, vertices at edge
+ * midpoints, over the bricks the label sets say hold the label and another (label.c);
+ * with cap closed half a voxel past the border (the indicator 0 beyond it); in `space`.
+ * stats: cells and bricks visited, triangles, time (error_bound 0). Returns 0,
+ * ISO_E_ARGUMENT (the tree has no label sets), ISO_E_LIMIT or ISO_E_NOMEM (mesh empty). */
+int iso_extract_label(const iso_tree *tree, int64_t label, int cap, iso_space space, int threads, iso_mesh *mesh,
+                      iso_extract_stats *stats, iso_error *err);
+
+/* Marching cubes' surface of any volume at level, through its brick min/max grid (made
+ * here: one pass over the samples) and the exact kernel, without a hierarchy: for volumes
+ * made on the fly (a segment's smoothed field). The same surface as iso_extract at
+ * tolerance 0. stats: bricks and cells visited, triangles, time, error bound. Returns 0,
+ * ISO_E_LIMIT or ISO_E_NOMEM. */
+int iso_extract_exact(const iso_volume *vol, double level, iso_space space, int threads, iso_mesh *mesh,
+                      iso_extract_stats *stats, iso_error *err);
 
 /* Moves mesh's index-space positions to world millimetres, bit for bit as the exact
  * kernel places its own (an identity direction: origin + index * spacing). O(V). */

@@ -16,6 +16,15 @@ void iso_bricks_box(const iso_volume *vol, const uint32_t brick[3], size_t lo[3]
     }
 }
 
+int iso_bricks_on_border(const iso_bricks *g, size_t at)
+{
+    size_t b[3] = {at % g->count[0], at / g->count[0] % g->count[1], at / g->count[0] / g->count[1]};
+    for (int d = 0; d < 3; d++)
+        if (b[d] == 0 || b[d] + 1 == g->count[d])
+            return 1;
+    return 0;
+}
+
 void iso_bricks_count(const iso_volume *vol, uint32_t count[3])
 {
     for (int d = 0; d < 3; d++)

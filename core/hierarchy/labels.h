@@ -1,4 +1,5 @@
-/* labels.h: per brick, which labels a label volume's samples hold: the min/max grid's
+/* labels.h (part of the hierarchy's public header tree.h): per brick, which labels a label
+ * volume's samples hold: the min/max grid's
  * counterpart for segmentations, built in the hierarchy's pass over the bricks and kept
  * in its file (tree.h).
  *

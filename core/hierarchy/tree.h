@@ -16,6 +16,7 @@
 #include <stdint.h>
 
 #include "base/base.h"
+#include "labels.h"
 #include "volume/volume.h"
 
 /* Min and max of the samples over a regular grid of bricks, the flat bottom
@@ -51,6 +52,9 @@ static inline size_t iso_bricks_total(const iso_bricks *b)
 
 /* Bricks per axis of vol's grid, ceil((dims - 1) / 8); 0 on an axis of fewer than 2 samples. */
 void iso_bricks_count(const iso_volume *vol, uint32_t count[3]);
+
+/* 1 if brick `at` (grid index, x fastest) is on the grid's border along some axis. */
+int iso_bricks_on_border(const iso_bricks *bricks, size_t at);
 
 /* The inclusive sample box of brick (i, j, k): lo = 8 * index, hi clipped to dims - 1. */
 void iso_bricks_box(const iso_volume *vol, const uint32_t brick[3], size_t lo[3], size_t hi[3]);
@@ -130,7 +134,7 @@ typedef struct iso_tree {
     iso_bricks bricks;      /* regular min/max grid for exact extraction; computed, not saved */
     uint8_t *level_code;    /* per brick, ISO_TREE_CODES codes (iso_tree_level_error); saved */
     iso_tree_scale scale;   /* what the codes stand for */
-    struct iso_label_sets *labels; /* per brick the labels held, for a label volume
+    iso_label_sets *labels; /* per brick the labels held, for a label volume
                                     * (vol->labels; hierarchy/labels.h), else NULL; saved */
     void *mapping;          /* file mapping when loaded with iso_tree_load, else NULL */
     size_t mapping_bytes;

@@ -111,4 +111,71 @@ int iso_dicom_load(const char *path, const iso_load_options *opt, iso_volume **o
  * origin and direction into *shape (data NULL, no stats). The same checks and errors. */
 int iso_dicom_geometry(const char *path, const iso_load_options *opt, iso_volume *shape, iso_error *err);
 
+/* NRRD headers' key:=value pairs and multi-valued samples, for 3D Slicer's segmentations
+ * (core/segment reads their meaning). */
+
+/* Calls fn(context, key, value, line, err) for each "key:=value" line of path's NRRD header
+ * (until the blank line that ends it), in order; stops at fn's first non-zero return,
+ * which it returns. 0, ISO_E_IO or ISO_E_NOMEM otherwise. */
+int iso_nrrd_key_values(const char *path,
+                        int (*fn)(void *context, const char *key, const char *value, int line, iso_error *err),
+                        void *context, iso_error *err);
+/* A NRRD's samples as layers: a 3-D file is one volume, a 4-D file whose first axis holds
+ * N values per sample (N <= 256) N volumes, value v of every sample in layer v; each with
+ * the file's geometry and its stats. *layers is a malloc'd array of *count volumes. The
+ * errors of iso_nrrd_load. */
+int iso_nrrd_load_layers(const char *path, const iso_load_options *opt, iso_volume ***layers, size_t *count,
+                         iso_error *err);
+
+/* DICOM Segmentation objects (PS3.3 A.51, C.8.20): what a SEG says (its segments, its
+ * type, its frames' places and segments, the shared plane geometry, the series it was
+ * derived from) and its pixel data as stored, read with GDCM's dataset API. Placing the
+ * frames on a grid is core/segment/dicom_seg.c's job. */
+
+/* Segmentation Storage, and Label Map Segmentation Storage (2024). */
+#define ISO_GDCM_SEG_SOP_CLASS "1.2.840.10008.5.1.4.1.1.66.4"
+#define ISO_GDCM_SEG_LABELMAP_SOP_CLASS "1.2.840.10008.5.1.4.1.1.66.7"
+
+typedef struct iso_gdcm_seg_segment {
+    unsigned number;          /* Segment Number (0062,0004) */
+    char label[128];          /* Segment Label (0062,0005) */
+    char category[128];       /* Segmented Property Category (0062,0003) > Code Meaning */
+    char type[128];           /* Segmented Property Type (0062,000F) > Code Meaning */
+    uint16_t lab[3];          /* Recommended Display CIELab Value (0062,000D) */
+    int has_lab;
+} iso_gdcm_seg_segment;
+
+typedef struct iso_gdcm_seg_frame {
+    double position[3];       /* Plane Position (0020,9113) > Image Position (Patient) */
+    int has_position;
+    unsigned segment;         /* Segment Identification (0062,000A) > Referenced Segment Number; 0 if absent */
+} iso_gdcm_seg_frame;
+
+typedef struct iso_gdcm_seg {
+    char sop_class[80], series_uid[80];
+    char referenced_series[80];   /* Referenced Series Sequence (0008,1115) > SeriesInstanceUID */
+    char type[16];                /* Segmentation Type (0062,0001): BINARY, FRACTIONAL, LABELMAP */
+    unsigned rows, columns, frames, bits_allocated;
+    double max_fraction;          /* Maximum Fractional Value (0062,000E) */
+    double pixel_spacing[2];      /* shared Pixel Measures: between rows, between columns */
+    double orientation[6];        /* shared Plane Orientation (0020,9116) */
+    int has_orientation;
+    unsigned per_frame_items;     /* items in Per-frame Functional Groups (5200,9230) */
+    iso_gdcm_seg_segment *segments; /* segment_count, malloc'd */
+    unsigned segment_count;
+    iso_gdcm_seg_frame *frame;   /* frames entries, malloc'd */
+    unsigned char *pixels;        /* the Pixel Data as stored (1-bit packed, or 8/16-bit), malloc'd */
+    size_t pixel_bytes;
+} iso_gdcm_seg;
+
+/* Reads SOP Class and Series UIDs only (the header up to them): 0, 1 when path is no
+ * DICOM file, -1 with why. */
+int iso_gdcm_seg_probe(const char *path, char *sop_class, size_t sop_size, char *series_uid, size_t series_size,
+                        char *why, size_t why_size);
+/* Reads the whole object, pixel data included (uncompressed or deflated; an encapsulated
+ * one is decoded by GDCM). max_frames caps NumberOfFrames. 0, or -1 with why. On success
+ * free with iso_gdcm_seg_free. */
+int iso_gdcm_seg_read(const char *path, unsigned max_frames, iso_gdcm_seg *out, char *why, size_t why_size);
+void iso_gdcm_seg_free(iso_gdcm_seg *seg);
+
 #endif

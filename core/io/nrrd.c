@@ -923,3 +923,80 @@ int iso_nrrd_load(const char *path, const iso_load_options *opt, iso_volume **ou
     free(hdr);
     return rc;
 }
+
+int iso_nrrd_key_values(const char *path,
+                        int (*fn)(void *context, const char *key, const char *value, int line, iso_error *err),
+                        void *context, iso_error *err)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return iso_error_set(err, ISO_E_IO, "%s: cannot open: %s", path, strerror(errno));
+    char *line = malloc(ISO_NRRD_MAX_LINE + 1);
+    int rc = line ? 0 : iso_error_set(err, ISO_E_NOMEM, "%s: out of memory", path), line_no = 0;
+    while (!rc) {
+        line_no++;
+        int status = read_line(f, line);
+        if (status != LINE_OK || line[0] == '\0')
+            break; /* the header's end (or what iso_nrrd_read_header reports) */
+        char *eq = line[0] == '#' ? NULL : strstr(line, ":=");
+        if (!eq)
+            continue;
+        *eq = '\0';
+        rc = fn(context, line, eq + 2, line_no, err);
+    }
+    free(line);
+    fclose(f);
+    return rc;
+}
+
+int iso_nrrd_load_layers(const char *path, const iso_load_options *opt, iso_volume ***out, size_t *count,
+                         iso_error *err)
+{
+    *out = NULL;
+    *count = 0;
+    iso_nrrd_header *hdr = malloc(sizeof *hdr);
+    if (!hdr)
+        return iso_error_set(err, ISO_E_NOMEM, "%s: out of memory", path);
+    iso_volume *wide = NULL;
+    int rc = iso_nrrd_read_header(path, hdr, err);
+    if (!rc)
+        rc = iso_nrrd_load_samples(path, hdr, opt, &wide, err);
+    size_t layers = rc ? 0 : hdr->components, size = rc ? 0 : iso_vol_type_size(hdr->type);
+    size_t samples = rc ? 0 : hdr->dims[0] * hdr->dims[1] * hdr->dims[2];
+    iso_volume **list = rc ? NULL : calloc(layers, sizeof *list);
+    if (!rc && !list)
+        rc = iso_error_set(err, ISO_E_NOMEM, "%s: out of memory", path);
+    /* Each layer's samples from the interleaved ones (value fastest); one is the file's own. */
+    for (size_t l = 0; !rc && l < layers; l++) {
+        iso_volume *vol = layers == 1 ? wide : iso_vol_create(hdr->dims, hdr->type, opt ? opt->max_bytes : 0, err);
+        if (!vol) {
+            rc = err ? err->code : ISO_E_NOMEM;
+            break;
+        }
+        if (layers > 1) {
+            const unsigned char *from = (const unsigned char *)wide->data + l * size;
+            unsigned char *to = vol->data;
+            for (size_t i = 0; i < samples; i++)
+                memcpy(to + i * size, from + i * layers * size, size);
+        }
+        vol->dims[0] = hdr->dims[0];
+        memcpy(vol->spacing, hdr->spacing, sizeof vol->spacing);
+        memcpy(vol->origin, hdr->origin, sizeof vol->origin);
+        memcpy(vol->direction, hdr->direction, sizeof vol->direction);
+        iso_vol_update_stats(vol);
+        list[l] = vol;
+    }
+    if (layers == 1)
+        wide = NULL;
+    iso_vol_destroy(wide);
+    free(hdr);
+    if (rc) {
+        for (size_t l = 0; list && l < layers; l++)
+            iso_vol_destroy(list[l]);
+        free(list);
+        return rc;
+    }
+    *out = list;
+    *count = layers;
+    return 0;
+}

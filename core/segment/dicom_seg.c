@@ -28,7 +28,6 @@
 #include <strings.h>
 #include <sys/stat.h>
 
-#include "io/dicom_gdcm.h"
 
 #define MAX_FRAMES 1000000u
 

@@ -3,10 +3,9 @@
  * PASS 1 (bricks): the segment's bricks from its layer's label sets (hierarchy/labels.h):
  *   those holding its label and another are its boundary bricks, the only ones its
  *   surface crosses; those on the volume's border need the cap.
- * PASS 2 (march): without smoothing, the exact brick kernel on the boundary bricks with
- *   the indicator's classification, "sample == label" (march.h, iso_march_label): marching
- *   cubes' surface of the 0/1 indicator at 0.5, vertices at edge midpoints. With
- *   smoothing, the field (field.c: the indicator convolved with the Gaussian) on the box of
+ * PASS 2 (march): without smoothing, the label's surface (extract.h, iso_extract_label:
+ *   the exact brick kernel on the boundary bricks with "sample == label" as its
+ *   classification, capped and placed: passes 2 to 4 here). With smoothing, the field (field.c: the indicator convolved with the Gaussian) on the box of
  *   the boundary bricks widened by the kernel, marched at 0.5 by the ordinary kernel over
  *   that field's own min/max bricks. A fractional layer's segment is the ordinary
  *   extraction of its layer at max_fraction / 2 (extract.h).
@@ -23,30 +22,16 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "extract/march.h"
-#include "extract/mc.h"
-#include "hierarchy/labels.h"
 
-/* PASS 1: the label's bricks (grid indices), or an empty list when no sample holds it.
- * *start and *count give them in sets->holding; *mixed is how many are boundary bricks. */
+/* The label's bricks in its layer's label sets: holding[*start .. *start + *count). */
 static void label_bricks(const iso_tree *tree, int64_t value, size_t *start, size_t *count)
 {
-    const iso_label_sets *sets = tree->labels;
-    long i = sets ? iso_label_index(sets, value) : -1;
+    long i = tree->labels ? iso_label_index(tree->labels, value) : -1;
     *start = *count = 0;
-    if (i < 0)
-        return;
-    *start = sets->holding_start[i];
-    *count = sets->holding_start[i + 1] - sets->holding_start[i];
-}
-
-static int on_border(const iso_bricks *g, uint32_t at)
-{
-    uint32_t b[3] = {at % g->count[0], at / g->count[0] % g->count[1], at / g->count[0] / g->count[1]};
-    for (int d = 0; d < 3; d++)
-        if (b[d] == 0 || b[d] + 1 == g->count[d])
-            return 1;
-    return 0;
+    if (i >= 0) {
+        *start = tree->labels->holding_start[i];
+        *count = tree->labels->holding_start[i + 1] - tree->labels->holding_start[i];
+    }
 }
 
 /* The box (samples, inclusive) of the segment's boundary bricks, and with cap of its
@@ -59,7 +44,7 @@ static int boundary_box(const iso_seg_layer *layer, int64_t value, int cap, long
     int any = 0;
     for (size_t k = 0; k < count; k++) {
         uint32_t at = layer->tree->labels->holding[start + k];
-        if (!(at & ISO_LABEL_MIXED) && !(cap && on_border(g, at & ~ISO_LABEL_MIXED)))
+        if (!(at & ISO_LABEL_MIXED) && !(cap && iso_bricks_on_border(g, at & ~ISO_LABEL_MIXED)))
             continue;
         at &= ~ISO_LABEL_MIXED;
         uint32_t b[3] = {at % g->count[0], at / g->count[0] % g->count[1], at / g->count[0] / g->count[1]};
@@ -98,86 +83,6 @@ static void widen(const iso_volume *vol, long margin, int cap, long lo[3], long 
     }
 }
 
-/* PASS 3: the padded cells (lower corner -1 or n-1 on some axis) whose home is brick at:
- * per axis its cells, and the padded one below (first brick) or above (last brick). */
-static int cap_brick(const iso_volume *vol, const iso_bricks *g, uint32_t at, int64_t value, iso_mesh *soup)
-{
-    static const double unit[3] = {1, 1, 1};
-    uint32_t b[3] = {at % g->count[0], at / g->count[0] % g->count[1], at / g->count[0] / g->count[1]};
-    size_t blo[3], bhi[3];
-    iso_bricks_box(vol, b, blo, bhi);
-    long from[3], to[3], n[3];
-    for (int d = 0; d < 3; d++) {
-        n[d] = (long)vol->dims[d];
-        from[d] = b[d] == 0 ? -1 : (long)blo[d];
-        to[d] = b[d] + 1 == g->count[d] ? n[d] - 1 : (long)bhi[d] - 1;
-    }
-    for (long k = from[2]; k <= to[2]; k++)
-        for (long j = from[1]; j <= to[1]; j++)
-            for (long i = from[0]; i <= to[0]; i++) {
-                long c[3] = {i, j, k};
-                int padded = 0;
-                for (int d = 0; d < 3; d++)
-                    padded |= c[d] == -1 || c[d] == n[d] - 1;
-                if (!padded)
-                    continue;
-                double v[8];
-                int ones = 0;
-                for (int corner = 0; corner < 8; corner++) {
-                    long p[3] = {i + (corner & 1), j + (corner >> 1 & 1), k + (corner >> 2 & 1)};
-                    int inside = 1;
-                    for (int d = 0; d < 3; d++)
-                        inside &= p[d] >= 0 && p[d] < n[d];
-                    v[corner] = inside && iso_vol_get(vol, (size_t)p[0], (size_t)p[1], (size_t)p[2]) == (double)value;
-                    ones += v[corner] != 0;
-                }
-                if (!ones)
-                    continue;
-                double origin[3] = {(double)i, (double)j, (double)k};
-                if (iso_mc_cell(v, 0.5, origin, unit, soup, NULL) < 0)
-                    return ISO_E_NOMEM;
-            }
-    return 0;
-}
-
-/* PASS 2 and 3 for a labels segment without smoothing. */
-static int march_labels(const iso_seg_layer *layer, int64_t value, const iso_seg_params *p, iso_mesh *mesh,
-                        iso_extract_stats *stats, iso_error *err)
-{
-    const iso_tree *tree = layer->tree;
-    size_t start, count;
-    label_bricks(tree, value, &start, &count);
-    uint32_t *listed = malloc((count ? count : 1) * sizeof *listed);
-    if (!listed)
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory listing the segment's bricks");
-    size_t n = 0;
-    for (size_t k = 0; k < count; k++)
-        if (tree->labels->holding[start + k] & ISO_LABEL_MIXED)
-            listed[n++] = tree->labels->holding[start + k] & ~ISO_LABEL_MIXED;
-    int world = p->space == ISO_SPACE_WORLD && !p->cap;
-    iso_march_stats ms;
-    int rc = iso_march_label(layer->vol, &tree->bricks, value, listed, n, world, p->threads, mesh, &ms, err);
-    free(listed);
-    if (rc)
-        return rc;
-    stats->nodes_visited = ms.bricks_active;
-    stats->cells_visited = ms.cells_visited;
-    if (!p->cap)
-        return 0;
-    for (size_t k = 0; k < count && !rc; k++) {
-        uint32_t at = tree->labels->holding[start + k] & ~ISO_LABEL_MIXED;
-        if (on_border(&tree->bricks, at))
-            rc = cap_brick(layer->vol, &tree->bricks, at, value, mesh);
-    }
-    if (rc || iso_mesh_weld(mesh)) {
-        iso_mesh_free(mesh);
-        return iso_error_set(err, ISO_E_NOMEM, "out of memory capping the segment");
-    }
-    if (p->space == ISO_SPACE_WORLD)
-        iso_extract_to_world(layer->vol, mesh);
-    return 0;
-}
-
 /* PASS 2 with smoothing (or a fractional layer smoothed): the field's own surface at 0.5. */
 static int march_smoothed(const iso_segmentation *seg, size_t s, const iso_seg_params *p, iso_mesh *mesh,
                           iso_extract_stats *stats, iso_error *err)
@@ -201,14 +106,7 @@ static int march_smoothed(const iso_segmentation *seg, size_t s, const iso_seg_p
     int rc = iso_seg_field(seg, s, lo, hi, p->smoothing, p->cap, &field, err);
     if (rc)
         return rc;
-    iso_bricks bricks;
-    if ((rc = iso_bricks_build(field, p->threads, &bricks, err))) {
-        iso_vol_destroy(field);
-        return rc;
-    }
-    iso_march_stats ms;
-    rc = iso_march_bricks(field, &bricks, 0.5, 1, p->space == ISO_SPACE_WORLD, p->threads, mesh, &ms, err);
-    iso_bricks_free(&bricks);
+    rc = iso_extract_exact(field, 0.5, p->space, p->threads, mesh, stats, err);
     iso_vol_destroy(field);
     if (rc)
         return rc;
@@ -216,8 +114,6 @@ static int march_smoothed(const iso_segmentation *seg, size_t s, const iso_seg_p
         for (size_t v = 0; v < mesh->vertex_count; v++)
             for (int d = 0; d < 3; d++)
                 mesh->positions[3 * v + d] += (float)lo[d];
-    stats->nodes_visited = ms.bricks_active;
-    stats->cells_visited = ms.cells_visited;
     return 0;
 }
 
@@ -250,7 +146,7 @@ int iso_seg_extract(const iso_segmentation *seg, size_t s, const iso_seg_params 
     if (params->smoothing > 0)
         rc = march_smoothed(seg, s, params, mesh, stats, err);
     else if (layer->kind == ISO_SEG_LABELS)
-        rc = march_labels(layer, segment->value, params, mesh, stats, err);
+        rc = iso_extract_label(layer->tree, segment->value, params->cap, params->space, params->threads, mesh, stats, err);
     else {
         iso_extract_params ep = {.level = layer->max_fraction / 2, .cap = params->cap, .space = params->space,
                                  .threads = params->threads};

@@ -8,7 +8,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "hierarchy/labels.h"
 
 /* The distinct values of vol, ascending, into *values (malloc'd): a run of equal samples
  * costs a compare each, a new value a bisection and an insertion. */

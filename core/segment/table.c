@@ -5,7 +5,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "hierarchy/labels.h"
 
 iso_segmentation *iso_seg_create(size_t layers)
 {

@@ -103,7 +103,8 @@ def bad_param(param, detail, instance="/v1/volumes/sphere/mesh"):
 
 
 NOT_FOUND_ID = "no volume \"(not a valid id)\"; /v1/volumes lists them"
-NO_RESOURCE = "no such resource; the API is /v1/volumes, /v1/volumes/{id} and /v1/volumes/{id}/mesh"
+NO_RESOURCE = ("no such resource; the API is /v1/volumes, /v1/volumes/{id}, /v1/volumes/{id}/mesh, "
+               "/v1/volumes/{id}/segments, /v1/volumes/{id}/segments/mesh and /v1/volumes/{id}/segments/{n}/mesh")
 
 
 # ---------------------------------------------------------------- one open server

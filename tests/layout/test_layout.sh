@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The layout's promises, checked on the sources:
-#   - core/ is split by stage (base, io, volume, hierarchy, extract, mesh), each with one
-#     public header; a stage's other headers are its own: nothing outside the stage
+#   - core/ is split by stage (base, io, volume, hierarchy, extract, mesh, and segment, the
+#     segmentations built on them), each with one public header; a stage's other headers are its own: nothing outside the stage
 #     includes them (the unit tests and their support code are white-box and may);
 #   - core/ speaks neither HTTP nor the API's JSON: no libmicrohttpd, libcurl or jansson
 #     in core/, except jansson in io/sidecar.c, which reads the sidecar file format;
@@ -13,8 +13,8 @@ cd "$(dirname "$0")/../.."
 pass() { echo "PASS layout${ISO_SAN_SUFFIX:-}.$1"; }
 fail() { echo "FAIL layout${ISO_SAN_SUFFIX:-}.$1: $2"; }
 
-stages="base io volume hierarchy extract mesh"
-public="base/base.h io/io.h volume/volume.h hierarchy/tree.h extract/extract.h mesh/mesh.h"
+stages="base io volume hierarchy extract mesh segment"
+public="base/base.h io/io.h volume/volume.h hierarchy/tree.h extract/extract.h mesh/mesh.h segment/segment.h"
 
 # 1. The folders are exactly the stages, and each holds its public header.
 found=$(find core -mindepth 1 -maxdepth 1 -type d -printf '%f\n' | sort | tr '\n' ' ')
