@@ -41,7 +41,7 @@ def listed_options(text):
 
 rc, top, err = run("--help")
 commands = re.findall(r"^  isoserve (\w+) ", top, re.M)
-report("usage_lists_commands", rc == 0 and commands == ["info", "build", "extract", "serve", "bench"],
+report("usage_lists_commands", rc == 0 and commands == ["info", "build", "extract", "serve", "segments", "bench"],
        f"status {rc}, commands {commands}: {err}")
 
 sources = {path: open(path).read() for path in glob.glob("server/*.c")}
