@@ -61,6 +61,25 @@ static int emit_caps(const iso_volume *vol, double level, iso_mesh *soup)
     return 0;
 }
 
+/* A mirrored index-to-world map (its determinant negative: one axis flipped, as in LPI or
+ * a radiological NIfTI) turns every triangle inside out in world space. Swapping two
+ * corners of each keeps mesh.h's winding: counter-clockwise seen from the lower values. */
+void iso_extract_world_winding(const iso_volume *vol, iso_mesh *mesh)
+{
+    const double (*d)[3] = vol->direction;
+    double det = d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) -
+                 d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
+                 d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]);
+    if (!(det < 0))
+        return;
+    for (size_t t = 0; t < mesh->triangle_count; t++) {
+        uint32_t *tri = mesh->indices + 3 * t;
+        uint32_t b = tri[1];
+        tri[1] = tri[2];
+        tri[2] = b;
+    }
+}
+
 /* PASS 3. With an identity direction iso_vol_index_to_world is origin + index * spacing
  * per axis, to the same bits (its other terms add +0 to a sum that is not -0), as march.c
  * places its vertices: one multiply-add per coordinate, over the whole array. */
@@ -96,6 +115,7 @@ void iso_extract_to_world(const iso_volume *vol, iso_mesh *mesh)
             p[1] = (float)(o1 + (double)p[1] * s1);
             p[2] = (float)(o2 + (double)p[2] * s2);
         }
+        iso_extract_world_winding(vol, mesh);
         return;
     }
     for (size_t v = 0; v < mesh->vertex_count; v++) {
@@ -105,15 +125,20 @@ void iso_extract_to_world(const iso_volume *vol, iso_mesh *mesh)
         for (int d = 0; d < 3; d++)
             p[d] = (float)world[d];
     }
+    iso_extract_world_winding(vol, mesh);
 }
 
-static int finish(const iso_volume *vol, iso_space space, int weld, iso_mesh *mesh,
+/* space: where the positions are now; asked: where the caller wants them (world positions
+ * placed by the kernel arrive as ISO_SPACE_INDEX, already placed). */
+static int finish(const iso_volume *vol, iso_space space, iso_space asked, int weld, iso_mesh *mesh,
                   iso_extract_stats *stats, double start, iso_error *err)
 {
     if (weld && iso_mesh_weld(mesh))
         return iso_error_set(err, ISO_E_NOMEM, "out of memory welding the mesh");
     if (space == ISO_SPACE_WORLD)
-        iso_extract_to_world(vol, mesh);
+        iso_extract_to_world(vol, mesh); /* the positions, and the winding */
+    else if (asked == ISO_SPACE_WORLD)
+        iso_extract_world_winding(vol, mesh); /* placed by the kernel: the winding only */
     stats->triangles = mesh->triangle_count;
     stats->vertices = mesh->vertex_count;
     stats->extract_ms = iso_clock_ms() - start;
@@ -128,7 +153,8 @@ static int cap_and_finish(const iso_volume *vol, const iso_extract_params *param
         iso_mesh_free(mesh);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory capping the surface");
     }
-    return finish(vol, placed ? ISO_SPACE_INDEX : params->space, params->cap, mesh, stats, start, err);
+    return finish(vol, placed ? ISO_SPACE_INDEX : params->space, params->space, params->cap, mesh, stats,
+                  start, err);
 }
 
 /* The exact path: the kernel, then the cap and placement. */
@@ -165,7 +191,7 @@ int iso_extract(const iso_tree *tree, const iso_extract_params *params, iso_mesh
     if (!params->no_minmax && !params->cap && !(root->min <= params->level && params->level < root->max)) {
         stats->nodes_visited = 1;
         iso_mesh_clear(mesh);
-        return finish(tree->vol, params->space, 0, mesh, stats, start, err);
+        return finish(tree->vol, params->space, params->space, 0, mesh, stats, start, err);
     }
     if (params->tolerance > 0) {
         int exact;
@@ -235,5 +261,5 @@ int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,
         iso_mesh_free(mesh);
         return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
     }
-    return finish(vol, space, 1, mesh, stats, start, err);
+    return finish(vol, space, space, 1, mesh, stats, start, err);
 }

@@ -91,8 +91,14 @@ int iso_extract_exact(const iso_volume *vol, double level, iso_space space, int 
                       iso_extract_stats *stats, iso_error *err);
 
 /* Moves mesh's index-space positions to world millimetres, bit for bit as the exact
- * kernel places its own (an identity direction: origin + index * spacing). O(V). */
+ * kernel places its own (an identity direction: origin + index * spacing), and keeps the
+ * winding (iso_extract_world_winding). O(V + T). */
 void iso_extract_to_world(const iso_volume *vol, iso_mesh *mesh);
+
+/* For a mesh already in world space: where the index-to-world map is mirrored (a negative
+ * determinant, as LPI), swaps two corners of every triangle, so that the winding keeps
+ * mesh.h's meaning in world space. O(T); nothing where the map is not mirrored. */
+void iso_extract_world_winding(const iso_volume *vol, iso_mesh *mesh);
 
 /* The baseline: marching cubes over every cell, no hierarchy. Same table, welding and
  * output space as iso_extract at tolerance 0. */

@@ -112,6 +112,8 @@ int iso_extract_label(const iso_tree *tree, int64_t value, int cap, iso_space sp
     }
     if (cap && space == ISO_SPACE_WORLD)
         iso_extract_to_world(tree->vol, mesh);
+    else if (space == ISO_SPACE_WORLD)
+        iso_extract_world_winding(tree->vol, mesh); /* placed by the kernel */
     stats->triangles = mesh->triangle_count;
     stats->vertices = mesh->vertex_count;
     stats->extract_ms = iso_clock_ms() - start_ms;

@@ -921,6 +921,60 @@ static void test_world_positions_are_the_index_map(void)
     iso_vol_destroy(vol);
 }
 
+/* A mirrored index-to-world map (one axis flipped: LPI, a radiological NIfTI) would turn
+ * the surface inside out in world space; the winding is kept instead: the world mesh's
+ * signed enclosed volume is the index mesh's times the voxel volume, positive (normals
+ * outward, toward the lower values), by every extraction path, with corners 1 and 2 of
+ * each triangle swapped exactly when the map mirrors. */
+static void test_mirrored_map_keeps_winding(void)
+{
+    double r0;
+    iso_volume *vol = sphere_volume(32, &r0);
+    const double spacing[3] = {0.8, 1.25, 2};
+    memcpy(vol->spacing, spacing, sizeof spacing);
+    iso_tree *tree = surface_build(vol);
+    const double maps[3][3][3] = {{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}},   /* LPS */
+                                  {{1, 0, 0}, {0, 1, 0}, {0, 0, -1}},  /* LPI: mirrored */
+                                  {{0, -1, 0}, {-1, 0, 0}, {0, 0, 1}}}; /* axes swapped: mirrored */
+    for (int m = 0; m < 3; m++) {
+        memcpy(vol->direction, maps[m], sizeof maps[m]);
+        int mirrored = m > 0;
+        for (int variant = 0; variant < 4; variant++) {
+            iso_mesh index, world;
+            iso_mesh_init(&index);
+            iso_mesh_init(&world);
+            iso_extract_params p = {.level = 4, .tolerance = variant == 1 ? 0.15 : 0, .cap = variant == 2,
+                                    .space = ISO_SPACE_INDEX, .threads = 1};
+            iso_error err;
+            if (variant == 3) {
+                CHECK_OK(iso_extract_full_scan(vol, p.level, ISO_SPACE_INDEX, &index, NULL, &err), &err);
+                CHECK_OK(iso_extract_full_scan(vol, p.level, ISO_SPACE_WORLD, &world, NULL, &err), &err);
+            } else {
+                CHECK_OK(iso_extract(tree, &p, &index, NULL, &err), &err);
+                p.space = ISO_SPACE_WORLD;
+                CHECK_OK(iso_extract(tree, &p, &world, NULL, &err), &err);
+            }
+            double in_index = iso_mesh_enclosed_volume(&index), in_world = iso_mesh_enclosed_volume(&world);
+            double voxel = spacing[0] * spacing[1] * spacing[2];
+            CHECKF(in_index > 0 && fabs(in_world - in_index * voxel) < 1e-4 * in_index * voxel,
+                   "map %d variant %d: enclosed %g in index space, %g in world (want %g)", m, variant,
+                   in_index, in_world, in_index * voxel);
+            size_t same = 0, swapped = 0;
+            for (size_t t = 0; t < index.triangle_count && index.triangle_count == world.triangle_count; t++) {
+                const uint32_t *a = index.indices + 3 * t, *b = world.indices + 3 * t;
+                same += a[0] == b[0] && a[1] == b[1] && a[2] == b[2];
+                swapped += a[0] == b[0] && a[1] == b[2] && a[2] == b[1];
+            }
+            CHECKF((mirrored ? swapped : same) == index.triangle_count && index.triangle_count > 0,
+                   "map %d variant %d: %zu same, %zu swapped of %zu", m, variant, same, swapped, index.triangle_count);
+            iso_mesh_free(&index);
+            iso_mesh_free(&world);
+        }
+    }
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_mc_table_shapes);
@@ -940,6 +994,7 @@ int main(void)
     CHECK_RUN(test_tolerance_coarsens_only_where_it_pays);
     CHECK_RUN(test_tolerance_meshes_do_not_depend_on_threads);
     CHECK_RUN(test_world_positions_are_the_index_map);
+    CHECK_RUN(test_mirrored_map_keeps_winding);
     CHECK_RUN(test_level_errors_are_lemma1_per_coarse_cell);
     CHECK_RUN(test_level_codes);
     CHECK_RUN(test_cthead_guarantee_and_trend);
