@@ -90,8 +90,13 @@ static json_t *volume_object(const proto_volume_doc *doc, int detail)
         json_object_set_new(o, "segments", json_integer((json_int_t)doc->segmentation->segment_count));
         json_object_set_new(o, "segmentation", json_string(doc->segmentation->source));
     }
+    if (o)
+        json_object_set_new(o, "orientation", json_string(doc->orientation ? doc->orientation
+                                                          : vol->oriented ? "file" : "none"));
     if (!o || !detail)
         return o;
+    if (vol->has_padding)
+        json_object_set_new(o, "padding", json_real(vol->padding));
     json_t *counts = json_array();
     for (size_t b = 0; b < doc->histogram_bins; b++)
         json_array_append_new(counts, json_integer((json_int_t)doc->histogram[b]));

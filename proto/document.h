@@ -18,6 +18,8 @@ typedef struct proto_volume_doc {
     const iso_volume *vol;        /* dims, type, range, geometry; NULL: a catalog entry not
                                      loaded here (a summary: id, name, modality, levels, shard) */
     const char *shard;            /* the replica that preloads it (sharded), or NULL */
+    const char *orientation;      /* who placed the axes in the patient: "file", "catalog",
+                                     "none" (identity by convention); NULL with vol NULL */
     const double *levels;         /* suggested levels */
     size_t level_count;
     /* Detail only (proto_json_volume with detail set): */
@@ -30,9 +32,10 @@ typedef struct proto_volume_doc {
 } proto_volume_doc;
 
 /* One volume: id, name, modality, dims, spacing, origin, index_to_world (row-major 4x4,
- * LPS mm), value_type, value_range, suggested_levels, version; a segmentation's also
- * "segments" (how many) and "segmentation" (its source: labels, seg.nrrd, dicom-seg); with detail also histogram
- * {min, max, counts} and hierarchy {nodes, bytes, ms, from_file}. */
+ * LPS mm), orientation, value_type, value_range, suggested_levels, version; a
+ * segmentation's also "segments" (how many) and "segmentation" (its source: labels,
+ * seg.nrrd, dicom-seg); with detail also histogram {min, max, counts}, padding (when the
+ * file names one) and hierarchy {nodes, bytes, ms, from_file}. */
 char *proto_json_volume(const proto_volume_doc *doc, int detail);
 /* A segmentation's segments: {"volume": id, "source", "layers", "segments": [{"number",
  * "name", "category", "type", "color" (sRGB 0..1), "color_hex" ("#rrggbb"), "voxels",

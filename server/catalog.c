@@ -345,12 +345,23 @@ static int read_entry(const char *file, size_t index, json_t *item, srv_catalog 
     size_t count = 0;
     if ((rc = read_levels(file, id, levels, values, &count, err)))
         return rc;
+    json_t *orientation = json_object_get(item, "orientation");
+    iso_volume probe = {0};
+    iso_error axes_err;
+    if (orientation && (!json_is_string(orientation) ||
+                        iso_vol_set_axes(&probe, json_string_value(orientation), &axes_err)))
+        return iso_error_set(err, ISO_E_FORMAT, "%s: volume \"%s\": \"orientation\" must be three letters, one of "
+                             "L or R, one of P or A, one of S or I: where the i, j, k axes point (e.g. \"LPI\")",
+                             file, id);
     char *full = orthanc ? strdup(rest) : resolve(file, path);
     if (!full)
         return iso_error_set(err, ISO_E_NOMEM, "out of memory reading %s", file);
     rc = add(out, id, full, json_string_value(json_object_get(item, "name")),
              json_string_value(json_object_get(item, "modality")), values, count, err);
     free(full);
+    if (!rc && orientation)
+        snprintf(out->entries[out->count - 1].orientation, sizeof out->entries[0].orientation, "%s",
+                 json_string_value(orientation));
     if (!rc && orthanc)
         rc = set_orthanc(out, url, series, err);
     return rc;

@@ -29,6 +29,8 @@ typedef struct srv_catalog_entry {
     int labels;               /* a segmentation (segment/segment.h): a label map ("labels":
                                  true or a descriptions file), a .seg.nrrd, a DICOM SEG */
     char *labels_file;        /* its label descriptions (ITK-SNAP's, or "IDX NAME"), or NULL */
+    char orientation[4];      /* "" or where the i, j, k axes point ("LPI": iso_vol_set_axes),
+                                 for a file that does not say it */
 } srv_catalog_entry;
 
 typedef struct srv_catalog {
@@ -42,8 +44,9 @@ typedef struct srv_catalog {
 int srv_catalog_id_valid(const char *id);
 
 /* Reads a catalog file: {"volumes": [{"id", "path", "name"?, "modality"?, "levels"?,
- * "labels"?}, ...]} (or the array alone); "labels": true declares a label map (or a DICOM
- * SEG) a segmentation, a string names its label descriptions too (relative to the catalog). Relative paths are taken from the catalog's directory. Instead of
+ * "labels"?, "orientation"?}, ...]} (or the array alone); "labels": true declares a label
+ * map (or a DICOM SEG) a segmentation, a string names its label descriptions too (relative
+ * to the catalog). Relative paths are taken from the catalog's directory. Instead of
  * "path", "orthanc": {"url": "http://host:8042", "series": "ORTHANC-SERIES-ID"} names a
  * series on an Orthanc server (orthanc.h), and "dicomweb": {"url", "credentials"?, "study"?,
  * "series"} one on a DICOMweb archive (dicomweb.h); with "query" (a QIDO-RS query string)

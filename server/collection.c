@@ -173,11 +173,17 @@ void srv_volume_describe(srv_volume *v, uint32_t volume_crc)
     snprintf(v->version, sizeof v->version, "%08x%08x%s-%d", (unsigned)volume_crc, (unsigned)geometry_hash(v->vol),
              v->seg ? table_hash(v->seg) : "", SRV_MESH_ALGORITHM_VERSION);
     iso_hist_compute(v->vol, SRV_HISTOGRAM_BINS, v->histogram);
+    if (!v->vol->has_padding)
+        v->vol->has_padding = iso_vol_find_padding(v->vol, v->histogram, SRV_HISTOGRAM_BINS, &v->vol->padding);
+    uint64_t data_only[SRV_HISTOGRAM_BINS]; /* the levels skip padding; the histogram shows it */
+    memcpy(data_only, v->histogram, sizeof data_only);
+    if (v->vol->has_padding)
+        iso_hist_drop_padding(data_only, SRV_HISTOGRAM_BINS, v->vol->value_min, v->vol->value_max, v->vol->padding);
     if (e->level_count) {
         memcpy(v->levels, e->levels, e->level_count * sizeof *v->levels);
         v->level_count = e->level_count;
     } else {
-        v->level_count = iso_hist_suggest_levels(v->histogram, SRV_HISTOGRAM_BINS, v->vol->value_min,
+        v->level_count = iso_hist_suggest_levels(data_only, SRV_HISTOGRAM_BINS, v->vol->value_min,
                                                  v->vol->value_max, v->levels, SRV_LEVELS_MAX);
     }
 }
@@ -191,7 +197,8 @@ proto_volume_doc srv_volume_doc(const srv_volume *v, const char *shard)
         .shard = shard, .id = e->id, .name = e->name && *e->name ? e->name : v->vol->description,
         .modality = e->modality && *e->modality ? e->modality : v->vol->modality,
         .version = v->version, .vol = v->vol, .levels = v->levels, .level_count = v->level_count,
-        .histogram = v->histogram, .histogram_bins = SRV_HISTOGRAM_BINS, .segmentation = v->seg};
+        .histogram = v->histogram, .histogram_bins = SRV_HISTOGRAM_BINS, .segmentation = v->seg,
+        .orientation = e->orientation[0] ? "catalog" : v->vol->oriented ? "file" : "none"};
     if (v->tree) {
         doc.hierarchy_nodes = v->tree->node_count;
         doc.hierarchy_bytes = iso_tree_memory(v->tree);
@@ -280,6 +287,10 @@ static int load_one(srv_volume *v, const srv_catalog_entry *e, const srv_preload
     snprintf(label, sizeof label, "isoserve: [%zu/%zu] %s: loading", index + 1, total, e->id);
     int rc = e->labels ? load_segmentation(e, opt, label, &v->seg, err, upstream)
                        : load_volume(e, opt, label, &v->vol, err, upstream);
+    /* The catalog's axes for a file that does not say them: every layer of a segmentation. */
+    for (size_t l = 0; !rc && e->orientation[0] && l < (v->seg ? v->seg->layer_count : 1); l++)
+        if ((rc = iso_vol_set_axes(v->seg ? v->seg->layers[l].vol : v->vol, e->orientation, err)))
+            free_loaded(v); /* the catalog checked the code: not expected */
     if (rc) {
         fprintf(stderr, "isoserve: volume \"%s\": %s; skipped\n", e->id, err->message);
         return rc;

@@ -223,7 +223,7 @@ int iso_extract_exact(const iso_volume *vol, double level, iso_space space, int 
     stats->nodes_visited = ms.bricks_active;
     stats->cells_visited = ms.cells_visited;
     stats->error_bound = ms.error_bound;
-    return finish(vol, ISO_SPACE_INDEX, 0, mesh, stats, start, err);
+    return finish(vol, ISO_SPACE_INDEX, space, 0, mesh, stats, start, err);
 }
 
 int iso_extract_full_scan(const iso_volume *vol, double level, iso_space space,

@@ -621,6 +621,11 @@ static int build_volume(series *s, const iso_load_options *opt, iso_volume **out
     memcpy(vol->direction, probe.direction, sizeof vol->direction);
     copy_label(vol->modality, sizeof vol->modality, h->modality);
     copy_label(vol->description, sizeof vol->description, h->series_description);
+    vol->oriented = 1; /* ImageOrientationPatient is required to get here */
+    if (h->has_padding) {
+        vol->has_padding = 1;
+        vol->padding = s->frames[0].slope * h->padding + s->frames[0].intercept;
+    }
     if ((rc = read_samples(s, vol, opt, err)) || (rc = rescale(s, vol, max_bytes, err))) {
         iso_vol_destroy(vol);
         return rc;

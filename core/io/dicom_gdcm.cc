@@ -4,6 +4,7 @@
 // point catches everything: GDCM throws on some malformed input, and C must never see it.
 #include "dicom_gdcm.h"
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -157,6 +158,14 @@ void read_plain(const Fields &f, const gdcm::DataSet &ds, iso_gdcm_header *h)
     f.numbers(ds, kPixelSpacing, h->pixel_spacing, 2);
     if (f.numbers(ds, kOrientation, h->orientation, 6) == 6)
         h->has_orientation = 1;
+    // Padding is US or SS as the pixels are; a reader that took SS bits as US gives
+    // 65536 + v, folded back here for signed pixels.
+    if (f.numbers(ds, gdcm::Tag(0x0028, 0x0120), &h->padding, 1) == 1 && std::isfinite(h->padding)) {
+        double half = std::ldexp(1.0, h->bits_allocated ? (int)h->bits_allocated - 1 : 15);
+        if (h->pixel_signed && h->padding >= half)
+            h->padding -= 2 * half;
+        h->has_padding = 1;
+    }
     double position[3], slope = 1, intercept = 0;
     int has_position = f.numbers(ds, kPosition, position, 3) == 3;
     if (!f.numbers(ds, kSlope, &slope, 1))

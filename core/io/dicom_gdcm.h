@@ -35,6 +35,8 @@ typedef struct iso_gdcm_header {
     double pixel_spacing[2]; /* PixelSpacing: between rows, between columns; 0 if absent */
     double orientation[6];   /* ImageOrientationPatient: row direction, column direction */
     int has_orientation;
+    double padding;          /* PixelPaddingValue (0028,0120) as stored (signed for signed pixels) */
+    int has_padding;
     double *grid_offsets;    /* RT dose GridFrameOffsetVector (frames values) or NULL */
     iso_gdcm_frame *frame;   /* frames entries, malloc'd */
 } iso_gdcm_header;

@@ -166,6 +166,7 @@ static int finish(const char *path, const mhd *m, iso_nrrd_header *hdr, iso_erro
         for (int r = 0; r < 3; r++)
             hdr->direction[r][a] = axis ? axis[r] / norm : r == a;
     }
+    hdr->oriented = m->have_matrix;
     if (hdr->byte_skip == -1 && hdr->encoding != ISO_NRRD_RAW)
         return iso_error_set(err, ISO_E_UNSUPPORTED, "%s: HeaderSize -1 works only with uncompressed data", path);
     return 0;

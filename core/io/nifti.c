@@ -102,7 +102,11 @@ static int set_geometry(const char *path, const nifti_image *nim, iso_volume *vo
             affine[r][c] = (r < 2 ? -1.0 : 1.0) * m->m[r][c];
     char what[600];
     snprintf(what, sizeof what, "%s (%s)", path, nim->sform_code > 0 ? "sform" : "qform");
-    return iso_vol_set_affine(vol, affine, what, err);
+    int rc = iso_vol_set_affine(vol, affine, what, err);
+    /* Code 0 on both is NIfTI's "unknown": the qform is then the voxel sizes alone. */
+    if (!rc)
+        vol->oriented = nim->sform_code > 0 || nim->qform_code > 0;
+    return rc;
 }
 
 /* libnifti keeps its options (the debug level, set here, among them) in one global that

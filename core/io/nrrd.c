@@ -569,6 +569,9 @@ static int finish_header(parser *p)
             h->direction[d][d] = p->spacings[a] < 0 ? -1 : 1;
         }
     }
+    /* A named space, or directions in one, place the axes in the patient; spacings alone
+     * (even negative ones) only say how far apart the samples are. */
+    h->oriented = p->line_of[F_SPACE] || p->line_of[F_SPACE_DIRECTIONS];
     if (p->space_ras)
         for (int r = 0; r < 2; r++) {
             h->origin[r] = -h->origin[r];
@@ -895,6 +898,7 @@ int iso_nrrd_load_samples(const char *path, const iso_nrrd_header *hdr,
     memcpy(vol->spacing, hdr->spacing, sizeof vol->spacing);
     memcpy(vol->origin, hdr->origin, sizeof vol->origin);
     memcpy(vol->direction, hdr->direction, sizeof vol->direction);
+    vol->oriented = hdr->oriented;
     fclose(f);
     *out = vol;
     return ISO_OK;

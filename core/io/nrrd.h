@@ -43,6 +43,7 @@ typedef struct iso_nrrd_header {
     int big_endian;              /* byte order of the stored samples */
     iso_nrrd_encoding encoding;
     double spacing[3], origin[3], direction[3][3]; /* as in iso_volume */
+    int oriented;                /* the header says how the axes lie (iso_volume.oriented) */
     int64_t byte_skip;           /* >= -1; -1: the samples are the last data_bytes of a raw file */
     int64_t line_skip;           /* >= 0 lines skipped before the byte skip */
     int detached;                /* 1 when a "data file:" field names the data */

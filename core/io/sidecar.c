@@ -140,6 +140,7 @@ static int read_geometry(const char *side, json_t *root, iso_nrrd_header *hdr, i
         for (int r = 0; r < 3; r++)
             hdr->direction[r][c] /= n;
     }
+    hdr->oriented = 1;
     return 0;
 }
 

@@ -38,6 +38,18 @@ void iso_hist_compute(const iso_volume *vol, size_t bins, uint64_t *counts)
     }
 }
 
+size_t iso_hist_drop_padding(uint64_t *counts, size_t bins, double min, double max, double padding)
+{
+    assert(counts && bins >= 1);
+    if (!(max > min) || !(padding >= min && padding <= max))
+        return 0;
+    double b = (padding - min) * (double)bins / (max - min);
+    size_t bin = b >= (double)(bins - 1) ? bins - 1 : (size_t)b;
+    uint64_t dropped = counts[bin];
+    counts[bin] = 0;
+    return (size_t)dropped;
+}
+
 /* Otsu's prefix sums live on the stack; more bins than this are refused. */
 #define HIST_MAX_BINS 1024
 

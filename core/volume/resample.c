@@ -33,6 +33,7 @@ iso_volume *iso_resample(const iso_volume *vol, const size_t dims[3], iso_error 
     }
     memcpy(out->modality, vol->modality, sizeof out->modality);
     memcpy(out->description, vol->description, sizeof out->description);
+    out->oriented = vol->oriented;
     float *dst = out->data;
     for (size_t z = 0; z < dims[2]; z++)
         for (size_t y = 0; y < dims[1]; y++)

@@ -2,6 +2,7 @@
 #include "volume.h"
 
 #include <assert.h>
+#include <ctype.h>
 #include <inttypes.h>
 #include <math.h>
 #include <stdlib.h>
@@ -331,6 +332,30 @@ void iso_vol_affine(const iso_volume *vol, double affine[3][4])
     }
     for (int r = 0; r < 3; r++)
         affine[r][3] = origin[r];
+}
+
+int iso_vol_set_axes(iso_volume *vol, const char *code, iso_error *err)
+{
+    assert(vol && code);
+    static const char letters[] = "LRPASI"; /* pairs: +x -x, +y -y, +z -z of LPS */
+    double direction[3][3] = {{0}};
+    int seen[3] = {0};
+    size_t n = strlen(code);
+    for (size_t a = 0; a < 3 && n == 3; a++) {
+        const char *at = strchr(letters, toupper((unsigned char)code[a]));
+        if (!at || !*at)
+            break;
+        int pair = (int)(at - letters) / 2;
+        if (seen[pair]++)
+            break;
+        direction[pair][a] = (at - letters) % 2 ? -1 : 1;
+    }
+    if (n != 3 || !seen[0] || !seen[1] || !seen[2] || seen[0] + seen[1] + seen[2] != 3)
+        return iso_error_set(err, ISO_E_ARGUMENT, "orientation \"%.16s\": three letters, one of L or R, "
+                             "one of P or A, one of S or I (where the i, j, k axes point, e.g. LPI)", code);
+    memcpy(vol->direction, direction, sizeof direction);
+    vol->oriented = 1;
+    return 0;
 }
 
 int iso_vol_set_affine(iso_volume *vol, const double affine[3][4], const char *what,

@@ -44,6 +44,13 @@ typedef struct iso_volume {
     char description[65];    /* the file's own words for it (DICOM's SeriesDescription), or "" */
     int labels;              /* 1: an integer label volume, each value naming a segment: its
                               * hierarchy keeps per brick the labels held (hierarchy/labels.h) */
+    int oriented;            /* 1 when the file says how its axes lie in the patient (NRRD
+                                space, NIfTI sform or qform, MetaImage TransformMatrix, a
+                                sidecar's direction, DICOM); 0: direction is the identity
+                                by convention, not by the file */
+    int has_padding;         /* 1 when the file names a padding value (DICOM's Pixel Padding
+                                Value (0028,0120)): samples outside the field of view */
+    double padding;          /* that value, rescaled as the samples are */
 } iso_volume;
 
 /* Default cap on the bytes of one volume's samples: 8 GiB. */
@@ -168,6 +175,13 @@ int iso_vol_set_affine(iso_volume *vol, const double affine[3][4], const char *w
  * inverse (world offsets to index offsets) and det A. Returns 0, or -1 when A is singular
  * (|det| <= 1e-300); inv is then unset. */
 int iso_vol_frame(const iso_volume *vol, double a[3][3], double inv[3][3], double *det);
+
+/* Points the i, j, k axes where a three-letter code says (DICOM's sense: each letter is
+ * the patient direction its axis runs toward: L or R, P or A, S or I, one of each pair, in
+ * any order; "LPS" is the identity, "LPI" flips k): for files that do not say it. Spacing
+ * and origin stay; the volume becomes oriented. ISO_E_ARGUMENT, the volume unchanged, for
+ * any other code. */
+int iso_vol_set_axes(iso_volume *vol, const char *code, iso_error *err);
 /* The same map as a 3x4 affine matrix [A | origin], world = A * index + origin, read off
  * iso_vol_index_to_world so that the two always agree. */
 void iso_vol_affine(const iso_volume *vol, double affine[3][4]);
@@ -192,6 +206,23 @@ void iso_hist_compute(const iso_volume *vol, size_t bins, uint64_t *counts);
  * single-valued histogram, and for more than 1024 bins. O(bins^2). */
 size_t iso_hist_suggest_levels(const uint64_t *counts, size_t bins, double min, double max,
                                double *levels, size_t max_levels);
+
+/* Clears, in counts (iso_hist_compute's bins over [min, max]), the bin of the padding
+ * value, so that levels suggested from them never sit between padding and data (a level
+ * there draws the field of view's border, not the anatomy). Returns the count it cleared;
+ * 0 for a padding value outside [min, max]. O(1). */
+size_t iso_hist_drop_padding(uint64_t *counts, size_t bins, double min, double max, double padding);
+
+/* The value a scanner wrote outside its field of view, when the file does not name it
+ * (DICOM's Pixel Padding Value does: the loader sets has_padding): the value at an end of
+ * the range that holds at least 0.5% of the samples and fills whole lines through the
+ * volume along some axis, at most 2% of the lines that meet it meeting any other value (a
+ * CT's reconstruction circle, repeated on every slice; the 0 around a skull-stripped brain
+ * or air at -1024 also cross tissue on their lines, so they are not padding). counts: the
+ * volume's histogram over `bins` bins (iso_hist_compute), which spares the pass when no
+ * end bin holds that share. Returns 1 and sets *padding, or 0. O(N) when an end bin
+ * qualifies, with scratch of one byte per line along each axis. */
+int iso_vol_find_padding(const iso_volume *vol, const uint64_t *counts, size_t bins, double *padding);
 
 /* A volume filtered to other dimensions (the paper's "filtered down" 3dhead,
  * and the scaling ladders of the benchmarks). */

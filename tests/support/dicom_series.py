@@ -7,10 +7,12 @@
         scanners do) instead of as they are; --oblique: rows along +y, columns along -z,
         slices along -x (a sagittal stack), else the identity axes. Prints one line per
         slice, "k FILE", in slice order.
-    dicom_series.py phantom OUTDIR [--rle] [--bits=16]
+    dicom_series.py phantom OUTDIR [--rle] [--bits=16] [--padding]
         the same from a synthetic 40x36x24 CT phantom (a sphere of 1000 HU in -1000 HU
         around a cylinder of 300 HU), stored with --hu: for tests that run without
-        ../shared; --bits=16: 16 stored bits although 12 would do (as many scanners write).
+        ../shared; --bits=16: 16 stored bits although 12 would do (as many scanners write);
+        --padding: stored 0 (-1024 HU) outside a circle of radius 17 in every slice, named
+        by PixelPaddingValue (0028,0120).
     dicom_series.py ct OUTDIR --bits=B [--signed] [--intercept=I] [--slope=S] [--scale=K] [--offset=O]
         the phantom's values times K plus O (defaults 1, 0) as a series of B stored bits (12
         or 16, in 16 allocated; the bits above B set, as overlays may), signed or unsigned,
@@ -109,7 +111,7 @@ def set_pixels(ds, frames, rle):
 
 
 def write_series(data, spacing, out, rle=False, hu=False, oblique=False, seed=1, uid=None, bits=None,
-                 stored=None, description="isoserve test series"):
+                 stored=None, description="isoserve test series", padding=None):
     """One file per slice of data ([z, y, x]); prints "k FILE" per slice in slice order.
     stored: (bits, signed, intercept, slope) to write data's values through a rescale."""
     os.makedirs(out, exist_ok=True)
@@ -148,6 +150,8 @@ def write_series(data, spacing, out, rle=False, hu=False, oblique=False, seed=1,
             if int(data.max()) + 1024 < 4096 and bits != 16:
                 ds.BitsStored, ds.HighBit = 12, 11
             slice_ = (slice_.astype(np.int32) + 1024).astype("<u2")
+            if padding is not None:
+                ds.PixelPaddingValue = padding
         else:
             ds.PixelRepresentation = 1 if slice_.dtype.kind == "i" else 0
             slice_ = slice_.astype("<i2" if slice_.dtype.kind == "i" else "<u2")
@@ -228,7 +232,13 @@ def main(argv):
         write_series(data, spacing, args[2], "--rle" in flags, "--hu" in flags, "--oblique" in flags, seed, uid)
     elif kind == "phantom":
         data, spacing = phantom()
-        write_series(data, spacing, args[1], "--rle" in flags, True, False, seed, uid, bits=number("bits", None))
+        padding = None
+        if "--padding" in flags:
+            y, x = np.mgrid[0:data.shape[1], 0:data.shape[2]]
+            data[:, (x - 20) ** 2 + (y - 18) ** 2 > 17 ** 2] = -1024
+            padding = 0
+        write_series(data, spacing, args[1], "--rle" in flags, True, False, seed, uid, bits=number("bits", None),
+                     padding=padding)
     elif kind == "ct":
         data, spacing = phantom()
         offset, nbits, signed = number("offset", 0), int(number("bits", 16)), "--signed" in flags

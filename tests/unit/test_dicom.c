@@ -308,6 +308,29 @@ static void test_rescaled_series_types(void)
     }
 }
 
+/* PixelPaddingValue: stored 0 outside the phantom's circle, -1024 HU once rescaled, is the
+ * volume's padding (the levels the server suggests skip it); without the tag, none. */
+static void test_padding_value(void)
+{
+    if (!have_pydicom())
+        return;
+    CHECK_EQ(helper(NULL, "phantom %s --padding", tmp("padded")), 0);
+    iso_volume *v = load(tmp("padded"));
+    if (v) {
+        CHECK_EQ(v->has_padding, 1);
+        CHECK_EQ(v->padding, -1024);
+        CHECK_EQ(v->value_min, -1024);
+        CHECK_EQ(v->oriented, 1);
+        iso_vol_destroy(v);
+    }
+    CHECK_EQ(helper(NULL, "phantom %s", tmp("unpadded")), 0);
+    v = load(tmp("unpadded"));
+    if (v) {
+        CHECK_EQ(v->has_padding, 0);
+        iso_vol_destroy(v);
+    }
+}
+
 static void copy_file(const char *from, const char *to, long keep)
 {
     FILE *in = fopen(from, "rb"), *out = fopen(to, "wb");
@@ -494,6 +517,7 @@ int main(void)
     CHECK_RUN(test_rescaled_series_types);
     CHECK_RUN(test_enhanced_multiframe);
     CHECK_RUN(test_phantom_rle);
+    CHECK_RUN(test_padding_value);
     CHECK_RUN(test_hostile_series);
     CHECK_RUN(test_shared_cthead_shuffled);
     CHECK_RUN(test_shared_cranium_rle_oblique);

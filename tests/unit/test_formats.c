@@ -113,6 +113,7 @@ static void test_mricron_ch2bet(void)
     CHECK_EQ(iso_vol_get(vol, 90, 125, 71), 32);
     CHECK_EQ(iso_vol_get(vol, 100, 100, 90), 49);
     CHECK(vol->value_min == 0 && vol->value_max == 133);
+    CHECK_EQ(vol->oriented, 1); /* its sform */
     double a[3][4];
     iso_vol_affine(vol, a);
     /* RAS (1,0,0,-90) ... in LPS: x and y rows negated. */
@@ -194,6 +195,7 @@ static void test_nifti_pixdim_only(void)
     CHECK_NEAR(vol->spacing[0], 0.5, 1e-12);
     CHECK_NEAR(vol->spacing[1], 2, 1e-12);
     CHECK_NEAR(vol->spacing[2], 3, 1e-12);
+    CHECK_EQ(vol->oriented, 0); /* qform_code and sform_code 0: NIfTI's "unknown" */
     iso_vol_destroy(vol);
 }
 

@@ -339,6 +339,35 @@ static void test_otsu_levels(void)
     CHECK_EQ(iso_hist_suggest_levels(counts, 256, 5, 5, levels, 4), 0);
 }
 
+/* A CT whose corners hold -2000 (outside the reconstruction circle): Otsu on every bin puts
+ * its first level between the padding and air, which draws the circle; with the padding's
+ * bin dropped the levels fall between air, soft tissue and bone. */
+static void test_levels_skip_padding(void)
+{
+    uint64_t counts[256] = {0};
+    const double min = -2000, max = 3000, width = (max - min) / 256;
+    size_t air = (size_t)((-1000 - min) / width), soft = (size_t)((40 - min) / width),
+           bone = (size_t)((1200 - min) / width);
+    counts[0] = 4000000;
+    for (int d = -2; d <= 2; d++) {
+        counts[air + d] = 500000;
+        counts[soft + d] = 300000;
+        counts[bone + d] = 60000;
+    }
+    double levels[2];
+    CHECK_EQ(iso_hist_suggest_levels(counts, 256, min, max, levels, 2), 2);
+    CHECKF(levels[0] < -1000, "with padding the first level %g sits below air", levels[0]);
+    CHECK_EQ(iso_hist_drop_padding(counts, 256, min, max, -2000), 4000000);
+    CHECK_EQ(counts[0], 0);
+    CHECK_EQ(iso_hist_suggest_levels(counts, 256, min, max, levels, 2), 2);
+    CHECKF(levels[0] > -1000 && levels[0] < 40 && levels[1] > 40 && levels[1] < 1200, "levels %g %g",
+           levels[0], levels[1]);
+    /* The maximum's bin, and a value outside the range (nothing dropped). */
+    counts[255] = 7;
+    CHECK_EQ(iso_hist_drop_padding(counts, 256, min, max, 3000), 7);
+    CHECK_EQ(iso_hist_drop_padding(counts, 256, min, max, -3024), 0);
+}
+
 /* The histogram counts every sample once, the maximum in the last bin, NaN nowhere. */
 static void test_histogram_counts(void)
 {
@@ -429,6 +458,7 @@ int main(void)
     CHECK_RUN(test_problem_body);
     CHECK_RUN(test_otsu_levels);
     CHECK_RUN(test_histogram_counts);
+    CHECK_RUN(test_levels_skip_padding);
     CHECK_RUN(test_budget_picks_finest_fit);
     CHECK_RUN(test_query_distance);
     return check_finish();

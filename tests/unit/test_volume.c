@@ -583,6 +583,7 @@ static void test_nrrd_geometry(void)
         CHECK(vol->direction[0][0] == 0 && vol->direction[1][0] == 1 && vol->direction[2][0] == 0);
         CHECK(vol->direction[0][1] == -1 && vol->direction[1][1] == 0 && vol->direction[2][1] == 0);
         CHECK(vol->direction[0][2] == 0 && vol->direction[1][2] == 0 && vol->direction[2][2] == 1);
+        CHECK_EQ(vol->oriented, 1);
         iso_vol_index_to_world(vol, (const double[3]){1, 2, 2}, world);
         CHECK_NEAR(world[0], 1 - 6, 1e-12);
         CHECK_NEAR(world[1], -2 + 2, 1e-12);
@@ -597,6 +598,7 @@ static void test_nrrd_geometry(void)
         CHECK(vol->spacing[0] == 0.5 && vol->spacing[1] == 0.75 && vol->spacing[2] == 2);
         CHECK(vol->direction[2][2] == -1 && vol->direction[0][0] == 1);
         CHECK(vol->origin[0] == 0 && vol->origin[1] == 0 && vol->origin[2] == 0);
+        CHECK_EQ(vol->oriented, 0); /* spacings place samples, not the patient */
     }
     iso_vol_destroy(vol);
 
@@ -609,6 +611,96 @@ static void test_nrrd_geometry(void)
         CHECK(vol->spacing[0] == 1 && vol->spacing[1] == 2 && vol->spacing[2] == 3);
     }
     iso_vol_destroy(vol);
+}
+
+/* Orientation codes: each letter the direction its axis runs toward, any order; anything
+ * else refused with the volume unchanged. */
+static void test_set_axes(void)
+{
+    iso_error err;
+    size_t dims[3] = {2, 2, 2};
+    iso_volume *vol = iso_vol_create(dims, ISO_U8, 0, &err);
+    CHECK(vol != NULL);
+    if (!vol)
+        return;
+    vol->spacing[2] = 2;
+    vol->origin[0] = 5;
+    CHECK_OK(iso_vol_set_axes(vol, "LPI", &err), &err);
+    const double lpi[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, -1}};
+    CHECK(memcmp(vol->direction, lpi, sizeof lpi) == 0);
+    CHECK(vol->oriented == 1 && vol->spacing[2] == 2 && vol->origin[0] == 5);
+    double world[3];
+    iso_vol_index_to_world(vol, (const double[3]){1, 1, 1}, world);
+    CHECK(world[0] == 6 && world[1] == 1 && world[2] == -2);
+    CHECK_OK(iso_vol_set_axes(vol, "asr", &err), &err); /* i toward anterior, j superior, k right */
+    const double asr[3][3] = {{0, 0, -1}, {-1, 0, 0}, {0, 1, 0}};
+    CHECK(memcmp(vol->direction, asr, sizeof asr) == 0);
+    static const char *const bad[] = {"", "LP", "LPSI", "LLS", "LRS", "LPX", "PAS", "SIL"};
+    for (size_t b = 0; b < sizeof bad / sizeof *bad; b++) {
+        CHECKF(iso_vol_set_axes(vol, bad[b], &err) == ISO_E_ARGUMENT, "\"%s\" accepted", bad[b]);
+        CHECK(strstr(err.message, "one of L or R") != NULL);
+    }
+    CHECK(memcmp(vol->direction, asr, sizeof asr) == 0);
+    iso_vol_destroy(vol);
+}
+
+/* Fills vol with air (10) around a ball of 900, and `pad` outside a circle of radius
+ * 0.45 n in every k-slice (a CT's reconstruction circle) when pad is not NAN. */
+static iso_volume *scan(size_t n, iso_voxel_type type, double pad, double ball_value)
+{
+    iso_error err;
+    size_t dims[3] = {n, n, n / 2};
+    iso_volume *vol = iso_vol_create(dims, type, 0, &err);
+    if (!vol)
+        return NULL;
+    double c = (double)(n - 1) / 2;
+    for (size_t k = 0; k < dims[2]; k++)
+        for (size_t j = 0; j < n; j++)
+            for (size_t i = 0; i < n; i++) {
+                double r2 = (i - c) * (i - c) + (j - c) * (j - c), z = (double)k - (double)dims[2] / 2;
+                double v = r2 + 4 * z * z < 0.09 * n * n ? ball_value : 10;
+                if (!isnan(pad) && r2 > 0.2025 * n * n)
+                    v = pad;
+                iso_vol_set(vol, i, j, k, v);
+            }
+    iso_vol_update_stats(vol);
+    return vol;
+}
+
+/* Padding is the end value that fills whole lines through the volume: the circle's
+ * outside (at either end of the range, any type) is found; air around a ball, a rare
+ * value, a volume without a spike at its ends are not. */
+static void test_find_padding(void)
+{
+    uint64_t counts[256];
+    double pad = 0;
+    struct { iso_voxel_type type; double pad, ball; int found; } cases[] = {
+        {ISO_I16, -2000, 900, 1}, {ISO_F32, -3024, 900, 1}, {ISO_U16, 65535, 900, 1},
+        {ISO_I16, NAN, 900, 0},  /* air (the minimum) surrounds the ball: lines cross it */
+        {ISO_U8, 0, 200, 1},     /* 0 outside the circle, air 10 inside: found */
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof *cases; c++) {
+        iso_volume *vol = scan(40, cases[c].type, cases[c].pad, cases[c].ball);
+        CHECK(vol != NULL);
+        if (!vol)
+            continue;
+        iso_hist_compute(vol, 256, counts);
+        int found = iso_vol_find_padding(vol, counts, 256, &pad);
+        CHECKF(found == cases[c].found && (!found || pad == cases[c].pad), "case %zu: found %d, padding %g",
+               c, found, pad);
+        iso_vol_destroy(vol);
+    }
+    /* The same circle, but a tenth of its lines crossed by tissue: not padding. */
+    iso_volume *vol = scan(40, ISO_I16, -2000, 900);
+    if (vol) {
+        for (size_t j = 0; j < 40; j += 10)
+            for (size_t i = 0; i < 40; i++)
+                if (iso_vol_get(vol, i, j, 3) == -2000)
+                    iso_vol_set(vol, i, j, 3, 50);
+        iso_hist_compute(vol, 256, counts);
+        CHECK_EQ(iso_vol_find_padding(vol, counts, 256, &pad), 0);
+        iso_vol_destroy(vol);
+    }
 }
 
 /* Every NRRD spelling of the supported types parses to its voxel type. */
@@ -1150,6 +1242,8 @@ int main(void)
     CHECK_RUN(test_stats);
     CHECK_RUN(test_stats_large);
     CHECK_RUN(test_index_to_world);
+    CHECK_RUN(test_set_axes);
+    CHECK_RUN(test_find_padding);
     CHECK_RUN(test_nrrd_attached_raw);
     CHECK_RUN(test_nrrd_attached_gzip);
     CHECK_RUN(test_nrrd_detached);
