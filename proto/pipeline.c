@@ -312,6 +312,7 @@ static int encode(const proto_pipeline_request *req, proto_pipeline_result *res,
         rc = proto_glb_encode_info(&res->mesh, &req->encode, &res->bytes, &res->size, &info, err);
         break;
     case PROTO_FORMAT_GLB_MESHOPT: break; /* with the normals, in meshopt_steps */
+    case PROTO_FORMAT_GLB_PLAIN: rc = proto_encode_glb_plain(&res->mesh, &res->bytes, &res->size, err); break;
     case PROTO_FORMAT_PLY: rc = proto_encode_ply(&res->mesh, &res->bytes, &res->size, err); break;
     case PROTO_FORMAT_STL: rc = proto_encode_stl(&res->mesh, &res->bytes, &res->size, err); break;
     case PROTO_FORMAT_OBJ: rc = proto_encode_obj(&res->mesh, &res->bytes, &res->size, err); break;

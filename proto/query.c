@@ -85,12 +85,12 @@ static int parse_count(const char *key, const char *value, unsigned long min, un
 }
 
 static const char *const format_names[PROTO_FORMAT_COUNT] = {"draco", "glb", "ply", "stl",
-                                                             "glb-meshopt"};
+                                                             "glb-meshopt", "glb-plain"};
 static const char *const format_types[PROTO_FORMAT_COUNT] = {
     "application/x-draco", "model/gltf-binary", "application/x-ply", "model/stl",
-    "model/gltf-binary"};
+    "model/gltf-binary", "model/gltf-binary"};
 static const char *const format_extensions[PROTO_FORMAT_COUNT] = {"drc", "glb", "ply", "stl",
-                                                                  "glb"};
+                                                                  "glb", "glb"};
 
 const char *proto_format_name(proto_format format) { return format_names[format]; }
 const char *proto_format_content_type(proto_format format) { return format_types[format]; }
@@ -148,7 +148,7 @@ static int parse_one(int which, const char *value, proto_mesh_request *out, prot
                 out->format = (proto_format)f;
                 return 0;
             }
-        return proto_problem_set(problem, 400, key, "format must be draco, glb, glb-meshopt, ply or stl, not \"%s\"",
+        return proto_problem_set(problem, 400, key, "format must be draco, glb, glb-meshopt, glb-plain, ply or stl, not \"%s\"",
                                  shown(value ? value : "", buf, sizeof buf));
     case P_CAP:
     case P_MEASURES:

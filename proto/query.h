@@ -18,6 +18,7 @@ typedef enum proto_format {
     PROTO_FORMAT_PLY,
     PROTO_FORMAT_STL,
     PROTO_FORMAT_GLB_MESHOPT,              /* glb, EXT_meshopt_compression (encode.h) */
+    PROTO_FORMAT_GLB_PLAIN,                /* glb without extensions (encode.h) */
     PROTO_FORMAT_COUNT,                    /* the formats the API serves end here */
     PROTO_FORMAT_OBJ = PROTO_FORMAT_COUNT, /* OBJ text: the CLI writes it, the API does not */
     PROTO_FORMAT_NONE                      /* no encoding (pipeline.h keeps the mesh) */

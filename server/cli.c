@@ -204,7 +204,8 @@ int srv_format_of_path(const char *path)
 {
     static const struct { const char *suffix; proto_format format; } formats[] = {
         {".ply", PROTO_FORMAT_PLY}, {".obj", PROTO_FORMAT_OBJ}, {".drc", PROTO_FORMAT_DRACO},
-        {".meshopt.glb", PROTO_FORMAT_GLB_MESHOPT}, {".glb", PROTO_FORMAT_GLB},
+        {".meshopt.glb", PROTO_FORMAT_GLB_MESHOPT}, {".plain.glb", PROTO_FORMAT_GLB_PLAIN},
+        {".glb", PROTO_FORMAT_GLB},
         {".stl", PROTO_FORMAT_STL}};
     if (!path)
         return PROTO_FORMAT_NONE;

@@ -59,7 +59,7 @@ enum {
 static const srv_option extract_options[EX_OPTIONS] = {
     [EX_LEVEL] = {"--level", "L", "the iso-level, in the volume's values (required)"},
     [EX_TOLERANCE] = {"--tolerance", "T", "the error bound in values, >= 0 (default 0: the exact surface)"},
-    [EX_OUT] = {"-o", "OUT", "write the mesh: .ply, .stl, .obj, .drc, .glb or .meshopt.glb"},
+    [EX_OUT] = {"-o", "OUT", "write the mesh: .ply, .stl, .obj, .drc, .glb, .meshopt.glb or .plain.glb (no extension)"},
     [EX_JSON] = {"--json", NULL, "print the counts, times, error bound, area and watertightness as JSON"},
     [EX_NORMALS] = {"--normals", "ORDER", "none, trilinear, triquadratic or tricubic (default)"},
     [EX_CAP] = {"--cap", NULL, "close the surface at the volume's border (a printable mesh)"},
@@ -165,7 +165,7 @@ static int srv_cmd_extract(int argc, char **argv)
         return srv_fail("extract: --no-simplify goes with --budget");
     int format = srv_format_of_path(out);
     if (format < 0)
-        return srv_fail("%s: unknown output format (use .ply, .stl, .obj, .drc, .glb or .meshopt.glb)", out);
+        return srv_fail("%s: unknown output format (use .ply, .stl, .obj, .drc, .glb, .meshopt.glb or .plain.glb)", out);
     opt.want_tree = !full_scan;
     srv_subject s;
     if (srv_open(&opt, &s))

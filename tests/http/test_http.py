@@ -353,6 +353,46 @@ draco3d.createDecoderModule({}).then(m => {
         assert normals == "true", out.stdout
     check("mesh_glb_loads_in_three_gltfloader", glb_three)
 
+    # format=glb-plain, for tools without Draco or meshopt: no extension used or required,
+    # the Khronos validator finds nothing to report, and the buffers hold the PLY's own
+    # floats and indices, bit for bit; three's GLTFLoader reads the same counts.
+    def glb_plain():
+        if not os.path.isdir("web/node_modules/gltf-validator"):
+            raise Skip("web/node_modules/gltf-validator not installed (make node-deps)")
+        r = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=glb-plain&normals=trilinear")
+        ply = s.get(f"/v1/volumes/blob/mesh?level={level}&tolerance={tol}&format=ply&normals=trilinear")
+        assert r.status == 200 and r.getheader("Content-Type") == "model/gltf-binary", r.status
+        assert 'filename="blob-' in r.getheader("Content-Disposition")
+        b = r.body
+        jlen = struct.unpack_from("<I", b, 12)[0]
+        doc = json.loads(b[20:20 + jlen])
+        assert "extensionsUsed" not in doc and "extensionsRequired" not in doc, doc
+        path = os.path.join(tmp, "blob.plain.glb")
+        open(path, "wb").write(b)
+        out = subprocess.run(["node", "tests/http/gltf_validate.mjs", os.path.abspath("web"), path],
+                             capture_output=True, text=True, timeout=60)
+        assert out.returncode == 0 and out.stdout.split("\n")[0] == "0 0 -" and not out.stderr, out.stdout + out.stderr
+        head, _, payload = ply.body.partition(b"end_header\n")
+        nv = int(re.search(rb"element vertex (\d+)", head).group(1))
+        nt = int(re.search(rb"element face (\d+)", head).group(1))
+        vertices = np.frombuffer(payload[:24 * nv], "<f4").reshape(nv, 6)
+        faces = np.frombuffer(payload[24 * nv:], np.dtype([("n", "u1"), ("i", "<u4", 3)]))["i"]
+        binary = b[28 + jlen:]
+        views = doc["bufferViews"]
+        got_pos = np.frombuffer(binary[views[0]["byteOffset"]:][:12 * nv], "<f4").reshape(nv, 3)
+        got_nrm = np.frombuffer(binary[views[1]["byteOffset"]:][:12 * nv], "<f4").reshape(nv, 3)
+        got_idx = np.frombuffer(binary[views[2]["byteOffset"]:][:12 * nt], "<u4").reshape(nt, 3)
+        assert np.array_equal(got_pos, vertices[:, :3]), "positions differ from the PLY's"
+        assert np.array_equal(got_nrm, vertices[:, 3:]), "normals differ from the PLY's"
+        assert np.array_equal(got_idx, faces), "indices differ from the PLY's"
+        bounds = np.float32([doc["accessors"][0]["min"], doc["accessors"][0]["max"]])
+        assert np.array_equal(bounds, [vertices[:, :3].min(0), vertices[:, :3].max(0)]), doc["accessors"][0]
+        loaded = subprocess.run(["node", "tests/http/gltf_load.mjs", path, os.path.abspath("web")],
+                                capture_output=True, text=True, timeout=60)
+        tri, ver, normals, *_ = loaded.stdout.split()
+        assert (int(tri), int(ver), normals) == (nt, nv, "true"), loaded.stdout + loaded.stderr
+    check("mesh_glb_plain_validates_and_is_the_ply", glb_plain)
+
     # format=glb-meshopt: three's GLTFLoader with its MeshoptDecoder gets exactly the
     # mesh's triangles and vertices, and the PLY's bounding box within half a qp step; its
     # vertices are numbered by first use, so the two are compared corner by corner: each
@@ -865,6 +905,49 @@ def preload_and_cache_dir(tmp):
     assert open(path, "rb").read() != bytes(data)
 
 
+def orientation_and_padding(tmp):
+    """A CT-like scan (air -1000, tissue 40, bone 1200) whose corners outside the
+    reconstruction circle hold -2000 on every slice, with spacings only: its orientation is
+    "none" and its suggested levels skip the padding; the same file with a catalog
+    "orientation" is "catalog" with that map; a header with a space is "file"; a bad code is
+    refused by name."""
+    z, y, x = np.mgrid[0:16, 0:40, 0:40].astype(np.float64)
+    r2 = (x - 19.5) ** 2 + (y - 19.5) ** 2
+    data = np.full(z.shape, -1000.0)
+    data[r2 + 4 * (z - 8) ** 2 < 14 ** 2] = 40
+    data[r2 + 4 * (z - 8) ** 2 < 8 ** 2] = 1200
+    data[r2 > 19 ** 2] = -2000
+    write_nrrd(os.path.join(tmp, "scan.nrrd"), data, (0.5, 0.5, 2))
+    with open(os.path.join(tmp, "spaced.nrrd"), "wb") as f:
+        f.write(b"NRRD0004\ntype: float\ndimension: 3\nsizes: 40 40 16\nspace: left-posterior-superior\n"
+                b"space directions: (0.5,0,0) (0,0.5,0) (0,0,2)\nendian: little\nencoding: raw\n\n")
+        f.write(data.astype("<f4").tobytes())
+    cat = os.path.join(tmp, "oriented.json")
+    json.dump({"volumes": [{"id": "scan", "path": "scan.nrrd"},
+                           {"id": "scan-lpi", "path": "scan.nrrd", "orientation": "LPI"},
+                           {"id": "spaced", "path": "spaced.nrrd"},
+                           {"id": "bad", "path": "scan.nrrd", "orientation": "LPX"}]}, open(cat, "w"))
+    s = Server(["--catalog", cat, "--web-root", tmp])
+    try:
+        vols = {v["id"]: v for v in json.loads(s.get("/v1/volumes").body)["volumes"]}
+        assert sorted(vols) == ["scan", "scan-lpi", "spaced"], sorted(vols)
+        assert 'volume "bad": "orientation" must be three letters' in s.log(), s.log()
+        assert [vols[v]["orientation"] for v in ("scan", "scan-lpi", "spaced")] == ["none", "catalog", "file"]
+        assert vols["scan"]["index_to_world"][:12] == [0.5, 0, 0, 0, 0, 0.5, 0, 0, 0, 0, 2, 0]
+        assert vols["scan-lpi"]["index_to_world"][:12] == [0.5, 0, 0, 0, 0, 0.5, 0, 0, 0, 0, -2, 0]
+        levels = vols["scan"]["suggested_levels"]
+        assert len(levels) == 2 and -1000 < levels[0] < 40 < levels[1] < 1200, levels
+        doc = json.loads(s.get("/v1/volumes/scan").body)
+        assert doc["padding"] == -2000 and doc["orientation"] == "none", doc.get("padding")
+        # The flipped map keeps the surface's winding: the same enclosed volume, closed.
+        heads = [s.request("HEAD", f"/v1/volumes/{v}/mesh?level={levels[1]}&format=ply&measures=true")
+                 for v in ("scan", "scan-lpi")]
+        assert [h.getheader("X-Iso-Closed") for h in heads] == ["true", "true"]
+        assert heads[0].getheader("X-Iso-Volume-Mm3") == heads[1].getheader("X-Iso-Volume-Mm3")
+    finally:
+        s.stop()
+
+
 def volumes_dir(tmp, blob):
     d = os.path.join(tmp, "dir")
     os.mkdir(d)
@@ -961,6 +1044,7 @@ def main():
         check("graceful_shutdown_finishes_request", lambda: graceful_shutdown(tmp, catalog))
         check("preload_healthz_and_cache_dir", lambda: preload_and_cache_dir(tmp))
         check("volumes_dir_ids", lambda: volumes_dir(tmp, blob))
+        check("orientation_and_padding", lambda: orientation_and_padding(tmp))
         check("cors_configured_origins", lambda: cors_origins(tmp, catalog))
         check("default_collection", lambda: default_collection(tmp))
         check("bad_options", bad_options)

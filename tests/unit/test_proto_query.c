@@ -117,7 +117,7 @@ static void test_query_rejections(void)
         {{{"level", "1"}, {"tolerance", "-1"}}, 2, "tolerance", "from 0"},
         {{{"level", "1"}, {"tolerance", "1e31"}}, 2, "tolerance", "from 0"},
         {{{"level", "1"}, {"normals", "phong"}}, 2, "normals", "tricubic"},
-        {{{"level", "1"}, {"format", "obj"}}, 2, "format", "draco, glb, glb-meshopt, ply or stl"},
+        {{{"level", "1"}, {"format", "obj"}}, 2, "format", "draco, glb, glb-meshopt, glb-plain, ply or stl"},
         {{{"level", "1"}, {"cap", "yes"}}, 2, "cap", "true or false"},
         {{{"level", "1"}, {"cap", NULL}}, 2, "cap", "true or false"},
         {{{"level", "1"}, {"measures", "1"}}, 2, "measures", "true or false"},
