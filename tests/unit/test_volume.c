@@ -1180,6 +1180,33 @@ static void samples_sha(const iso_volume *vol, int big_endian, char hex[65])
     sha256_hex(digest, hex);
 }
 
+/* Padding in the shared scans: the bunny's -2000 and the quarter head's 0 outside their scan
+ * circles, and the 255 that fills whole columns of the avg152T1 copy; nothing in the
+ * others (skull-stripped brains' 0 and CT air included). The bunny's first suggested level
+ * drew its circle (below air); without the padding the levels fall between air (~30) and
+ * the ceramic (~2330), where the bunny is. */
+static void check_shared_padding(const iso_volume *vol, const char *name)
+{
+    static const struct { const char *prefix; double value; } padded[] = {
+        {"bunny", -2000}, {"headsq", 0}, {"avg152T1", 255}};
+    uint64_t counts[256];
+    iso_hist_compute(vol, 256, counts);
+    double padding = 0, want = NAN, with[2], without[2];
+    for (size_t p = 0; p < sizeof padded / sizeof *padded; p++)
+        if (!strncmp(name, padded[p].prefix, strlen(padded[p].prefix)))
+            want = padded[p].value;
+    int found = iso_vol_find_padding(vol, counts, 256, &padding);
+    CHECKF(found == !isnan(want) && (!found || padding == want), "%s: padding found %d (%g)", name, found, padding);
+    int bunny = strncmp(name, "bunny", 5) == 0;
+    if (!bunny)
+        return;
+    CHECK_EQ(iso_hist_suggest_levels(counts, 256, vol->value_min, vol->value_max, with, 2), 2);
+    iso_hist_drop_padding(counts, 256, vol->value_min, vol->value_max, padding);
+    CHECK_EQ(iso_hist_suggest_levels(counts, 256, vol->value_min, vol->value_max, without, 2), 2);
+    CHECKF(with[0] < -1000 && without[0] > 100 && without[1] < 2300 && without[0] < without[1],
+           "bunny: levels %g %g with the padding, %g %g without", with[0], with[1], without[0], without[1]);
+}
+
 static void test_shared_manifest(void)
 {
     const char *dir = check_shared_volumes();
@@ -1226,6 +1253,7 @@ static void test_shared_manifest(void)
         samples_sha(vol, big, hex);
         CHECKF(strncmp(hex, row.sha16, 16) == 0, "%s: sha256 %.16s, manifest %s", row.name, hex,
                row.sha16);
+        check_shared_padding(vol, row.name);
         iso_vol_destroy(vol);
     }
     fclose(f);
