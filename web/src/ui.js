@@ -1,9 +1,17 @@
-// ui.js: the panel's pieces that draw: the histogram behind the level slider, suggested
-// level chips, the stats table, the measures, the scale bar, the error line.
+// ui.js: the panel's pieces that draw: the histogram behind the level slider (a click on it
+// picks the level there), suggested level chips, the stats table, the measures, the scale
+// bar, the error line, and number formatting.
 
+// Draws the histogram with the suggested levels marked; a click on it or on a chip calls
+// onPick(level).
 export function drawHistogram(canvas, histogram, levels, onPick) {
   const ctx = canvas.getContext('2d');
   const { width, height } = canvas;
+  canvas.onclick = (e) => {
+    const box = canvas.getBoundingClientRect();
+    const t = Math.min(1, Math.max(0, (e.clientX - box.left) / box.width));
+    onPick(Number((histogram.min + t * (histogram.max - histogram.min)).toPrecision(6)));
+  };
   ctx.clearRect(0, 0, width, height);
   const counts = histogram.counts;
   const peak = Math.max(...counts.map((c) => Math.log1p(c)), 1);
@@ -24,7 +32,7 @@ export function drawHistogram(canvas, histogram, levels, onPick) {
   chips.replaceChildren(...levels.map((level) => {
     const b = document.createElement('button');
     b.textContent = formatNumber(level);
-    b.title = 'suggested level';
+    b.title = 'suggested level (N: the next one)';
     b.addEventListener('click', () => onPick(level));
     return b;
   }));
@@ -52,6 +60,8 @@ function fillTable(table, rows) {
 }
 
 export function showStats(table, mesh, decodeMs, codec) {
+  // A body from the browser's own cache never reached the server this time.
+  const cache = mesh.browserCached ? 'browser cache' : mesh.cache ? `server ${mesh.cache}` : '–';
   fillTable(table, [
     ['triangles', integer(mesh.triangles), 'stat-triangles'],
     ['vertices', integer(mesh.vertices)],
@@ -66,7 +76,7 @@ export function showStats(table, mesh, decodeMs, codec) {
     ['error bound', formatNumber(mesh.errorBound)],
     ['tolerance used', formatNumber(mesh.tolerance)],
     ['distance (p99)', mesh.distanceMm === null ? '–' : `${formatNumber(mesh.distanceMm, 3)} mm`, 'stat-distance'],
-    ['server cache', mesh.cache ?? '–'],
+    ['cache', cache, 'stat-cache'],
   ]);
 }
 
@@ -96,8 +106,20 @@ export function showScale(mmPerPixel) {
   document.getElementById('scale-label').textContent = `${formatNumber(length)} mm`;
 }
 
-export function showError(message) {
+export function showError(message, action) {
   const box = document.getElementById('error');
   box.hidden = !message;
   box.textContent = message || '';
+  if (message && action) {
+    const b = document.createElement('button');
+    b.type = 'button';
+    b.textContent = action.label;
+    b.id = action.id ?? '';
+    b.addEventListener('click', action.run);
+    box.append(document.createElement('br'), b);
+  }
+}
+
+export function megabytes(bytes) {
+  return bytes >= 1e6 ? `${formatNumber(bytes / 1e6, 3)} MB` : `${formatNumber(bytes / 1e3, 3)} kB`;
 }

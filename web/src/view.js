@@ -1,18 +1,22 @@
-// view.js: the 3D view: three.js scene, mesh decoding (Draco in a worker with DRACOLoader,
-// glb-meshopt with GLTFLoader + MeshoptDecoder), one mesh per surface with its own colour
-// and opacity, a clipping plane, orbit controls, a light that follows the camera, framing,
-// and a scale bar in millimetres.
+// view.js: the 3D view: three.js scene in the patient's frame, mesh decoding (Draco in a
+// worker with DRACOLoader, glb-meshopt with GLTFLoader + MeshoptDecoder), one mesh per
+// surface with its own colour and opacity, a clipping plane, the camera (camera.js) and the
+// orientation marker (marker.js), drawn on demand: every change asks for a frame and at
+// most one frame is drawn per animation frame, so input never queues behind drawing.
 //
-// Meshes arrive in LPS millimetres (x to the patient's left, y posterior, z superior).
-// The mesh group is turned so that superior is up and anterior faces the viewer:
-// display (x, y, z) = (L, S, A) = (x, z, -y), a rotation of -90 degrees about x.
+// The scene's world is LPS millimetres, as the meshes arrive (x to the patient's left, y
+// posterior, z superior), superior up. A volume whose file has no orientation gets its
+// assumed axes corrected by `axes` (a mirror per flipped axis about the volume's centre);
+// everything else (camera, clipping plane, URL) is in the corrected frame.
 import * as THREE from 'three';
-import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { DRACOLoader } from 'three/addons/loaders/DRACOLoader.js';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { MeshoptDecoder } from 'three/addons/libs/meshopt_decoder.module.js';
+import { Camera } from './camera.js';
+import { Marker } from './marker.js';
 
 const AXES = { x: 0, y: 1, z: 2 };
+const DEFAULT_AXES = 'LPS';
 
 export class View {
   constructor(container) {
@@ -20,30 +24,44 @@ export class View {
     this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
     this.renderer.localClippingEnabled = true;
+    this.renderer.autoClear = false; // the marker draws over the scene in its corner
     container.prepend(this.renderer.domElement);
     this.scene = new THREE.Scene();
-    this.camera = new THREE.PerspectiveCamera(35, 1, 0.1, 1e6);
-    this.scene.add(this.camera);
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x404048, 1.2));
-    const headlight = new THREE.DirectionalLight(0xffffff, 2.2);
-    headlight.position.set(0.3, 0.5, 1); // from just above and right of the eye
-    this.camera.add(headlight);
-    this.controls = new OrbitControls(this.camera, this.renderer.domElement);
-    this.controls.addEventListener('change', () => this.render());
-    this.group = new THREE.Group();
-    this.group.rotation.x = -Math.PI / 2;
-    this.turn = new THREE.Group(); // the optional half turn about the viewing axis
-    this.turn.add(this.group);
-    this.scene.add(this.turn);
+    this.camera = new Camera(this.renderer.domElement, () => this.requestRender());
+    this.scene.add(this.camera.camera);
+    this.group = new THREE.Group(); // the axes correction of an unoriented volume
+    this.group.matrixAutoUpdate = false;
+    this.scene.add(this.group);
+    this.marker = new Marker();
     this.plane = new THREE.Plane(new THREE.Vector3(1, 0, 0), 0);
     this.clipping = [];
     this.surfaces = [];
+    this.bounds = null; // the volume's box in the corrected frame: THREE.Box3
     this.draco = new DRACOLoader().setDecoderPath('./three/addons/libs/draco/');
     this.draco.preload();
     this.gltf = new GLTFLoader().setMeshoptDecoder(MeshoptDecoder);
     this.onScale = () => {};
+    this.onFrame = () => {};
+    this.frames = 0; // drawn frames, for the benchmark's frames per second
+    this.pending = false;
     new ResizeObserver(() => this.resize()).observe(container);
     this.resize();
+  }
+
+  // Asks for a frame; many asks before the next animation frame draw once.
+  requestRender() {
+    if (this.pending) return;
+    this.pending = true;
+    requestAnimationFrame(() => {
+      this.pending = false;
+      this.render();
+    });
+  }
+
+  // Resolves once the frames asked for so far are drawn (tests read pixels after it).
+  drawn() {
+    return new Promise((resolve) => requestAnimationFrame(() => requestAnimationFrame(resolve)));
   }
 
   // Decodes a mesh body into { geometry, matrix } (matrix: the glb node's transform, which
@@ -61,6 +79,24 @@ export class View {
     return { geometry: found.geometry, matrix: found.matrixWorld.clone() };
   }
 
+  // The volume: its LPS box as the file places it ([[x0, y0, z0], [x1, y1, z1]]), the
+  // assumed axes' correction (a code like LPI: where i, j, k point) and whether the file
+  // says how its axes lie. Sets the camera's limits; the camera itself is set by the caller.
+  setVolume(box, axes = DEFAULT_AXES, oriented = true) {
+    const lo = new THREE.Vector3(...box[0]), hi = new THREE.Vector3(...box[1]);
+    const centre = lo.clone().add(hi).multiplyScalar(0.5);
+    const sign = [...DEFAULT_AXES].map((letter, a) => (axes[a] === letter ? 1 : -1));
+    this.group.matrix.makeTranslation(centre.x, centre.y, centre.z)
+      .multiply(new THREE.Matrix4().makeScale(...sign))
+      .multiply(new THREE.Matrix4().makeTranslation(-centre.x, -centre.y, -centre.z));
+    this.group.matrixWorldNeedsUpdate = true;
+    this.axes = axes;
+    this.bounds = new THREE.Box3(lo, hi); // a mirror about the centre keeps the box
+    this.camera.setBounds(this.bounds);
+    this.marker.setAxesKnown(oriented);
+    this.requestRender();
+  }
+
   // The i-th surface's mesh and material, made on first use.
   surface(i) {
     while (this.surfaces.length <= i) {
@@ -71,8 +107,8 @@ export class View {
     return this.surfaces[i];
   }
 
-  // Shows a decoded mesh as surface i in place of its previous one; frames it when asked.
-  show(i, { geometry, matrix }, frame) {
+  // Shows a decoded mesh as surface i in place of its previous one.
+  show(i, { geometry, matrix }) {
     if (!geometry.getAttribute('normal') && geometry.getAttribute('position')?.count) geometry.computeVertexNormals();
     const s = this.surface(i);
     if (s.mesh) {
@@ -84,8 +120,15 @@ export class View {
     s.mesh.matrix.copy(matrix);
     s.mesh.renderOrder = s.material.transparent ? 1 : 0; // translucent after opaque
     this.group.add(s.mesh);
-    if (frame && geometry.getAttribute('position')?.count) this.frame();
-    this.render();
+    this.requestRender();
+  }
+
+  // The box of what is drawn (corrected frame), or null when nothing is.
+  drawnBox() {
+    this.group.updateMatrixWorld(true);
+    const box = new THREE.Box3();
+    for (const s of this.surfaces) if (s.mesh?.geometry.getAttribute('position')?.count) box.expandByObject(s.mesh);
+    return box.isEmpty() ? null : box;
   }
 
   // Removes surface i's mesh (a surface switched off).
@@ -96,7 +139,7 @@ export class View {
       s.mesh.geometry.dispose();
       s.mesh = null;
     }
-    this.render();
+    this.requestRender();
   }
 
   // Colour ('#rrggbb') and opacity (0..1) of surface i. A translucent surface writes no
@@ -109,75 +152,58 @@ export class View {
     material.depthWrite = opacity >= 1;
     material.needsUpdate = true;
     if (mesh) mesh.renderOrder = material.transparent ? 1 : 0;
-    this.render();
+    this.requestRender();
   }
 
   clear() {
     this.surfaces.forEach((_, i) => this.hide(i));
   }
 
-  // The clipping plane: off, or across `axis` ('x', 'y' or 'z' of the volume's LPS mm) at
-  // `at`, keeping the side below it (or above when `flip`).
+  // The clipping plane: off, or across `axis` ('x', 'y' or 'z' of the corrected LPS frame)
+  // at `at` (0..1 of the volume's box), keeping the side below it (or above when `flip`).
   clip(on, axis, at, flip) {
+    const a = AXES[axis] ?? 0;
+    const was = this.clipping.length;
     this.clipping.length = 0;
-    if (on) {
-      const normal = new THREE.Vector3();
-      normal.setComponent(AXES[axis] ?? 0, flip ? 1 : -1);
-      this.turn.updateMatrixWorld(true);
-      const local = new THREE.Plane(normal, flip ? -at : at);
-      this.plane.copy(local).applyMatrix4(this.group.matrixWorld);
+    if (on && this.bounds) {
+      const where = this.bounds.min.getComponent(a) + at * (this.bounds.max.getComponent(a) - this.bounds.min.getComponent(a));
+      const normal = new THREE.Vector3().setComponent(a, flip ? 1 : -1);
+      this.plane.set(normal, flip ? -where : where);
       this.clipping.push(this.plane);
     }
-    for (const s of this.surfaces) s.material.needsUpdate = true;
-    this.render();
-  }
-
-  frame() {
-    this.turn.updateMatrixWorld(true); // the half turn must count before measuring
-    const box = new THREE.Box3().setFromObject(this.group);
-    const sphere = box.getBoundingSphere(new THREE.Sphere());
-    const distance = sphere.radius / Math.sin(THREE.MathUtils.degToRad(this.camera.fov / 2)) * 1.1;
-    this.controls.target.copy(sphere.center);
-    this.camera.position.copy(sphere.center).add(new THREE.Vector3(0, 0, distance));
-    this.camera.near = distance / 100;
-    this.camera.far = distance * 10;
-    this.camera.updateProjectionMatrix();
-    this.controls.update();
+    // The shaders change only when the plane comes or goes; moving it is a uniform.
+    if (was !== this.clipping.length) for (const s of this.surfaces) s.material.needsUpdate = true;
+    this.requestRender();
   }
 
   set wireframe(on) {
     for (const s of this.surfaces) s.material.wireframe = on;
-    this.render();
+    this.requestRender();
   }
 
-  // Files without orientation (plain spacings) may store the head upside down: a half turn
-  // about the viewing axis (a rotation, never a mirror) puts it right, face still forward.
-  set flipped(on) {
-    this.turn.rotation.z = on ? Math.PI : 0;
-    if (this.surfaces.some((s) => s.mesh)) this.frame();
-    this.render();
+  set background(color) {
+    this.renderer.setClearColor(color);
+    this.marker.setBackground(color);
+    this.requestRender();
   }
-
-  set background(color) { this.renderer.setClearColor(color); this.render(); }
 
   resize() {
     const { clientWidth: w, clientHeight: h } = this.container;
     if (!w || !h) return;
     this.renderer.setSize(w, h);
-    this.camera.aspect = w / h;
-    this.camera.updateProjectionMatrix();
-    this.render();
-  }
-
-  // Millimetres per pixel at the orbit target: what the scale bar needs.
-  mmPerPixel() {
-    const distance = this.camera.position.distanceTo(this.controls.target);
-    const visible = 2 * distance * Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2));
-    return visible / this.container.clientHeight;
+    this.camera.setAspect(w / h);
+    this.requestRender();
   }
 
   render() {
-    this.renderer.render(this.scene, this.camera);
-    this.onScale(this.mmPerPixel());
+    this.frames++;
+    const { clientWidth: w, clientHeight: h } = this.container;
+    this.renderer.setViewport(0, 0, w, h);
+    this.renderer.setScissorTest(false);
+    this.renderer.clear();
+    this.renderer.render(this.scene, this.camera.camera);
+    this.marker.render(this.renderer, this.camera.camera, w, h);
+    this.onScale(this.camera.mmPerPixel(h));
+    this.onFrame();
   }
 }
