@@ -327,6 +327,20 @@ async function panelTests(page, base) {
   await page.setViewportSize({ width: 1100, height: 800 });
   await page.goto(`${base}?volume=${volume.id}&level=${volume.level}&tolerance=1`);
   await settled(page);
+  // Turning with the button held draws the preview while full frames are slow, and the
+  // full mesh once released (the picture that stays is the surface).
+  const canvas = await page.locator('#view canvas').boundingBox();
+  await page.mouse.move(canvas.x + 300, canvas.y + 300);
+  await page.mouse.down();
+  await page.mouse.move(canvas.x + 340, canvas.y + 310, { steps: 2 });
+  await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+  const held = await page.evaluate(() => { const v = window.isoViewer.view, s = v.surfaces[0];
+    return { slow: v.fullFrameMs, lod: s.lod?.visible ?? null, full: s.mesh.visible, frames: v.frames }; });
+  await page.mouse.up();
+  await page.evaluate(() => window.isoViewer.view.drawn());
+  const released = await page.evaluate(() => { const s = window.isoViewer.view.surfaces[0]; return { lod: s.lod?.visible ?? null, full: s.mesh.visible }; });
+  report('turning_draws_preview_then_full', (held.slow > 60 ? held.lod === true && !held.full : held.full) &&
+    released.full && released.lod !== true, JSON.stringify({ held, released }));
   const fits = await page.evaluate(() => { const p = document.getElementById('panel'); return [p.scrollHeight, p.clientHeight]; });
   report('panel_fits_800px', fits[0] <= fits[1], `${fits[0]} px of content in ${fits[1]}`);
   await page.keyboard.press('?');

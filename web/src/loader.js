@@ -24,6 +24,7 @@
 import { ApiError, CODEC_FORMATS, getBudgetFacts, getChain, getMesh, meshUrl } from './api.js';
 
 const PREVIEW_TRIANGLES = 16000;
+const LOD_TRIANGLES = 200000; // a full mesh larger than this gets a preview to turn with
 const RETRY_MAX_S = 30;
 
 // The full meshes this browser has fetched (their URLs, the last SEEN_MAX), kept across
@@ -174,6 +175,18 @@ export class Loader {
     return Math.max(this.range, this.previewTolerance(i));
   }
 
+  // A preview for a large full mesh drawn without one (from the browser's cache), kept to
+  // stand in while the view moves; nothing is shown or reported.
+  async fetchLod(i, level, mine) {
+    const l = this.live[i], p = { level, tolerance: this.settleTolerance(i), normals: 'none' };
+    try {
+      const mesh = await getMesh(this.ctx.state.volume, { ...p, format: this.format() }, l.controller?.signal);
+      const decoded = await this.ctx.view.decode(mesh.bytes, this.ctx.state.codec);
+      if (mine === l.generation) this.ctx.view.keepLod(i, decoded, level);
+      else decoded.geometry.dispose();
+    } catch { /* without it the view turns with the full mesh */ }
+  }
+
   // Fetches the preview and starts decoding it; returns the drawing's promise so that the
   // full request goes out while it runs.
   async preview(i, params, mine, signal) {
@@ -219,7 +232,7 @@ export class Loader {
       return false;
     }
     const drawing = performance.now();
-    view.show(i, decoded);
+    view.show(i, decoded, { lod: kind !== 'final', level: params.level });
     l.drawn = { level: params.level, kind, triangles: mesh.triangles, tolerance: params.tolerance,
       distance: params.distance ?? 0, mesh, decodeMs };
     // The split the browser benchmark reports: the answer's arrival after the request
@@ -229,6 +242,7 @@ export class Loader {
       fetchMs: (mesh.arrived ?? start) - started, serverMs: (mesh.extractMs ?? 0) + (mesh.normalsMs ?? 0) + (mesh.encodeMs ?? 0),
       drawMs: performance.now() - drawing, browserCached: mesh.browserCached };
     this.shown.push(record);
+    if (kind === 'final' && !view.hasLod(i) && mesh.triangles > LOD_TRIANGLES) this.fetchLod(i, params.level, mine);
     if (kind === 'final') seen.add(meshUrl(state.volume, { ...params, format: this.format() }));
     this.ctx.onShown(i, record, mesh);
     return true;

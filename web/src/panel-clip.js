@@ -1,6 +1,7 @@
 // panel-clip.js: the panel's clipping section: a plane across one of the patient's axes
 // (left-right, front-back, foot-head) at a place along the volume, keeping either side.
-// Moving it changes a uniform only, and the view draws at most once per animation frame.
+// Moving it changes a uniform only, and the view draws at most once per animation frame
+// (with the previews while the slider is held, when full frames are slow).
 export function mountClip(ctx) {
   const { $, state } = ctx;
   const changed = () => {
@@ -12,6 +13,10 @@ export function mountClip(ctx) {
   };
   for (const id of ['clip', 'clip-axis', 'clip-flip']) $(id).addEventListener('change', changed);
   $('clip-at').addEventListener('input', changed);
+  // While the slider is held the view may draw previews (view.js); the full frame follows
+  // its release.
+  $('clip-at').addEventListener('pointerdown', () => { ctx.view.holding = true; });
+  for (const type of ['pointerup', 'pointercancel', 'change']) $('clip-at').addEventListener(type, () => { ctx.view.holding = false; ctx.view.moving(); });
 }
 
 export function applyClip(ctx) {

@@ -4,6 +4,13 @@
 // orientation marker (marker.js), drawn on demand: every change asks for a frame and at
 // most one frame is drawn per animation frame, so input never queues behind drawing.
 //
+// While the camera turns or the clipping plane moves, a view whose last full frame took
+// more than SLOW_FRAME_MS (software GL, a large mesh) draws each surface's preview mesh
+// instead, at half the resolution (as VTK's LOD actors and volume renderers' interactive
+// quality do), and the full meshes again once the button is released and nothing has
+// moved for SETTLE_MS: turning stays smooth (a pause with the button down does not start
+// a slow full frame), and what stays on screen is the full surface.
+//
 // The scene's world is LPS millimetres, as the meshes arrive (x to the patient's left, y
 // posterior, z superior), superior up. A volume whose file has no orientation gets its
 // assumed axes corrected by `axes` (a mirror per flipped axis about the volume's centre);
@@ -17,18 +24,24 @@ import { Marker } from './marker.js';
 
 const AXES = { x: 0, y: 1, z: 2 };
 const DEFAULT_AXES = 'LPS';
+const SLOW_FRAME_MS = 60;
+const SETTLE_MS = 250;
 
 export class View {
   constructor(container) {
     this.container = container;
     this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
-    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
+    this.pixelRatio = Math.min(window.devicePixelRatio, 2);
+    this.renderer.setPixelRatio(this.pixelRatio);
     this.renderer.localClippingEnabled = true;
     this.renderer.autoClear = false; // the marker draws over the scene in its corner
     container.prepend(this.renderer.domElement);
     this.scene = new THREE.Scene();
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x404048, 1.2));
-    this.camera = new Camera(this.renderer.domElement, () => this.requestRender());
+    this.camera = new Camera(this.renderer.domElement, () => this.moving());
+    this.holding = false; // a mouse button down on the view
+    this.camera.controls.addEventListener('start', () => { this.holding = true; });
+    this.camera.controls.addEventListener('end', () => { this.holding = false; this.moving(); });
     this.scene.add(this.camera.camera);
     this.group = new THREE.Group(); // the axes correction of an unoriented volume
     this.group.matrixAutoUpdate = false;
@@ -45,6 +58,8 @@ export class View {
     this.onFrame = () => {};
     this.frames = 0; // drawn frames, for the benchmark's frames per second
     this.pending = false;
+    this.fullFrameMs = 0; // the last frame with every full mesh
+    this.motion = null;   // the timer that ends a motion
     new ResizeObserver(() => this.resize()).observe(container);
     this.resize();
   }
@@ -59,8 +74,23 @@ export class View {
     });
   }
 
-  // Resolves once the frames asked for so far are drawn (tests read pixels after it).
-  drawn() {
+  // The camera or the clipping plane moves: draw, with the previews if full frames are
+  // slow, until SETTLE_MS pass without motion.
+  moving() {
+    clearTimeout(this.motion);
+    const settle = () => {
+      if (this.holding) { this.motion = setTimeout(settle, SETTLE_MS); return; }
+      this.motion = null;
+      this.requestRender();
+    };
+    this.motion = setTimeout(settle, SETTLE_MS);
+    this.requestRender();
+  }
+
+  // Resolves once the frames asked for so far are drawn, full meshes included (tests read
+  // pixels after it).
+  async drawn() {
+    while (this.motion || this.pending) await new Promise((resolve) => setTimeout(resolve, 20));
     return new Promise((resolve) => requestAnimationFrame(() => requestAnimationFrame(resolve)));
   }
 
@@ -107,21 +137,45 @@ export class View {
     return this.surfaces[i];
   }
 
-  // Shows a decoded mesh as surface i in place of its previous one.
-  show(i, { geometry, matrix }) {
+  // Shows a decoded mesh as surface i in place of its previous one. `lod`: it is a preview,
+  // also kept to stand in for the full mesh while the view moves; a full mesh of another
+  // level than the kept preview drops it.
+  show(i, { geometry, matrix }, { lod = false, level = null } = {}) {
     if (!geometry.getAttribute('normal') && geometry.getAttribute('position')?.count) geometry.computeVertexNormals();
     const s = this.surface(i);
-    if (s.mesh) {
-      this.group.remove(s.mesh);
-      s.mesh.geometry.dispose();
-    }
-    s.mesh = new THREE.Mesh(geometry, s.material);
-    s.mesh.matrixAutoUpdate = false;
-    s.mesh.matrix.copy(matrix);
-    s.mesh.renderOrder = s.material.transparent ? 1 : 0; // translucent after opaque
+    if (s.mesh) this.drop(s.mesh);
+    s.mesh = this.mesh(s, geometry, matrix);
     this.group.add(s.mesh);
+    if (lod) this.keepLod(i, { geometry: geometry.clone(), matrix }, level);
+    else if (s.lod && s.lodLevel !== level) this.keepLod(i, null, null);
+    this.measure = true;
     this.requestRender();
   }
+
+  // Keeps a preview (or none) to stand in for surface i's mesh while the view moves.
+  keepLod(i, decoded, level) {
+    const s = this.surface(i);
+    if (s.lod) this.drop(s.lod);
+    s.lod = decoded ? this.mesh(s, decoded.geometry, decoded.matrix) : null;
+    s.lodLevel = level;
+    if (s.lod) { s.lod.visible = false; this.group.add(s.lod); }
+  }
+
+  mesh(s, geometry, matrix) {
+    const mesh = new THREE.Mesh(geometry, s.material);
+    mesh.matrixAutoUpdate = false;
+    mesh.matrix.copy(matrix);
+    mesh.renderOrder = s.material.transparent ? 1 : 0; // translucent after opaque
+    return mesh;
+  }
+
+  drop(mesh) {
+    this.group.remove(mesh);
+    mesh.geometry.dispose();
+  }
+
+  // Whether surface i has a preview to stand in while the view moves.
+  hasLod(i) { return !!this.surfaces[i]?.lod; }
 
   // The box of what is drawn (corrected frame), or null when nothing is.
   drawnBox() {
@@ -134,11 +188,9 @@ export class View {
   // Removes surface i's mesh (a surface switched off).
   hide(i) {
     const s = this.surfaces[i];
-    if (s?.mesh) {
-      this.group.remove(s.mesh);
-      s.mesh.geometry.dispose();
-      s.mesh = null;
-    }
+    if (s?.mesh) this.drop(s.mesh);
+    if (s?.lod) this.drop(s.lod);
+    if (s) { s.mesh = null; s.lod = null; }
     this.requestRender();
   }
 
@@ -152,6 +204,7 @@ export class View {
     material.depthWrite = opacity >= 1;
     material.needsUpdate = true;
     if (mesh) mesh.renderOrder = material.transparent ? 1 : 0;
+    if (this.surfaces[i].lod) this.surfaces[i].lod.renderOrder = material.transparent ? 1 : 0;
     this.requestRender();
   }
 
@@ -173,7 +226,7 @@ export class View {
     }
     // The shaders change only when the plane comes or goes; moving it is a uniform.
     if (was !== this.clipping.length) for (const s of this.surfaces) s.material.needsUpdate = true;
-    this.requestRender();
+    this.moving();
   }
 
   set wireframe(on) {
@@ -198,10 +251,28 @@ export class View {
   render() {
     this.frames++;
     const { clientWidth: w, clientHeight: h } = this.container;
+    // Previews stand in while moving when full frames are slow; never a surface without one.
+    const light = this.motion !== null && this.fullFrameMs > SLOW_FRAME_MS;
+    for (const s of this.surfaces) {
+      if (!s.mesh) continue;
+      const swap = light && !!s.lod;
+      s.mesh.visible = !swap;
+      if (s.lod) s.lod.visible = swap;
+    }
+    const ratio = light ? this.pixelRatio / 2 : this.pixelRatio;
+    if (this.renderer.getPixelRatio() !== ratio) this.renderer.setPixelRatio(ratio), this.renderer.setSize(w, h);
+    const start = performance.now();
     this.renderer.setViewport(0, 0, w, h);
     this.renderer.setScissorTest(false);
     this.renderer.clear();
     this.renderer.render(this.scene, this.camera.camera);
+    // Reading one pixel waits for the GPU: the frame's real cost, measured on the first
+    // full frame after a mesh changed.
+    if (!light && this.measure) {
+      this.measure = false;
+      this.renderer.getContext().readPixels(0, 0, 1, 1, 0x1908, 0x1401, new Uint8Array(4));
+      this.fullFrameMs = performance.now() - start;
+    }
     this.marker.render(this.renderer, this.camera.camera, w, h);
     this.onScale(this.camera.mmPerPixel(h));
     this.onFrame();
