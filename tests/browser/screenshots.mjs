@@ -12,8 +12,9 @@ const require = createRequire(resolve('web/node_modules') + '/');
 const { chromium } = require('playwright-core');
 const shared = process.env.ISO_SHARED_VOLUMES ?? '../shared/volumes';
 const tmp = mkdtempSync(join(tmpdir(), 'isoserve-shots-'));
+// CThead's header has no orientation; its first slice is the crown: LPI.
 writeFileSync(join(tmp, 'catalog.json'), JSON.stringify({ volumes: [{ id: 'cthead', name: 'CT head (Stanford)',
-  modality: 'CT', path: resolve(shared, 'CThead_256x256x113_u16be.nhdr'), levels: [700.5, 1500.5] }] }));
+  modality: 'CT', path: resolve(shared, 'CThead_256x256x113_u16be.nhdr'), levels: [700.5, 1500.5], orientation: 'LPI' }] }));
 const server = spawn(resolve('build/isoserve'), ['serve', '--catalog', join(tmp, 'catalog.json'), '--listen', '127.0.0.1:0'],
   { stdio: ['ignore', 'ignore', 'pipe'] });
 const port = await new Promise((ok) => {
@@ -30,22 +31,16 @@ const context = await chromium.launchPersistentContext(profile, {
 });
 const page = context.pages()[0] ?? await context.newPage();
 const views = [
-  ['skin', 'level=700.5&tolerance=0&normals=tricubic'],
-  ['skin-over-bone', 'level=700.5&tolerance=0&normals=tricubic&color=e8b89a&opacity=0.3&level2=1500.5&color2=f2efe6&clip=x:0.55'],
+  ['skin', 'level=700.5'],
+  ['skin-over-bone', 'level=700.5&color=e8b89a&opacity=0.3&level2=1500.5&color2=f2efe6&clip=x:0.55'],
 ];
 for (const [name, query] of views) {
   await page.goto(`http://127.0.0.1:${port}/?volume=cthead&${query}`);
   const surfaces = query.includes('level2') ? 2 : 1;
   await page.waitForFunction((n) => [...Array(n).keys()].every((i) => window.isoViewer?.shown.some((m) => m.surface === i && m.kind === 'final')),
     surfaces, { timeout: 180000 });
-  await page.check('#flip'); // CThead's header has no orientation; its slices run foot to crown
-  await page.waitForTimeout(300);
-  if (surfaces === 2) { // a quarter turn: the cut faces the viewer
-    await page.mouse.move(760, 380);
-    await page.mouse.down();
-    await page.mouse.move(640, 380, { steps: 10 });
-    await page.mouse.up();
-  }
+  if (surfaces === 2) await page.keyboard.press('l'); // the patient's left: the cut faces the viewer
+  await page.evaluate(() => window.isoViewer.view.drawn());
   await page.click('#measure');
   await page.waitForFunction((n) => (document.getElementById('measures').textContent.match(/mm²/g) || []).length === n, surfaces, { timeout: 180000 });
   await page.screenshot({ path: `docs/screenshot-${name}.png` });

@@ -22,10 +22,10 @@ function phaseText(p) {
   const since = seconds(performance.now() - p.since);
   if (p.step === 'downloading') {
     const got = megabytes(p.received ?? 0);
-    return `downloading the ${what} at ${formatNumber(p.level)}: ${p.total ? `${got} of ${megabytes(p.total)}` : got} (${since})`;
+    return `downloading the ${what} at ${formatNumber(p.level, 6)}: ${p.total ? `${got} of ${megabytes(p.total)}` : got} (${since})`;
   }
-  if (p.step === 'decoding') return `decoding the ${what} at ${formatNumber(p.level)}`;
-  return `server ${p.step} the ${what} at ${formatNumber(p.level)}… (${since})`;
+  if (p.step === 'decoding') return `decoding the ${what} at ${formatNumber(p.level, 6)}`;
+  return `server ${p.step} the ${what} at ${formatNumber(p.level, 6)}… (${since})`;
 }
 
 // Redraws the status lines from the loader's state.
@@ -39,19 +39,19 @@ export function showStatus(ctx) {
     const d = l.drawn;
     const line = document.createElement('div');
     line.id = `status-${i + 1}`;
-    let text = !d ? `${name}nothing drawn yet` : d.triangles === 0 ? `${name}no surface at ${formatNumber(d.level)}`
-      : `${name}${formatNumber(d.level)}, ${d.kind === 'final' ? 'full' : 'preview'}, ${formatNumber(d.triangles, 7)} triangles`;
+    let text = !d ? `${name}nothing drawn yet` : d.triangles === 0 ? `${name}no surface at ${formatNumber(d.level, 6)}`
+      : `${name}${formatNumber(d.level, 6)}, ${d.kind === 'final' ? 'full' : 'preview'}, ${formatNumber(d.triangles, 7)} triangles`;
     if (l.phase) text += ` · ${phaseText(l.phase)}`;
     line.textContent = text;
     if (l.failure) {
       const f = document.createElement('div');
       f.className = 'failure';
       if (l.retry) {
-        f.textContent = `${formatNumber(s.level)} not loaded: ${l.failure.message}; trying again in ` +
+        f.textContent = `${formatNumber(s.level, 6)} not loaded: ${l.failure.message}; trying again in ` +
           `${Math.max(0, Math.ceil((l.retry.at - performance.now()) / 1000))} s (attempt ${l.retry.attempt + 1})`;
         f.append(button('Retry now', `retry-${i + 1}`, l.retry.now));
       } else {
-        f.textContent = `${formatNumber(s.level)} not shown: ${l.failure.message}`;
+        f.textContent = `${formatNumber(s.level, 6)} not shown: ${l.failure.message}`;
       }
       if (l.offer) f.append(offer(ctx, i, l.offer));
       line.append(f);
