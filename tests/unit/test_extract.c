@@ -872,6 +872,27 @@ static void test_tolerance_meshes_do_not_depend_on_threads(void)
 /* World positions off the tolerance path (and its cap, and the full scan) are the index
  * positions through iso_vol_index_to_world, bit for bit: extract.c's one multiply-add per
  * coordinate with an identity direction, the general map with a rotated one. */
+/* The surface at `level` extracted twice, in index space and in world space, by the
+ * hierarchy (with `tolerance`, every block coarsened that may be, closed at the border when
+ * `cap`) or by the full scan. */
+static void index_and_world(const iso_tree *tree, double level, double tolerance, int cap, int full_scan,
+                            iso_mesh *index, iso_mesh *world)
+{
+    iso_mesh_init(index);
+    iso_mesh_init(world);
+    iso_extract_params p = {.level = level, .tolerance = tolerance, .cap = cap, .space = ISO_SPACE_INDEX, .threads = 1,
+                            .coarsen = ISO_COARSEN_ALL};
+    iso_error err;
+    if (full_scan) {
+        CHECK_OK(iso_extract_full_scan(tree->vol, level, ISO_SPACE_INDEX, index, NULL, &err), &err);
+        CHECK_OK(iso_extract_full_scan(tree->vol, level, ISO_SPACE_WORLD, world, NULL, &err), &err);
+        return;
+    }
+    CHECK_OK(iso_extract(tree, &p, index, NULL, &err), &err);
+    p.space = ISO_SPACE_WORLD;
+    CHECK_OK(iso_extract(tree, &p, world, NULL, &err), &err);
+}
+
 static void test_world_positions_are_the_index_map(void)
 {
     double r0;
@@ -889,19 +910,7 @@ static void test_world_positions_are_the_index_map(void)
         }
         for (int variant = 0; variant < 3; variant++) {
             iso_mesh index, world;
-            iso_mesh_init(&index);
-            iso_mesh_init(&world);
-            iso_extract_params p = {.level = 4, .tolerance = variant == 2 ? 0 : 0.15, .cap = variant == 1,
-                                    .space = ISO_SPACE_INDEX, .threads = 1, .coarsen = ISO_COARSEN_ALL};
-            iso_error err;
-            if (variant == 2) {
-                CHECK_OK(iso_extract_full_scan(vol, p.level, ISO_SPACE_INDEX, &index, NULL, &err), &err);
-                CHECK_OK(iso_extract_full_scan(vol, p.level, ISO_SPACE_WORLD, &world, NULL, &err), &err);
-            } else {
-                CHECK_OK(iso_extract(tree, &p, &index, NULL, &err), &err);
-                p.space = ISO_SPACE_WORLD;
-                CHECK_OK(iso_extract(tree, &p, &world, NULL, &err), &err);
-            }
+            index_and_world(tree, 4, variant == 2 ? 0 : 0.15, variant == 1, variant == 2, &index, &world);
             CHECK(index.vertex_count > 0);
             CHECK_EQ(world.vertex_count, index.vertex_count);
             size_t off = 0;
@@ -941,19 +950,7 @@ static void test_mirrored_map_keeps_winding(void)
         int mirrored = m > 0;
         for (int variant = 0; variant < 4; variant++) {
             iso_mesh index, world;
-            iso_mesh_init(&index);
-            iso_mesh_init(&world);
-            iso_extract_params p = {.level = 4, .tolerance = variant == 1 ? 0.15 : 0, .cap = variant == 2,
-                                    .space = ISO_SPACE_INDEX, .threads = 1};
-            iso_error err;
-            if (variant == 3) {
-                CHECK_OK(iso_extract_full_scan(vol, p.level, ISO_SPACE_INDEX, &index, NULL, &err), &err);
-                CHECK_OK(iso_extract_full_scan(vol, p.level, ISO_SPACE_WORLD, &world, NULL, &err), &err);
-            } else {
-                CHECK_OK(iso_extract(tree, &p, &index, NULL, &err), &err);
-                p.space = ISO_SPACE_WORLD;
-                CHECK_OK(iso_extract(tree, &p, &world, NULL, &err), &err);
-            }
+            index_and_world(tree, 4, variant == 1 ? 0.15 : 0, variant == 2, variant == 3, &index, &world);
             double in_index = iso_mesh_enclosed_volume(&index), in_world = iso_mesh_enclosed_volume(&world);
             double voxel = spacing[0] * spacing[1] * spacing[2];
             CHECKF(in_index > 0 && fabs(in_world - in_index * voxel) < 1e-4 * in_index * voxel,
