@@ -84,10 +84,10 @@ function volumes() {
   return [{ id: 'ch2', label: 'ch2 brain', path: '/usr/share/mricron/templates/ch2bet.nii.gz', level: 30.5, levels: [30.5, 90.5] }];
 }
 
-function startServer(catalog) {
+function startServer(catalog, extra = []) {
   return new Promise((ok, fail) => {
     const proc = spawn(resolve(process.env.ISOSERVE_BIN || 'build/isoserve'), ['serve', '--catalog', catalog,
-      '--listen', '127.0.0.1:0', '--cache-mb', '2048'], { stdio: ['ignore', 'ignore', 'pipe'] });
+      '--listen', '127.0.0.1:0', '--cache-mb', '2048', ...extra], { stdio: ['ignore', 'ignore', 'pipe'] });
     let log = '';
     proc.stderr.on('data', (d) => {
       log += d;
