@@ -242,6 +242,7 @@ export class Loader {
       fetchMs: (mesh.arrived ?? start) - started, serverMs: (mesh.extractMs ?? 0) + (mesh.normalsMs ?? 0) + (mesh.encodeMs ?? 0),
       drawMs: performance.now() - drawing, browserCached: mesh.browserCached };
     this.shown.push(record);
+    view.afterFrame.push(() => { record.drawnAt = performance.now(); }); // the frame that shows it
     if (kind === 'final' && !view.hasLod(i) && mesh.triangles > LOD_TRIANGLES) this.fetchLod(i, params.level, mine);
     if (kind === 'final') seen.add(meshUrl(state.volume, { ...params, format: this.format() }));
     this.ctx.onShown(i, record, mesh);

@@ -59,6 +59,7 @@ export class View {
     this.frames = 0; // drawn frames, for the benchmark's frames per second
     this.pending = false;
     this.fullFrameMs = 0; // the last frame with every full mesh
+    this.afterFrame = []; // called once after the next frame is drawn
     this.motion = null;   // the timer that ends a motion
     new ResizeObserver(() => this.resize()).observe(container);
     this.resize();
@@ -276,5 +277,8 @@ export class View {
     this.marker.render(this.renderer, this.camera.camera, w, h);
     this.onScale(this.camera.mmPerPixel(h));
     this.onFrame();
+    const after = this.afterFrame;
+    this.afterFrame = [];
+    for (const f of after) f();
   }
 }
