@@ -250,6 +250,34 @@ async function codecAndDetail(page, base, draco) {
     Number(h['x-iso-chain-level']) >= 1 && Number(h['x-iso-triangles']) < exact && / mm = [\d.]+ voxel/.test(label) &&
     page.url().includes(`distance=${asked}`), `asked ${asked} mm, got ${h['x-iso-distance-mm']} mm, level ${h['x-iso-chain-level']}, ` +
     `${h['x-iso-triangles']} of ${exact}; "${label}"`);
+  // The chain's own figures (GET .../chain, here as a server that has the route answers,
+  // finest level first): positions only at levels that change the mesh (level 2 is no
+  // closer than level 3, so asking its distance would give level 3) and none past 3
+  // voxels; a chain level no larger than a preview is asked for without one.
+  const voxel3 = 3 * voxelMm;
+  const levels = [[600000, 0], [300000, 0.1], [150000, 0.25], [75000, 0.2], [37000, 0.6], [18000, 1.5], [9000, voxel3 * 1.5]]
+    .map(([triangles, p99]) => ({ triangles, distance_p99_mm: p99 * voxelMm, distance_max_mm: 2 * p99 * voxelMm }));
+  await page.route((u) => u.pathname.endsWith('/chain'), (route) => route.fulfill({ contentType: 'application/json',
+    body: JSON.stringify({ level: volume.level, tolerance: 1, state: 'ready', exact_triangles: 600000, levels }) }));
+  await page.goto(`${base}?volume=${volume.id}&level=${volume.level}&tolerance=1`);
+  await settled(page);
+  await page.waitForFunction(() => window.isoViewer.ctx.detail.chain?.state === 'ready', null, { timeout: 20000 });
+  const mocked = await page.evaluate(() => window.isoViewer.ctx.detail.positions.map((p) => [p.k ?? 0, p.triangles ?? 0]));
+  report('detail_positions_from_the_chain', JSON.stringify(mocked) === JSON.stringify([[0, 0], [1, 300000], [3, 75000], [4, 37000], [5, 18000]]),
+    JSON.stringify(mocked));
+  const n = await page.evaluate(() => window.isoViewer.shown.length);
+  await page.evaluate(() => {
+    const el = document.getElementById('distance');
+    el.value = '4';
+    el.dispatchEvent(new Event('input'));
+    el.dispatchEvent(new Event('change'));
+  });
+  await settled(page);
+  const after = await page.evaluate((n) => ({ kinds: window.isoViewer.shown.slice(n).map((m) => m.kind), distance: window.isoViewer.state.distance,
+    label: document.getElementById('distance-value').textContent }), n);
+  report('detail_small_level_without_preview', after.kinds.join() === 'final' && Math.abs(after.distance - 1.5 * voxelMm) < 1e-3 &&
+    /18,000 triangles, p99/.test(after.label), JSON.stringify(after));
+  await page.unrouteAll({ behavior: 'ignoreErrors' });
   // A link asking far beyond a few voxels asks for no more than the last position.
   await page.goto(`${base}?volume=${volume.id}&level=${volume.level}&tolerance=1&distance=100`);
   await settled(page);

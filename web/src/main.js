@@ -141,7 +141,10 @@ async function selectVolume(id, fromLink) {
   drawLevels(ctx);
   applyClip(ctx);
   ctx.sync();
-  await updateDetail(ctx, true);
+  // Detail's positions need the chain's figures: waited for only when the link asks for a
+  // Detail (capped by them), else fetched beside the first meshes.
+  const detail = updateDetail(ctx, true);
+  if (state.distance > 0) await detail;
   await ctx.refreshAll();
 }
 ctx.selectVolume = selectVolume;
