@@ -176,7 +176,7 @@ async function timedView(page, base, vol, level, distance) {
 // frames drawn per second, the time from the last move to the frame showing it, and after
 // the release the time to the full frame.
 async function orbitRate(page, ms) {
-  const box = await page.locator('#view canvas').boundingBox();
+  const box = await page.locator('#view canvas:not(.marker)').boundingBox();
   const cx = box.x + box.width / 2, cy = box.y + box.height / 2;
   await page.mouse.move(cx, cy);
   await page.mouse.down();

@@ -63,7 +63,7 @@ export async function settled(page, timeout = 120000) {
 // colour leans red and blue (two surfaces drawn in those colours).
 export async function pixelStats(page) {
   return page.evaluate(() => {
-    const canvas = document.querySelector('#view canvas');
+    const canvas = document.querySelector('#view canvas:not(.marker)');
     const copy = document.createElement('canvas');
     copy.width = canvas.width; copy.height = canvas.height;
     const ctx = copy.getContext('2d');
@@ -84,12 +84,12 @@ export async function pixelStats(page) {
 }
 
 // The canvas's pixels as a data URL (equal strings: equal pictures).
-export const canvasPixels = (page) => page.evaluate(() => document.querySelector('#view canvas').toDataURL());
+export const canvasPixels = (page) => page.evaluate(() => document.querySelector('#view canvas:not(.marker)').toDataURL());
 
 // Counts the pixels that differ between the canvas now and a picture taken before.
 export async function pixelDifference(page, before) {
   return page.evaluate(async (url) => {
-    const canvas = document.querySelector('#view canvas');
+    const canvas = document.querySelector('#view canvas:not(.marker)');
     const img = new Image();
     img.src = url;
     await img.decode();

@@ -190,7 +190,7 @@ async function linkTests(page, base) {
   const [kept, gone] = cut.left > cut.right ? ['left', 'right'] : ['right', 'left'];
   report('clip_plane_cuts_one_half', cut[gone] < 0.35 * both[gone] && cut[kept] > 0.7 * both[kept], JSON.stringify({ both, cut }));
   // Turn the camera by dragging, then the light background.
-  const box = await page.locator('#view canvas').boundingBox();
+  const box = await page.locator('#view canvas:not(.marker)').boundingBox();
   await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
   await page.mouse.down();
   await page.mouse.move(box.x + box.width / 2 + 120, box.y + box.height / 2 - 30, { steps: 3 });
@@ -357,7 +357,7 @@ async function panelTests(page, base) {
   await settled(page);
   // Turning with the button held draws the preview while full frames are slow, and the
   // full mesh once released (the picture that stays is the surface).
-  const canvas = await page.locator('#view canvas').boundingBox();
+  const canvas = await page.locator('#view canvas:not(.marker)').boundingBox();
   await page.mouse.move(canvas.x + 300, canvas.y + 300);
   await page.mouse.down();
   await page.mouse.move(canvas.x + 340, canvas.y + 310, { steps: 2 });

@@ -34,7 +34,6 @@ export class View {
     this.pixelRatio = Math.min(window.devicePixelRatio, 2);
     this.renderer.setPixelRatio(this.pixelRatio);
     this.renderer.localClippingEnabled = true;
-    this.renderer.autoClear = false; // the marker draws over the scene in its corner
     container.prepend(this.renderer.domElement);
     this.scene = new THREE.Scene();
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x404048, 1.2));
@@ -46,7 +45,7 @@ export class View {
     this.group = new THREE.Group(); // the axes correction of an unoriented volume
     this.group.matrixAutoUpdate = false;
     this.scene.add(this.group);
-    this.marker = new Marker();
+    this.marker = new Marker(container);
     this.plane = new THREE.Plane(new THREE.Vector3(1, 0, 0), 0);
     this.clipping = [];
     this.surfaces = [];
@@ -65,9 +64,11 @@ export class View {
     this.resize();
   }
 
-  // Asks for a frame; many asks before the next animation frame draw once.
+  // Asks for a frame; many asks before the next animation frame draw once. Nothing is
+  // drawn before a volume is set: the page's first requests go out without waiting for
+  // the first frame's shaders.
   requestRender() {
-    if (this.pending) return;
+    if (this.pending || !this.bounds) return;
     this.pending = true;
     requestAnimationFrame(() => {
       this.pending = false;
@@ -237,7 +238,6 @@ export class View {
 
   set background(color) {
     this.renderer.setClearColor(color);
-    this.marker.setBackground(color);
     this.requestRender();
   }
 
@@ -263,9 +263,6 @@ export class View {
     const ratio = light ? this.pixelRatio / 2 : this.pixelRatio;
     if (this.renderer.getPixelRatio() !== ratio) this.renderer.setPixelRatio(ratio), this.renderer.setSize(w, h);
     const start = performance.now();
-    this.renderer.setViewport(0, 0, w, h);
-    this.renderer.setScissorTest(false);
-    this.renderer.clear();
     this.renderer.render(this.scene, this.camera.camera);
     // Reading one pixel waits for the GPU: the frame's real cost, measured on the first
     // full frame after a mesh changed.
@@ -274,7 +271,7 @@ export class View {
       this.renderer.getContext().readPixels(0, 0, 1, 1, 0x1908, 0x1401, new Uint8Array(4));
       this.fullFrameMs = performance.now() - start;
     }
-    this.marker.render(this.renderer, this.camera.camera, w, h);
+    this.marker.render(this.camera.camera);
     this.onScale(this.camera.mmPerPixel(h));
     this.onFrame();
     const after = this.afterFrame;
