@@ -46,15 +46,18 @@ export async function stopServer(proc) {
   await new Promise((r) => proc.on('exit', r));
 }
 
-// Waits until every surface that is on has its full mesh drawn and nothing is pending,
-// then until that frame is on the canvas.
+// Waits until every surface that is on has the full mesh of the state's level, tolerance
+// and detail drawn and nothing is pending, then until that frame is on the canvas.
 export async function settled(page, timeout = 120000) {
   await page.waitForFunction(() => {
     const v = window.isoViewer;
     if (!v?.ctx?.loader) return false;
     const { state, loader } = v.ctx;
-    return state.surfaces.every((s, i) => !s.on || (loader.live[i].drawn?.kind === 'final' && loader.live[i].drawn.level === s.level &&
-      !loader.live[i].phase));
+    return state.surfaces.every((s, i) => {
+      const d = loader.live[i].drawn;
+      return !s.on || (d?.kind === 'final' && d.level === s.level && d.tolerance === state.tolerance &&
+        d.distance === state.distance && !loader.live[i].phase);
+    });
   }, null, { timeout });
   await page.evaluate(() => window.isoViewer.view.drawn());
 }
