@@ -24,7 +24,7 @@
 
 /* Bump when extraction or encoding changes what a mesh URL returns: it is part of every
  * volume's version, so ETags and caches in front of the server move on. */
-#define SRV_MESH_ALGORITHM_VERSION 6
+#define SRV_MESH_ALGORITHM_VERSION 7
 
 int srv_collection_init(srv_collection *c, const srv_catalog *catalog,
                         const srv_preload_options *options)
