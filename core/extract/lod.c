@@ -122,6 +122,33 @@ typedef struct plan_share {
     size_t whole;    /* of those, in a brick at stride 8 */
 } plan_share;
 
+/* 1 if crossed brick `brick` (blocks first.., m per axis) takes stride 8 whole: it is whole,
+ * its level 3 error is within the tolerance and, with a cap, no block of it is on the
+ * volume's border. */
+static int brick_whole(const plan *p, size_t brick, const uint32_t first[3], const uint32_t m[3], int cap)
+{
+    int whole = m[0] == 2 && m[1] == 2 && m[2] == 2 && stride_valid(p, first, ISO_TREE_LEVELS) &&
+                iso_tree_level_error(p->tree, brick) <= p->tolerance;
+    for (int d = 0; d < 3 && cap && whole; d++)
+        whole = first[d] != 0 && first[d] + 2 != p->blocks[d];
+    return whole;
+}
+
+/* PASS 1's share of blocks in stride-8 bricks alone, without choosing the other blocks'
+ * strides: enough to tell whether coarse units pay (coarse_pays), at a fraction of the
+ * plan's cost, which would otherwise fall on every exact answer. */
+static plan_share whole_share(const plan *p, int cap)
+{
+    plan_share share = {0, 0, 0};
+    FOR_ACTIVE_BRICKS(p, brick, first, m) {
+        size_t n = (size_t)m[0] * m[1] * m[2];
+        share.blocks += n;
+        share.whole += brick_whole(p, brick, first, m, cap) ? n : 0;
+    }
+    share.coarse = share.whole;
+    return share;
+}
+
 /* PASS 1: every brick whose [min, max] holds the level takes stride 8 whole if it may,
  * else each of its blocks the coarsest of strides 4 and 2 it may, or 1; the other bricks
  * stride 8, which touches nothing (their samples all lie on one side of the level). No
@@ -132,13 +159,7 @@ static plan_share plan_tolerance(plan *p, int cap)
     plan_share share = {0, 0, 0};
     memset(p->shift, ISO_TREE_LEVELS, blocks_total(p));
     FOR_ACTIVE_BRICKS(p, brick, first, m) {
-        int whole = m[0] == 2 && m[1] == 2 && m[2] == 2 && stride_valid(p, first, ISO_TREE_LEVELS) &&
-                    iso_tree_level_error(p->tree, brick) <= p->tolerance;
-        for (unsigned k = 0; k < 8 && cap && whole; k++) {
-            uint32_t q[3] = {first[0] + (k & 1), first[1] + (k >> 1 & 1), first[2] + (k >> 2)};
-            for (int d = 0; d < 3; d++)
-                whole &= q[d] != 0 && q[d] + 1 != p->blocks[d];
-        }
+        int whole = brick_whole(p, brick, first, m, cap);
         for (unsigned k = 0; k < 8; k++) {
             if (!has_block(m, k))
                 continue;
@@ -248,15 +269,16 @@ int iso_lod_extract(const iso_tree *tree, const iso_extract_params *params, int 
                     iso_extract_stats *stats, iso_error *err)
 {
     plan p;
-    *exact = 0;
-    size_t total = (size_t)((tree->vol->dims[0] + 2) / 4) * ((tree->vol->dims[1] + 2) / 4) * ((tree->vol->dims[2] + 2) / 4);
-    uint8_t *shift = malloc(total ? total : 1);
+    plan_grid(&p, tree, params->level, params->tolerance, NULL);
+    plan_share share = whole_share(&p, params->cap);
+    if ((*exact = params->coarsen != ISO_COARSEN_ALL && !coarse_pays(&share)))
+        return 0;
+    size_t total = blocks_total(&p);
+    uint8_t *shift = p.shift = malloc(total ? total : 1);
     if (!shift)
         return iso_error_set(err, ISO_E_NOMEM, "out of memory extracting the surface");
-    plan_grid(&p, tree, params->level, params->tolerance, shift);
-    plan_share share = plan_tolerance(&p, params->cap);
-    *exact = params->coarsen == ISO_COARSEN_ALL ? share.coarse == 0 : !coarse_pays(&share);
-    if (*exact) {
+    share = plan_tolerance(&p, params->cap);
+    if ((*exact = share.coarse == 0)) {
         free(shift);
         return 0;
     }
