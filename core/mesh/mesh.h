@@ -400,12 +400,33 @@ int iso_mesh_chain_distance(const iso_mesh_chain *chain, const iso_mesh *mesh, i
 /* A chain on disk (chain_file.c): iso_mesh_chain_save writes it with the caller's
  * identity (a hash of what the chain was built from: volume version, level, tolerance;
  * never trusted from the file) through a temporary file renamed into place; returns 0,
- * ISO_E_NOMEM or ISO_E_IO. iso_mesh_chain_load reads one back as a chain for
- * iso_mesh_chain_destroy, after checking everything: ISO_E_IO (cannot read), ISO_E_FORMAT
- * (not a chain file), ISO_E_STALE (another version, layout or identity), ISO_E_CORRUPT
- * (sizes, indices or checksums disagree), ISO_E_NOMEM; *out NULL then. Both O(file). */
+ * ISO_E_NOMEM or ISO_E_IO. The file holds the positions and each level's indices as
+ * aligned sections, each with its own checksum, so that a level can be cut from the
+ * mapped file without reading the rest. iso_mesh_chain_load reads one back whole as a
+ * chain for iso_mesh_chain_destroy (level 0's grid built again), after checking
+ * everything: ISO_E_IO (cannot read), ISO_E_FORMAT (not a chain file), ISO_E_STALE
+ * (another version, layout or identity), ISO_E_CORRUPT (sizes, indices or checksums
+ * disagree), ISO_E_NOMEM; *out NULL then. Both O(file). */
 int iso_mesh_chain_save(const iso_mesh_chain *chain, const char *path, uint64_t identity,
                         iso_error *err);
 int iso_mesh_chain_load(const char *path, uint64_t identity, iso_mesh_chain **out, iso_error *err);
+
+/* A chain file mapped read-only (mmap): iso_mesh_chain_map_open checks the header, the
+ * table of sections against the file's size (a file cut short is ISO_E_CORRUPT) and the
+ * level records' checksum, O(levels), and fails as iso_mesh_chain_load. Its chain (the
+ * records in memory, positions and indices in the mapping, no grid: a measure against it
+ * builds one for the call) may be picked from at once, but a level may be copied out
+ * (iso_mesh_chain_mesh) or measured against only after iso_mesh_chain_map_check(k) said 0
+ * for it (and level 0 for iso_mesh_chain_distance): that checks the positions' and level
+ * k's checksums and k's indices, once per mapping, O(level k + positions); thread-safe;
+ * ISO_E_CORRUPT, after which every check fails. The chain must never be given to
+ * iso_mesh_chain_destroy; iso_mesh_chain_map_close unmaps it (NULL allowed). bytes: the
+ * file's size. */
+typedef struct iso_mesh_chain_map iso_mesh_chain_map;
+int iso_mesh_chain_map_open(const char *path, uint64_t identity, iso_mesh_chain_map **out, iso_error *err);
+const iso_mesh_chain *iso_mesh_chain_map_chain(const iso_mesh_chain_map *map);
+int iso_mesh_chain_map_check(iso_mesh_chain_map *map, int k, iso_error *err);
+size_t iso_mesh_chain_map_bytes(const iso_mesh_chain_map *map);
+void iso_mesh_chain_map_close(iso_mesh_chain_map *map);
 
 #endif

@@ -343,7 +343,38 @@ static void test_chain_file_round_trip(void)
         CHECK(back == NULL);
         data[at] ^= 0x55;
     }
+    /* Mapped: the header, table and records checked at once, each level before its first
+     * cut. The last level's indices end the file: a byte flipped there is found by that
+     * level's check only, and the mapping is refused from then on. */
+    iso_mesh_chain_map *map = NULL;
+    write_bytes(path, data, n);
+    CHECK_OK(iso_mesh_chain_map_open(path, 42, &map, &err), &err);
+    if (map) {
+        const iso_mesh_chain *mc = iso_mesh_chain_map_chain(map);
+        CHECK_EQ(mc->levels, chain->levels);
+        CHECK_EQ(iso_mesh_chain_map_bytes(map), n);
+        CHECK(mc->grid == NULL && !memcmp(mc->positions, chain->positions, 3 * chain->vertex_count * sizeof(float)));
+        for (int k = 0; k < mc->levels; k++) {
+            CHECK_OK(iso_mesh_chain_map_check(map, k, &err), &err);
+            CHECK(!memcmp(mc->level[k].indices, chain->level[k].indices, 3 * chain->level[k].triangle_count * 4));
+        }
+        CHECK_EQ(iso_mesh_chain_map_check(map, mc->levels, &err), ISO_E_ARGUMENT);
+        iso_mesh_chain_map_close(map);
+    }
+    data[n - 2] ^= 0x55;
+    write_bytes(path, data, n);
+    map = NULL;
+    CHECK_OK(iso_mesh_chain_map_open(path, 42, &map, &err), &err);
+    if (map) {
+        CHECK_OK(iso_mesh_chain_map_check(map, 0, &err), &err);
+        CHECK_EQ(iso_mesh_chain_map_check(map, chain->levels - 1, &err), ISO_E_CORRUPT);
+        CHECK_EQ(iso_mesh_chain_map_check(map, 0, &err), ISO_E_CORRUPT);
+        iso_mesh_chain_map_close(map);
+    }
+    data[n - 2] ^= 0x55;
     write_bytes(path, data, n - 5); /* cut short */
+    CHECK_EQ(iso_mesh_chain_map_open(path, 42, &map, &err), ISO_E_CORRUPT);
+    CHECK(map == NULL);
     CHECK_EQ(iso_mesh_chain_load(path, 42, &back, &err), ISO_E_CORRUPT);
     write_bytes(path, (const unsigned char *)"not a chain at all, but long enough to hold a header of 64 bytes", 64);
     CHECK_EQ(iso_mesh_chain_load(path, 42, &back, &err), ISO_E_FORMAT);
