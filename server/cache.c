@@ -49,7 +49,6 @@ size_t srv_body_bytes(const srv_body *body)
 void srv_body_release(srv_body *body)
 {
     if (body && atomic_fetch_sub(&body->refs, 1) == 1) {
-        iso_mesh_chain_destroy(body->chain);
         free(body->data);
         free(body->gzip_data);
         pthread_mutex_destroy(&body->gzip_lock);

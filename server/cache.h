@@ -42,8 +42,10 @@ typedef struct srv_body {
     double vertex_offset_mm;        /* its vertices' move along the normals (0: none) */
     const char *budget_source;      /* static: "chain" or "tolerance" (pipeline.h), or NULL */
     double budget_other_mm;         /* the measured p99 of the candidate not chosen, or -1 */
-    struct iso_mesh_chain *chain;   /* a cached simplification chain (owned), no data; it
-                                     * keeps the faithful tolerance's triangle count itself */
+    const char *chain_source;       /* static: how the chain was had (chains.h), or NULL */
+    double chain_load_ms;           /* mapping it and checking the levels cut */
+    double chain_cut_ms;            /* cutting the level (0 when built here) */
+    double chain_build_ms;          /* building it, when this request did */
 } srv_body;
 
 /* A body owning data (malloc'd, taken over), with one reference. NULL on no memory (data

@@ -16,6 +16,8 @@
 #include <unistd.h>
 
 #include "catalog.h"
+#include "chain_background.h"
+#include "chains.h"
 #include "cli.h"
 #include "collection.h"
 #include "http.h"
@@ -28,7 +30,8 @@ typedef struct serve_options {
     const char *catalog, *volumes, *cache_dir, *web_root;
     char host[256];
     unsigned port;
-    long threads, queue, cache_mb, drain_seconds, max_connections, max_volume_mb;
+    long threads, queue, cache_mb, chain_mb, drain_seconds, max_connections, max_volume_mb;
+    int chain_background;             /* --chain-background on|off */
     long max_resident_mb;             /* 0: no limit */
     long connection_timeout, max_triangles;
     const char *token_file;
@@ -115,6 +118,12 @@ static int set_option(serve_options *o, const char *a, const char *v, int from_e
     else if (!strcmp(a, "--threads")) return parse_count(a, v, 1, 256, &o->threads);
     else if (!strcmp(a, "--queue")) return parse_count(a, v, 0, 100000, &o->queue);
     else if (!strcmp(a, "--cache-mb")) return parse_count(a, v, 0, 1 << 20, &o->cache_mb);
+    else if (!strcmp(a, "--chain-mb")) return parse_count(a, v, 0, 1 << 24, &o->chain_mb);
+    else if (!strcmp(a, "--chain-background")) {
+        if (strcmp(v, "on") && strcmp(v, "off"))
+            return srv_fail("--chain-background %s: expected on or off", v);
+        o->chain_background = !strcmp(v, "on");
+    }
     else if (!strcmp(a, "--drain-seconds")) return parse_count(a, v, 0, 3600, &o->drain_seconds);
     else if (!strcmp(a, "--max-connections")) return parse_count(a, v, 1, 65536, &o->max_connections);
     else if (!strcmp(a, "--max-volume-mb")) return parse_count(a, v, 1, 1 << 24, &o->max_volume_mb);
@@ -139,6 +148,8 @@ static const srv_option serve_options_table[] = {
     {"--threads", "N", "mesh workers, 1..256 (default: all cores)"},
     {"--queue", "N", "requests waiting for a worker before 503 (default 64)"},
     {"--cache-mb", "N", "the mesh cache's size in MB (default 256)"},
+    {"--chain-mb", "N", "simplification chains kept mapped, in MB (default 2048; files stay in --cache-dir)"},
+    {"--chain-background", "on|off", "build the suggested levels' chains after preloading (default on)"},
     {"--cors-origin", "ORIGIN", "allow this browser origin (repeatable, at most 16)"},
     {"--drain-seconds", "S", "on SIGTERM, how long requests in flight may finish (default 10)"},
     {"--max-connections", "N", "open connections at most (default 256)"},
@@ -183,7 +194,8 @@ static int parse_options(int argc, char **argv, serve_options *o)
 {
     long cores = sysconf(_SC_NPROCESSORS_ONLN);
     *o = (serve_options){.host = "127.0.0.1", .port = 8080, .threads = cores > 0 ? cores : 1,
-                         .queue = 64, .cache_mb = 256, .drain_seconds = 10,
+                         .queue = 64, .cache_mb = 256, .chain_mb = 2048, .chain_background = 1,
+                         .drain_seconds = 10,
                          .max_connections = 256, .max_volume_mb = 8192,
                          .connection_timeout = 30};
     if (options_from_env(o))
@@ -321,6 +333,8 @@ static int serve(const serve_options *o, srv_catalog *catalog)
 {
     srv_collection collection;
     srv_cache cache;
+    srv_chains chains;
+    srv_chain_background background = {0};
     srv_pool pool;
     srv_server server = {0};
     srv_shard_ring ring;
@@ -347,6 +361,7 @@ static int serve(const serve_options *o, srv_catalog *catalog)
                                    .max_resident_bytes = (uint64_t)o->max_resident_mb << 20};
     if (srv_collection_init(&collection, catalog, &preload) ||
         srv_cache_init(&cache, (size_t)o->cache_mb << 20) ||
+        srv_chains_init(&chains, (size_t)o->chain_mb << 20) ||
         srv_pool_init(&pool, (size_t)o->threads, (size_t)o->queue)) {
         srv_shard_ring_free(&ring);
         free(skip);
@@ -361,6 +376,7 @@ static int serve(const serve_options *o, srv_catalog *catalog)
         .token = o->token_file ? token : NULL, .max_triangles = (size_t)o->max_triangles};
     server.collection = &collection;
     server.cache = &cache;
+    server.chains = &chains;
     server.pool = &pool;
     int status = 0;
     if (srv_http_start(&server, &err)) {
@@ -379,6 +395,8 @@ static int serve(const serve_options *o, srv_catalog *catalog)
         status = srv_fail("serve: cannot start the preloading thread");
         goto done;
     }
+    if (o->chain_background && srv_chain_background_start(&background, &collection, &chains))
+        fprintf(stderr, "isoserve: chains: no thread for the background builder; requests build them\n");
     sigset_t stop_signals;
     sigemptyset(&stop_signals);
     sigaddset(&stop_signals, SIGINT);
@@ -395,10 +413,21 @@ static int serve(const serve_options *o, srv_catalog *catalog)
                 o->drain_seconds);
     srv_http_stop(&server);
     pthread_join(preloader, NULL);
+    /* A chain cannot be cut short: one still building after the drain is left to the exit
+     * (its temporary file is removed at the next start), with what it uses. */
+    if (srv_chain_background_stop(&background, (double)o->drain_seconds * 1000)) {
+        fprintf(stderr, "isoserve: stopped (a background chain was cut off)\n");
+        srv_pool_destroy(&pool);
+        srv_cache_destroy(&cache);
+        srv_shard_ring_free(&ring);
+        free(root);
+        return status;
+    }
     fprintf(stderr, "isoserve: stopped\n");
 done:
     srv_pool_destroy(&pool);
     srv_cache_destroy(&cache);
+    srv_chains_destroy(&chains);
     srv_collection_free(&collection);
     srv_shard_ring_free(&ring);
     free(skip);

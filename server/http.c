@@ -6,6 +6,8 @@
  * headers, queued and destroyed at once. */
 #include "http.h"
 
+#include <jansson.h>
+#include <math.h>
 #include <microhttpd.h>
 #include <netdb.h>
 #include <stdarg.h>
@@ -44,7 +46,8 @@ static const char expose_headers[] =
     "X-Iso-Simplify-Error-Mm, X-Iso-Simplify-Error-Voxels, X-Iso-Distance-Mm, "
     "X-Iso-Distance-Max-Mm, X-Iso-Distance-Voxels, X-Iso-Chain-Level, X-Iso-Exact-Triangles, "
     "X-Iso-Edges, X-Iso-Pinch-Edges, X-Iso-Pinch-Vertices, X-Iso-Vertex-Offset-Mm, "
-    "X-Iso-Budget-Source, X-Iso-Budget-Other-Distance-Mm, X-Iso-Cache, X-Iso-Replica, X-Iso-Load, X-Iso-Total, Link";
+    "X-Iso-Budget-Source, X-Iso-Budget-Other-Distance-Mm, X-Iso-Chain-Source, X-Iso-Chain-Load-Ms, "
+    "X-Iso-Chain-Cut-Ms, X-Iso-Chain-Build-Ms, X-Iso-Cache, X-Iso-Replica, X-Iso-Load, X-Iso-Total, Link";
 
 /* ---------------------------------------------------------------- responses */
 
@@ -560,6 +563,12 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
     }
     if (body->chain_level >= 0) {
         add_number(r, "X-Iso-Chain-Level", "%.0f", (double)body->chain_level);
+        if (body->chain_source) {
+            add_header(r, "X-Iso-Chain-Source", body->chain_source);
+            add_number(r, "X-Iso-Chain-Load-Ms", "%.3f", body->chain_load_ms);
+            add_number(r, "X-Iso-Chain-Cut-Ms", "%.3f", body->chain_cut_ms);
+            add_number(r, "X-Iso-Chain-Build-Ms", "%.3f", body->chain_build_ms);
+        }
         add_number(r, "X-Iso-Exact-Triangles", "%.0f", (double)body->exact_triangles);
         add_number(r, "X-Iso-Edges", "%.0f", (double)body->edges);
         add_number(r, "X-Iso-Pinch-Edges", "%.0f", (double)body->pinch_edges);
@@ -645,6 +654,7 @@ static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_r
     srv_collection_retain(s->collection, v); /* the job may outlive this request */
     work->request = mr;
     work->cache = s->cache;
+    work->chains = s->chains;
     work->max_triangles = s->config.max_triangles;
     work->accept_gzip = accepts_gzip(c);
     work->segment = segment;
@@ -659,6 +669,89 @@ static enum MHD_Result route_mesh(srv_server *s, struct MHD_Connection *c, srv_r
     if (!body)
         return send_problem(s, c, req, &problem, path);
     return send_body(s, c, req, body, key, etag, file_name, 0);
+}
+
+/* ---------------------------------------------------------------- chains */
+
+/* GET /v1/volumes/{id}/chain?level=L&tolerance=T[&cap=true]: what the registry holds of
+ * that chain, never building it: {state, exact_triangles, levels: [{triangles,
+ * distance_p99_mm, distance_max_mm}], level 0 first}. The parameters are a mesh request's,
+ * parsed alike, so that the chain named is the one a distance= request of them uses. */
+static enum MHD_Result route_chain(srv_server *s, struct MHD_Connection *c, srv_request *req,
+                                   const srv_volume *v, const char *path)
+{
+    param_list params = {0};
+    MHD_get_connection_values(c, MHD_GET_ARGUMENT_KIND, collect_param, &params);
+    if (params.overflow)
+        return fail(s, c, req, path, 400, "more than %d query parameters", MAX_PARAMS);
+    for (size_t i = 0; i < params.count; i++)
+        if (strcmp(params.items[i].key, "level") && strcmp(params.items[i].key, "tolerance") &&
+            strcmp(params.items[i].key, "cap"))
+            return fail(s, c, req, path, 400, "unknown parameter \"%s\"; the chain takes level, tolerance and cap",
+                        params.items[i].key);
+    proto_mesh_request mr;
+    proto_problem problem = {0};
+    if (proto_mesh_request_parse(params.items, params.count, &mr, &problem))
+        return send_problem(s, c, req, &problem, path);
+    char chain_params[160];
+    srv_chain_spec spec;
+    srv_chain_level_params(chain_params, sizeof chain_params, mr.level, mr.tolerance, mr.cap);
+    if (!s->chains || srv_chain_spec_init(&spec, s->collection->options.cache_dir, v->entry->id, v->version,
+                                          chain_params))
+        return fail(s, c, req, path, 503, "%s: this server keeps no chains", v->entry->id);
+    srv_chain *entry;
+    int state = srv_chains_peek(s->chains, &spec, &entry);
+    json_t *levels = json_array(), *doc = json_pack("{s:s, s:f, s:f, s:b}", "state",
+                                                    state == 2 ? "ready" : state == 1 ? "building" : "none",
+                                                    "level", mr.level, "tolerance", mr.tolerance, "cap", mr.cap);
+    const iso_mesh_chain *chain = entry ? srv_chain_get(entry) : NULL;
+    for (int k = 0; chain && levels && k < chain->levels; k++) {
+        const iso_mesh_chain_level *lv = &chain->level[k];
+        double p99 = k ? lv->distance.p99 : 0, max = k ? lv->distance.max : 0;
+        json_array_append_new(levels, json_pack("{s:I, s:o, s:o}", "triangles", (json_int_t)lv->triangle_count,
+                                                "distance_p99_mm", isfinite(p99) ? json_real(p99) : json_null(),
+                                                "distance_max_mm", isfinite(max) ? json_real(max) : json_null()));
+    }
+    if (doc && levels) {
+        json_object_set_new(doc, "exact_triangles",
+                            chain ? json_integer((json_int_t)chain->level[0].triangle_count) : json_null());
+        json_object_set(doc, "levels", levels);
+    }
+    json_decref(levels);
+    srv_chains_release(s->chains, entry);
+    char *text = doc ? json_dumps(doc, JSON_COMPACT) : NULL;
+    json_decref(doc);
+    return send_text(s, c, req, 200, text, "application/json", "no-store");
+}
+
+/* GET /v1/status: the background work, the chains' registry and the mesh cache. */
+static enum MHD_Result route_status(srv_server *s, struct MHD_Connection *c, srv_request *req)
+{
+    json_t *doc = NULL;
+    if (s->chains) {
+        srv_chains *r = s->chains;
+        pthread_mutex_lock(&r->lock);
+        srv_chain_progress p = r->progress;
+        size_t bytes = r->bytes, ready = r->ready, limit = r->limit;
+        pthread_mutex_unlock(&r->lock);
+        json_t *current = p.current[0] ? json_pack("{s:s, s:f}", "chain", p.current, "seconds",
+                                                   (iso_clock_ms() - p.current_since_ms) / 1000)
+                                       : json_null();
+        doc = json_pack("{s:{s:s, s:I, s:I, s:I, s:I, s:o}, s:{s:I, s:I, s:I, s:I, s:I, s:I, s:I}}",
+                        "background", "state", !p.enabled ? "off" : p.finished ? "done" : p.running ? "building"
+                                                                                          : "waiting",
+                        "planned", (json_int_t)p.planned, "built", (json_int_t)p.built, "there_already",
+                        (json_int_t)p.loaded, "failed", (json_int_t)p.failed, "current", current,
+                        "chains", "ready", (json_int_t)ready, "bytes", (json_int_t)bytes, "limit_bytes",
+                        (json_int_t)limit, "mapped", (json_int_t)atomic_load(&r->mapped), "built",
+                        (json_int_t)atomic_load(&r->built), "evictions", (json_int_t)atomic_load(&r->evictions),
+                        "corrupt", (json_int_t)atomic_load(&r->corrupt));
+    } else {
+        doc = json_pack("{s:{s:s}}", "background", "state", "off");
+    }
+    char *text = doc ? json_dumps(doc, JSON_COMPACT) : NULL;
+    json_decref(doc);
+    return send_text(s, c, req, 200, text, "application/json", "no-store");
 }
 
 /* ---------------------------------------------------------------- routing */
@@ -701,7 +794,7 @@ static enum MHD_Result add_length(void *cls, enum MHD_ValueKind kind, const char
 }
 
 /* The resources under a volume. */
-enum { PATH_NONE, PATH_VOLUME, PATH_MESH, PATH_SEGMENTS, PATH_SEGMENTS_MESH, PATH_SEGMENT_MESH };
+enum { PATH_NONE, PATH_VOLUME, PATH_MESH, PATH_SEGMENTS, PATH_SEGMENTS_MESH, PATH_SEGMENT_MESH, PATH_CHAIN };
 
 /* "/segments/{n}/mesh": n a segment number (digits, no sign or leading zero past one
  * digit), into *number; 0 when the path is not that. */
@@ -718,7 +811,7 @@ static int segment_mesh_path(const char *rest, unsigned long *number)
     return *number <= UINT32_MAX;
 }
 
-/* Splits "/v1/volumes/{id}[/mesh | /segments | /segments/mesh | /segments/{n}/mesh]" into
+/* Splits "/v1/volumes/{id}[/mesh | /chain | /segments | /segments/mesh | /segments/{n}/mesh]" into
  * the id and the resource (PATH_*; *number for a segment's mesh). */
 static int volume_path(const char *path, char *id, size_t size, unsigned long *number)
 {
@@ -736,6 +829,8 @@ static int volume_path(const char *path, char *id, size_t size, unsigned long *n
         return PATH_VOLUME;
     if (!strcmp(slash, "/mesh"))
         return PATH_MESH;
+    if (!strcmp(slash, "/chain"))
+        return PATH_CHAIN;
     if (!strcmp(slash, "/segments"))
         return PATH_SEGMENTS;
     if (!strcmp(slash, "/segments/mesh"))
@@ -811,15 +906,19 @@ static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_reques
         req->route = SRV_ROUTE_VOLUMES;
         return route_volumes(s, c, req);
     }
+    if (!strcmp(path, "/v1/status")) {
+        req->route = SRV_ROUTE_STATUS;
+        return route_status(s, c, req);
+    }
     char id[SRV_ID_MAX + 2];
     unsigned long number = 0;
     int kind = volume_path(path, id, sizeof id, &number);
     if (!kind)
         return fail(s, c, req, path, 404, "no such resource; the API is /v1/volumes, "
-                    "/v1/volumes/{id}, /v1/volumes/{id}/mesh, /v1/volumes/{id}/segments, "
-                    "/v1/volumes/{id}/segments/mesh and /v1/volumes/{id}/segments/{n}/mesh");
+                    "/v1/volumes/{id}, /v1/volumes/{id}/mesh, /v1/volumes/{id}/chain, /v1/volumes/{id}/segments, "
+                    "/v1/volumes/{id}/segments/mesh, /v1/volumes/{id}/segments/{n}/mesh and /v1/status");
     req->route = kind == PATH_VOLUME ? SRV_ROUTE_VOLUME : kind == PATH_MESH ? SRV_ROUTE_MESH
-               : kind == PATH_SEGMENTS ? SRV_ROUTE_SEGMENTS : SRV_ROUTE_SEGMENT_MESH;
+               : kind == PATH_CHAIN ? SRV_ROUTE_CHAIN : kind == PATH_SEGMENTS ? SRV_ROUTE_SEGMENTS : SRV_ROUTE_SEGMENT_MESH;
     if (!srv_catalog_id_valid(id))
         return fail(s, c, req, path, 404, "no volume \"(not a valid id)\"; /v1/volumes lists them");
     const srv_volume *v;
@@ -837,6 +936,8 @@ static enum MHD_Result route(srv_server *s, struct MHD_Connection *c, srv_reques
         return route_volume(s, c, req, v);
     if (kind == PATH_MESH)
         return route_mesh(s, c, req, v, path, SRV_JOB_LEVEL);
+    if (kind == PATH_CHAIN)
+        return route_chain(s, c, req, v, path);
     if (!v->seg)
         return fail(s, c, req, path, 404, "volume \"%s\" is not a segmentation (the catalog's \"labels\": true "
                     "declares a label map one)", id);

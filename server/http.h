@@ -12,6 +12,7 @@
 #include <stddef.h>
 
 #include "cache.h"
+#include "chains.h"
 #include "collection.h"
 #include "base/base.h"
 #include "metrics.h"
@@ -44,6 +45,7 @@ typedef struct srv_server {
     srv_http_config config;
     srv_collection *collection;
     srv_cache *cache;
+    srv_chains *chains;            /* distance= and budget= chains; NULL: built per request */
     srv_pool *pool;
     srv_metrics metrics;
     struct MHD_Daemon *daemon;

@@ -4,10 +4,8 @@
 
 #include <stdio.h>
 #include <stdlib.h>
-#include <unistd.h>
 
 #include "base/base.h"
-#include "hash.h"
 #include "pipeline.h"
 #include "segments.h"
 #include "status.h"
@@ -48,17 +46,6 @@ static void pipeline_request(const srv_mesh_job *job, proto_pipeline_request *re
         req->segment = (size_t)job->segment;
         req->smoothing = r->smoothing;
     }
-}
-
-/* What a chain is of: the level's surface, or a segment's (its number and smoothing). */
-static void chain_params(const srv_mesh_job *job, char *params, size_t size)
-{
-    const proto_mesh_request *r = &job->request;
-    if (job->segment >= 0)
-        snprintf(params, size, "segment=%u&smoothing=%.17g&cap=%d", job->volume->seg->segments[job->segment].number,
-                 r->smoothing, r->cap);
-    else
-        snprintf(params, size, "level=%.17g&tolerance=%.17g&cap=%d", r->level, r->tolerance, r->cap);
 }
 
 /* The problem body of a failed step, its status from status.h. An allocation that failed
@@ -139,81 +126,82 @@ int srv_mesh_body_gzip(srv_body *body)
     return made ? 1 + made_now : 0;
 }
 
-/* The cache key of the simplification chain a request would use: one per (volume,
- * level, tolerance, cap), whatever the distance, budget or format. */
-static void chain_key(const srv_mesh_job *job, char *key, size_t size)
+/* What a chain is of: the level's surface, or a segment's (its number and smoothing). */
+static void chain_params(const srv_mesh_job *job, char *params, size_t size)
+{
+    const proto_mesh_request *r = &job->request;
+    if (job->segment >= 0)
+        snprintf(params, size, "segment=%u&smoothing=%.17g&cap=%d", job->volume->seg->segments[job->segment].number,
+                 r->smoothing, r->cap);
+    else
+        srv_chain_level_params(params, size, r->level, r->tolerance, r->cap);
+}
+
+/* The chain a request uses: its registry entry (held until chain_done), how it was found
+ * and what that cost. */
+typedef struct chain_use {
+    srv_chain_spec spec;
+    srv_chain *entry;
+    srv_chain_source source;
+    int k;                 /* the level checked for the cut */
+    double load_ms;        /* mapping and checking the levels it cuts */
+} chain_use;
+
+/* The levels a request cuts are checked before the pipeline reads them: the one it picks,
+ * and level 0 for a budget (which measures against it). 0, or the check's error. */
+static int prepare_levels(const srv_mesh_job *job, const iso_mesh_chain *chain, chain_use *use, iso_error *err)
+{
+    const proto_mesh_request *r = &job->request;
+    use->k = r->budget ? iso_mesh_chain_pick_budget(chain, r->budget) : iso_mesh_chain_pick_distance(chain, r->distance);
+    double ms = 0, ms0 = 0;
+    int rc = srv_chain_prepare(use->entry, use->k, &ms, err);
+    if (!rc && r->budget)
+        rc = srv_chain_prepare(use->entry, 0, &ms0, err);
+    use->load_ms += ms + ms0;
+    return rc;
+}
+
+/* The registry's chain for the request, its levels checked; NULL when this request builds
+ * it (use->source SRV_CHAIN_BUILT, use->entry the entry to publish to) or when no entry
+ * can be had (built here, not kept). A chain found corrupt is discarded and built. */
+static const iso_mesh_chain *chain_for(const srv_mesh_job *job, chain_use *use)
 {
     char params[160];
     chain_params(job, params, sizeof params);
-    snprintf(key, size, "chain:%s/%s?%s", job->volume->entry->id, job->volume->version, params);
-}
-
-/* The chain's file beside the volume's hierarchy file in the cache dir:
- * "<dir>/<id>.<16 hex digits>.isochain", the digits a hash of the level, tolerance and cap
- * (the catalog's ids are file-name safe, so the path stays in the dir). Its identity, which
- * the file must carry, hashes the whole chain key, the volume's version included: a file
- * left from an older version of the volume is refused and rebuilt. 0 without a cache dir. */
-static int chain_file(const srv_mesh_job *job, const char *key, char *path, size_t size, uint64_t *identity)
-{
     const char *dir = job->collection ? job->collection->options.cache_dir : NULL;
-    if (!dir)
-        return 0;
-    char params[160];
-    chain_params(job, params, sizeof params);
-    int n = snprintf(path, size, "%s/%s.%016llx.isochain", dir, job->volume->entry->id,
-                     (unsigned long long)srv_hash64(params));
-    *identity = srv_hash64(key);
-    return n > 0 && (size_t)n < size;
-}
-
-/* A chain into the cache, in a body of no bytes that owns it and weighs what it holds;
- * without memory for that, it is dropped (a cache is optional). Returns the holder with a
- * reference for the caller (NULL when dropped: the chain is then destroyed unless kept). */
-static srv_body *cache_chain(const srv_mesh_job *job, const char *key, iso_mesh_chain *chain)
-{
-    srv_body *holder = srv_body_create(NULL, 0);
-    if (!holder) {
-        iso_mesh_chain_destroy(chain);
+    if (srv_chain_spec_init(&use->spec, dir, job->volume->entry->id, job->volume->version, params))
         return NULL;
+    for (int attempt = 0; attempt < 2; attempt++) {
+        double load_ms;
+        srv_chain_acquired got = srv_chains_acquire(job->chains, &use->spec, 1, &use->entry, &use->source, &load_ms);
+        use->load_ms += load_ms;
+        if (got != SRV_CHAIN_READY_NOW)
+            return NULL;
+        const iso_mesh_chain *chain = srv_chain_get(use->entry);
+        iso_error err = {0};
+        if (!prepare_levels(job, chain, use, &err))
+            return chain;
+        srv_chains_discard(job->chains, use->entry, &use->spec, err.message);
+        use->entry = NULL;
     }
-    holder->chain = chain;
-    holder->size = chain->bytes;
-    srv_cache_put(job->cache, key, holder);
-    return holder;
+    return NULL;
 }
 
-/* A chain the run built goes to the cache, and to its file when there is a cache dir (a
- * failure to write only costs the next start a rebuild). */
-static void keep_chain(const srv_mesh_job *job, const char *key, proto_pipeline_result *res)
+/* After the pipeline: a chain this request built goes to the registry (and its file);
+ * the entry is given back. */
+static void chain_done(const srv_mesh_job *job, chain_use *use, proto_pipeline_result *res, int rc)
 {
-    if (!job->cache || !res->chain_built)
+    if (!use->entry)
         return;
-    char path[4096];
-    uint64_t identity;
-    iso_error err = {0};
-    if (chain_file(job, key, path, sizeof path, &identity) &&
-        iso_mesh_chain_save(res->chain_built, path, identity, &err))
-        fprintf(stderr, "isoserve: %s: chain not written: %s\n", job->volume->entry->id, err.message);
-    srv_body_release(cache_chain(job, key, res->chain_built));
-    res->chain_built = NULL;
-}
-
-/* The chain from its file, when the cache has none: into the cache, with a reference for
- * the caller; NULL when there is no valid file (a stale or corrupt one is reported and
- * left to be rebuilt and overwritten). */
-static srv_body *chain_from_file(const srv_mesh_job *job, const char *key)
-{
-    char path[4096];
-    uint64_t identity;
-    if (!chain_file(job, key, path, sizeof path, &identity) || access(path, F_OK))
-        return NULL;
-    iso_mesh_chain *chain;
-    iso_error err = {0};
-    if (iso_mesh_chain_load(path, identity, &chain, &err)) {
-        fprintf(stderr, "isoserve: %s: %s; rebuilding the chain\n", job->volume->entry->id, err.message);
-        return NULL;
+    if (use->source == SRV_CHAIN_BUILT) {
+        if (!rc && res->chain_built) {
+            srv_chains_publish(job->chains, use->entry, &use->spec, res->chain_built);
+            res->chain_built = NULL;
+        } else {
+            srv_chains_abandon(job->chains, use->entry);
+        }
     }
-    return cache_chain(job, key, chain);
+    srv_chains_release(job->chains, use->entry);
 }
 
 /* Every segment as one glb scene (segments.h). */
@@ -267,18 +255,13 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     proto_pipeline_result res;
     iso_error err = {0};
     pipeline_request(job, &req);
-    char key[400] = "";
-    srv_body *chain = NULL;
-    if (job->cache && (req.distance >= 0 || req.budget)) {
-        chain_key(job, key, sizeof key);
-        if ((chain = srv_cache_get(job->cache, key)) || (chain = chain_from_file(job, key)))
-            req.chain = chain->chain;
-    }
+    chain_use use = {.k = -1};
+    if (job->chains && (req.distance >= 0 || req.budget))
+        req.chain = chain_for(job, &use);
     int rc = proto_pipeline_run(job->volume->tree, job->volume->vol, &req, &res, &err);
-    srv_body_release(chain);
+    chain_done(job, &use, &res, rc);
     if (rc)
         return failed(job, rc, &err, problem);
-    keep_chain(job, key, &res);
     srv_body *body = srv_body_create(res.bytes, res.size); /* takes the bytes, even failing */
     res.bytes = NULL;
     if (!body) {
@@ -309,6 +292,12 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     body->distance_max_mm = res.distance.max;
     body->distance_voxels = res.distance.p99 / iso_vol_min_spacing(job->volume->vol);
     body->chain_level = res.chain_level;
+    if (use.entry || use.source == SRV_CHAIN_BUILT) {
+        body->chain_source = srv_chain_source_name(use.source);
+        body->chain_load_ms = use.load_ms;
+        body->chain_cut_ms = use.source == SRV_CHAIN_BUILT ? 0 : res.simplify_ms;
+        body->chain_build_ms = use.source == SRV_CHAIN_BUILT ? res.simplify_ms : 0;
+    }
     body->exact_triangles = res.exact_triangles;
     body->edges = res.pinches.edges;
     body->pinch_edges = res.pinches.pinch_edges;
@@ -323,4 +312,44 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     if (job->cache)
         srv_cache_put(job->cache, job->key, body);
     return body;
+}
+
+int srv_mesh_chain_ensure(const srv_volume *v, srv_collection *collection, srv_chains *chains, double level,
+                          int threads, double *ms, iso_error *err)
+{
+    char params[160];
+    srv_chain_spec spec;
+    srv_chain_level_params(params, sizeof params, level, 0, 0);
+    if (srv_chain_spec_init(&spec, collection->options.cache_dir, v->entry->id, v->version, params))
+        return iso_error_set(err, ISO_E_ARGUMENT, "%s: the chain's name is too long", v->entry->id);
+    srv_chain *entry;
+    srv_chain_source source;
+    double load_ms;
+    *ms = 0;
+    srv_chain_acquired got = srv_chains_acquire(chains, &spec, 0, &entry, &source, &load_ms);
+    if (got != SRV_CHAIN_TO_BUILD) {
+        srv_chains_release(chains, entry);
+        return got == SRV_CHAIN_READY_NOW ? 1 : 2;
+    }
+    proto_pipeline_request req;
+    proto_pipeline_result res;
+    proto_pipeline_request_init(&req);
+    req.extract.level = level;
+    req.extract.threads = threads;
+    req.distance = 0; /* level 0 answers: the chain is what is wanted */
+    req.normals = 0;
+    req.format = PROTO_FORMAT_NONE;
+    double start = iso_clock_ms();
+    int rc = proto_pipeline_run(v->tree, v->vol, &req, &res, err);
+    *ms = iso_clock_ms() - start;
+    if (!rc && res.chain_built) {
+        srv_chains_publish(chains, entry, &spec, res.chain_built);
+        res.chain_built = NULL;
+    } else {
+        srv_chains_abandon(chains, entry);
+    }
+    srv_chains_release(chains, entry);
+    if (!rc)
+        proto_pipeline_result_free(&res);
+    return rc;
 }

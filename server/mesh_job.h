@@ -6,6 +6,7 @@
 #define SRV_MESH_JOB_H
 
 #include "cache.h"
+#include "chains.h"
 #include "collection.h"
 #include "query.h"
 
@@ -14,6 +15,8 @@ typedef struct srv_mesh_job {
     srv_collection *collection; /* holds a reference to volume, given back when freed */
     proto_mesh_request request;
     srv_cache *cache;       /* where the body goes when done; may be NULL */
+    srv_chains *chains;     /* the chains distance= and budget= are cut from; NULL: built
+                             * for the request and dropped */
     char *key;              /* the cache key (owned) */
     size_t max_triangles;   /* serve --max-triangles: a larger mesh is refused (422); 0: none */
     int accept_gzip;        /* the request accepts gzip: a meshopt body's gzip form is made
@@ -31,6 +34,13 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem);
  * call, by one caller at a time: 0 none (not wanted, or not worth it), 1 there, 2 made by
  * this call (the body has grown: srv_cache_grew). */
 int srv_mesh_body_gzip(srv_body *body);
+/* The chain of v's surface at level (tolerance 0, no cap: what the viewer's Detail asks
+ * first) built into the registry and its file, unless it is there (or in its file) already
+ * or being built: 0 built, 1 there, 2 being built by another caller, else the error
+ * (ISO_E_*). threads: for the build (1 keeps it on the calling thread, whose priority it
+ * then has). ms: the build's time. */
+int srv_mesh_chain_ensure(const srv_volume *v, srv_collection *collection, srv_chains *chains, double level,
+                          int threads, double *ms, iso_error *err);
 /* Frees a srv_mesh_job made with malloc, releasing its volume. */
 void srv_mesh_job_free(void *arg);
 

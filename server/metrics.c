@@ -6,7 +6,7 @@
 #include <string.h>
 
 static const char *const route_names[SRV_ROUTE_COUNT] = {
-    "volumes", "volume", "mesh", "healthz", "metrics", "static", "other", "segments", "segment_mesh"};
+    "volumes", "volume", "mesh", "healthz", "metrics", "static", "other", "segments", "segment_mesh", "chain", "status"};
 static const int status_codes[SRV_STATUS_SLOTS - 1] = {200, 204, 304, 400, 404, 405,
                                                        414, 500, 503, 206};
 /* Upper bounds in seconds. */

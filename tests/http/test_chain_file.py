@@ -4,12 +4,15 @@ One daemon at a time over a catalog of one analytic torus (two iso-levels), rest
 between the steps. Checks:
 - the first distance= request at a level builds the chain and writes it as
   CACHE/<id>.<16 hex digits>.isochain (one file per level, nothing outside the cache dir);
-- after a restart the same request is answered from that file: no cell visited (nothing
-  extracted), the same bytes and measured distance, no rebuild in the log; so is a budget=
+- after a restart the same request is answered from that file, mapped (X-Iso-Chain-Source:
+  file): no cell visited (nothing extracted), the same bytes and measured distance, no
+  rebuild in the log; so is a budget=
   request the chain answers (the file keeps the faithful mesh's triangle count the budget
   is compared with: nothing is extracted to find it again);
-- a corrupt file (one payload byte flipped) is refused (the log says why), the chain
-  rebuilt, the same bytes served, and the file rewritten: the next restart reads it;
+- a corrupt file (one byte flipped in the positions, checked before the first cut; or in
+  the level records, checked at mapping) or a truncated one is refused (the log says why),
+  the chain rebuilt, the same bytes served, and the file rewritten: the next restart reads
+  it;
 - a stale file (another level's chain under this level's name) is refused the same way;
 - a temporary chain file a killed writer left (ID.HASH.isochain.tmp.XXXXXX, unchanged for
   two minutes) is removed at start; one of an id not in the catalog is kept;
@@ -20,8 +23,7 @@ import glob
 import json
 import os
 import shutil
-import signal
-import subprocess
+import struct
 import sys
 import tempfile
 import time
@@ -29,44 +31,20 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
 from results import Results  # noqa: E402 - found through the path just set
 from client import request  # noqa: E402
-from ports import free_port  # noqa: E402
+import torus_daemon  # noqa: E402
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
-BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", os.path.join(ROOT, "build/isoserve")))
 RESULTS = Results("chain_file" + os.environ.get("ISO_SAN_SUFFIX", ""))
 LEVELS = (0.0, 0.5)
 BUDGET = "budget=300"  # under the faithful mesh's triangles: a chain level answers
 
 
-class Daemon:
+class Daemon(torus_daemon.Daemon):
     def __init__(self, tmp):
-        self.tmp, self.port = tmp, free_port()
-        self.log_path = os.path.join(tmp, "serve.log")
-        with open(self.log_path, "w") as log:
-            self.proc = subprocess.Popen([BIN, "serve", "--catalog", os.path.join(tmp, "catalog.json"),
-                                          "--listen", f"127.0.0.1:{self.port}",
-                                          "--cache-dir", os.path.join(tmp, "cache"), "--threads", "2"],
-                                         stdout=log, stderr=subprocess.STDOUT, cwd=ROOT)
-        deadline = time.time() + 60
-        while time.time() < deadline:
-            try:
-                if request(self.port, "/healthz", timeout=5).status == 200:
-                    return
-            except OSError:
-                pass
-            time.sleep(0.1)
-        raise AssertionError("the daemon did not start")
+        # No background builder: the requests build the chains here (test_chains.py has it).
+        super().__init__(tmp, "--chain-background", "off")
 
     def mesh(self, level, ask="distance=0.3"):
         return request(self.port, f"/v1/volumes/torus/mesh?level={level}&{ask}&format=ply&normals=none")
-
-    def stop(self):
-        self.proc.send_signal(signal.SIGTERM)
-        rc = self.proc.wait(timeout=60)
-        with open(self.log_path) as f:
-            log = f.read()
-        assert rc == 0, f"exit {rc}: {log[-500:]}"
-        return log
 
 
 def facts(r):
@@ -107,6 +85,8 @@ def main():
                 r = d.mesh(level)
                 assert facts(r) == first[level], level
                 assert int(r.getheader("X-Iso-Cells-Visited")) == 0, r.getheader("X-Iso-Cells-Visited")
+                assert r.getheader("X-Iso-Chain-Source") == "file", r.getheader("X-Iso-Chain-Source")
+                assert float(r.getheader("X-Iso-Chain-Build-Ms")) == 0
                 r = d.mesh(level, BUDGET)
                 assert facts(r) == first[(level, BUDGET)], level
                 assert int(r.getheader("X-Iso-Cells-Visited")) == 0, ("budget", r.getheader("X-Iso-Cells-Visited"))
@@ -134,18 +114,35 @@ def main():
             log = d.stop()
         assert "rebuilding the chain" not in log, log[-500:]
 
-    def flip(files):
+    def section(path, i):
+        """(offset, bytes) of section i of a chain file: 0 the level records, 1 the positions."""
+        with open(path, "rb") as f:
+            head = f.read(72 + 24 * (i + 1))
+        assert head[:8] == b"ISOCHAIN" and struct.unpack_from("<I", head, 8)[0] == 3
+        return struct.unpack_from("<QQ", head, 72 + 24 * i)
+
+    def flip_in(i):
+        def flip(files):
+            offset, size = section(files[0], i)
+            with open(files[0], "r+b") as f:
+                f.seek(offset + size // 2)
+                b = f.read(1)
+                f.seek(offset + size // 2)
+                f.write(bytes([b[0] ^ 0x55]))
+        return flip
+
+    def truncate(files):
         with open(files[0], "r+b") as f:
-            size = f.seek(0, 2)
-            f.seek(size // 2)
-            b = f.read(1)
-            f.seek(size // 2)
-            f.write(bytes([b[0] ^ 0x55]))
+            f.truncate(f.seek(0, 2) - 100)
 
     def swap(files):
         shutil.copyfile(files[0], files[1])
 
-    RESULTS.check("corrupt_refused_and_rebuilt", lambda: refused_and_rebuilt(flip, "checksum"))
+    RESULTS.check("corrupt_positions_refused_and_rebuilt",
+                  lambda: refused_and_rebuilt(flip_in(1), "positions' checksum mismatch"))
+    RESULTS.check("corrupt_records_refused_and_rebuilt",
+                  lambda: refused_and_rebuilt(flip_in(0), "records' checksum mismatch"))
+    RESULTS.check("truncated_refused_and_rebuilt", lambda: refused_and_rebuilt(truncate, "cut short"))
     RESULTS.check("stale_refused_and_rebuilt", lambda: refused_and_rebuilt(swap, "another surface"))
     def stale_temporaries_removed():
         mine = os.path.join(cache, "torus.0123456789abcdef.isochain.tmp.a1B2c3")

@@ -1,0 +1,43 @@
+"""One isoserve daemon over a catalog in a temporary directory (tmp/catalog.json), with
+its cache dir tmp/cache, for the tests that restart it between steps (the chain files and
+the chains' registry). Started at construction (ready when /healthz says 200), stopped by
+its PID with SIGTERM; stop() asserts exit 0 and returns the log."""
+
+import os
+import signal
+import subprocess
+import time
+
+from client import request
+from ports import free_port
+
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+BIN = os.path.abspath(os.environ.get("ISOSERVE_BIN", os.path.join(ROOT, "build/isoserve")))
+
+
+class Daemon:
+    def __init__(self, tmp, *extra):
+        self.tmp, self.port = tmp, free_port()
+        self.log_path = os.path.join(tmp, "serve.log")
+        with open(self.log_path, "w") as log:
+            self.proc = subprocess.Popen([BIN, "serve", "--catalog", os.path.join(tmp, "catalog.json"),
+                                          "--listen", f"127.0.0.1:{self.port}",
+                                          "--cache-dir", os.path.join(tmp, "cache"), "--threads", "2", *extra],
+                                         stdout=log, stderr=subprocess.STDOUT, cwd=ROOT)
+        deadline = time.time() + 60
+        while time.time() < deadline:
+            try:
+                if request(self.port, "/healthz", timeout=5).status == 200:
+                    return
+            except OSError:
+                pass
+            time.sleep(0.1)
+        raise AssertionError("the daemon did not start")
+
+    def stop(self):
+        self.proc.send_signal(signal.SIGTERM)
+        rc = self.proc.wait(timeout=60)
+        with open(self.log_path) as f:
+            log = f.read()
+        assert rc == 0, f"exit {rc}: {log[-500:]}"
+        return log
