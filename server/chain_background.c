@@ -22,7 +22,8 @@ static void lowest_priority(void)
     struct sched_param none = {0};
     if (pthread_setschedparam(pthread_self(), SCHED_IDLE, &none) == 0)
         return;
-    if (setpriority(PRIO_PROCESS, 0, 19))
+    static int said;
+    if (setpriority(PRIO_PROCESS, 0, 19) && !said++)
         fprintf(stderr, "isoserve: chains: cannot lower the background builder's priority\n");
 }
 
@@ -50,6 +51,7 @@ static void build_volume(srv_chain_background *b, const srv_volume *v, size_t *d
         char what[160];
         snprintf(what, sizeof what, "%s level %g", v->entry->id, v->levels[i]);
         set_progress(b, what);
+        lowest_priority(); /* again: a request that waited for the last chain raised it */
         iso_error err = {0};
         double ms;
         int rc = srv_mesh_chain_ensure(v, b->collection, b->chains, v->levels[i], 1, &ms, &err);
@@ -69,7 +71,6 @@ static void build_volume(srv_chain_background *b, const srv_volume *v, size_t *d
 static void *background_main(void *arg)
 {
     srv_chain_background *b = arg;
-    lowest_priority();
     while (!atomic_load(&b->collection->ready) && !atomic_load(&b->stop)) {
         struct timespec pause = {0, 100 * 1000 * 1000};
         nanosleep(&pause, NULL);

@@ -2,6 +2,7 @@
 #include "chains.h"
 
 #include <errno.h>
+#include <sched.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -21,6 +22,8 @@ struct srv_chain {
     iso_mesh_chain_map *map;    /* mapped from its file, or */
     iso_mesh_chain *owned;      /* held as built (no file) */
     size_t bytes;               /* what it weighs against the limit */
+    pthread_t builder;          /* while BUILDING at the lowest priority (idle_builder) */
+    int idle_builder;
 };
 
 const char *srv_chain_source_name(srv_chain_source source)
@@ -187,6 +190,14 @@ srv_chain_acquired srv_chains_acquire(srv_chains *r, const srv_chain_spec *spec,
             return SRV_CHAIN_BUSY;
         }
         *source = SRV_CHAIN_WAITED;
+        /* A request waits for the background builder: it runs at the request's priority
+         * from now on (it goes back to the lowest for its next chain), so that other work
+         * cannot hold the request up behind it. Failing that, it is only slower. */
+        if (e->idle_builder) {
+            struct sched_param normal = {0};
+            pthread_setschedparam(e->builder, SCHED_OTHER, &normal);
+            e->idle_builder = 0;
+        }
         pthread_cond_wait(&r->changed, &r->lock);
     }
     srv_chain_acquired outcome = SRV_CHAIN_READY_NOW;
@@ -251,6 +262,14 @@ void srv_chains_publish(srv_chains *r, srv_chain *c, const srv_chain_spec *spec,
     make_ready(r, c, map ? iso_mesh_chain_map_bytes(map) : built->bytes);
     atomic_fetch_add(&r->built, 1);
     pthread_cond_broadcast(&r->changed);
+    pthread_mutex_unlock(&r->lock);
+}
+
+void srv_chains_building_idle(srv_chains *r, srv_chain *c)
+{
+    pthread_mutex_lock(&r->lock);
+    c->builder = pthread_self();
+    c->idle_builder = 1;
     pthread_mutex_unlock(&r->lock);
 }
 

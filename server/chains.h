@@ -100,6 +100,9 @@ int srv_chain_prepare(srv_chain *c, int k, double *ms, iso_error *err);
  * to spec's file when there is one (a failure is reported and only costs a rebuild after
  * a restart), then mapped from it, else kept as built; waiters wake. */
 void srv_chains_publish(srv_chains *r, srv_chain *c, const srv_chain_spec *spec, iso_mesh_chain *built);
+/* The caller builds its BUILDING entry at the lowest priority (the background builder): a
+ * request that waits for it raises the building thread to the normal policy. */
+void srv_chains_building_idle(srv_chains *r, srv_chain *c);
 /* The caller could not build it: the entry goes, waiters wake (one of them builds). */
 void srv_chains_abandon(srv_chains *r, srv_chain *c);
 /* A ready entry found corrupt after mapping (why): reported, removed with spec's file; the

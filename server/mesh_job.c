@@ -331,6 +331,8 @@ int srv_mesh_chain_ensure(const srv_volume *v, srv_collection *collection, srv_c
         srv_chains_release(chains, entry);
         return got == SRV_CHAIN_READY_NOW ? 1 : 2;
     }
+    if (threads == 1)
+        srv_chains_building_idle(chains, entry);
     proto_pipeline_request req;
     proto_pipeline_result res;
     proto_pipeline_request_init(&req);

@@ -37,8 +37,9 @@ int srv_mesh_body_gzip(srv_body *body);
 /* The chain of v's surface at level (tolerance 0, no cap: what the viewer's Detail asks
  * first) built into the registry and its file, unless it is there (or in its file) already
  * or being built: 0 built, 1 there, 2 being built by another caller, else the error
- * (ISO_E_*). threads: for the build (1 keeps it on the calling thread, whose priority it
- * then has). ms: the build's time. */
+ * (ISO_E_*). threads: for the build; 1 keeps it on the calling thread, whose (lowest)
+ * priority it then has, and lets a request that waits for it raise that thread
+ * (srv_chains_building_idle). ms: the build's time. */
 int srv_mesh_chain_ensure(const srv_volume *v, srv_collection *collection, srv_chains *chains, double level,
                           int threads, double *ms, iso_error *err);
 /* Frees a srv_mesh_job made with malloc, releasing its volume. */

@@ -882,7 +882,7 @@ def preload_and_cache_dir(tmp):
         assert v["hierarchy"]["from_file"] is False
     finally:
         assert s.stop() == 0
-    files = sorted(os.listdir(cache))
+    files = sorted(f for f in os.listdir(cache) if ".isochain" not in f)  # the background's chains aside
     assert files == ["big.isotree", "small.isotree"], files
     s = Server(["--catalog", cat, "--cache-dir", cache, "--web-root", tmp])
     try:
