@@ -244,6 +244,22 @@ int srv_chain_prepare(srv_chain *c, int k, double *ms, iso_error *err)
     return rc;
 }
 
+int srv_chain_prepare_grid(srv_chains *r, srv_chain *c, double *ms, iso_error *err)
+{
+    double start = iso_clock_ms();
+    int rc = c->map ? iso_mesh_chain_map_grid(c->map, err) : 0;
+    if (!rc && c->map) {
+        pthread_mutex_lock(&r->lock);
+        size_t now = iso_mesh_chain_map_bytes(c->map);
+        if (c->listed && c->state == ENTRY_READY)
+            r->bytes += now - c->bytes;
+        c->bytes = now;
+        pthread_mutex_unlock(&r->lock);
+    }
+    *ms = iso_clock_ms() - start;
+    return rc;
+}
+
 void srv_chains_publish(srv_chains *r, srv_chain *c, const srv_chain_spec *spec, iso_mesh_chain *built)
 {
     iso_error err = {0};

@@ -96,6 +96,10 @@ const iso_mesh_chain *srv_chain_get(const srv_chain *c);
  * (iso_mesh_chain_map_check); ms: the time that took. 0 or ISO_E_CORRUPT (the entry is
  * then unusable: srv_chains_discard it). */
 int srv_chain_prepare(srv_chain *c, int k, double *ms, iso_error *err);
+/* Level 0's search grid for the measures against it (a budget's): built once on a mapped
+ * chain (level 0 checked first) and weighed with it; ms its time. 0, ISO_E_CORRUPT (as
+ * srv_chain_prepare) or ISO_E_NOMEM. */
+int srv_chain_prepare_grid(srv_chains *r, srv_chain *c, double *ms, iso_error *err);
 /* The caller's built chain (taken over, even on failure) into its BUILDING entry: written
  * to spec's file when there is one (a failure is reported and only costs a rebuild after
  * a restart), then mapped from it, else kept as built; waiters wake. */

@@ -148,7 +148,8 @@ typedef struct chain_use {
 } chain_use;
 
 /* The levels a request cuts are checked before the pipeline reads them: the one it picks,
- * and level 0 for a budget (which measures against it). 0, or the check's error. */
+ * and for a budget level 0 with its grid (a budget measures against it). 0, or the check's
+ * error. */
 static int prepare_levels(const srv_mesh_job *job, const iso_mesh_chain *chain, chain_use *use, iso_error *err)
 {
     const proto_mesh_request *r = &job->request;
@@ -156,7 +157,7 @@ static int prepare_levels(const srv_mesh_job *job, const iso_mesh_chain *chain, 
     double ms = 0, ms0 = 0;
     int rc = srv_chain_prepare(use->entry, use->k, &ms, err);
     if (!rc && r->budget)
-        rc = srv_chain_prepare(use->entry, 0, &ms0, err);
+        rc = srv_chain_prepare_grid(job->chains, use->entry, &ms0, err);
     use->load_ms += ms + ms0;
     return rc;
 }

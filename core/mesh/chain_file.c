@@ -268,7 +268,7 @@ const iso_mesh_chain *iso_mesh_chain_map_chain(const iso_mesh_chain_map *m)
 
 size_t iso_mesh_chain_map_bytes(const iso_mesh_chain_map *m)
 {
-    return m->bytes;
+    return m->chain.bytes;
 }
 
 /* A section's checksum; for a level's, every index below the vertex count too. */
@@ -307,10 +307,21 @@ int iso_mesh_chain_map_check(iso_mesh_chain_map *m, int k, iso_error *err)
     return rc;
 }
 
+int iso_mesh_chain_map_grid(iso_mesh_chain_map *m, iso_error *err)
+{
+    int rc = iso_mesh_chain_map_check(m, 0, err);
+    pthread_mutex_lock(&m->lock);
+    if (!rc && !m->chain.grid && iso_mesh_chain_grid_build(&m->chain))
+        rc = iso_error_set(err, ISO_E_NOMEM, "%s: no memory for level 0's grid", m->path);
+    pthread_mutex_unlock(&m->lock);
+    return rc;
+}
+
 void iso_mesh_chain_map_close(iso_mesh_chain_map *m)
 {
     if (!m)
         return;
+    iso_mesh_grid_destroy(m->chain.grid);
     munmap((void *)(uintptr_t)m->data, m->bytes);
     pthread_mutex_destroy(&m->lock);
     free(m);

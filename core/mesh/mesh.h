@@ -420,13 +420,17 @@ int iso_mesh_chain_load(const char *path, uint64_t identity, iso_mesh_chain **ou
  * for it (and level 0 for iso_mesh_chain_distance): that checks the positions' and level
  * k's checksums and k's indices, once per mapping, O(level k + positions); thread-safe;
  * ISO_E_CORRUPT, after which every check fails. The chain must never be given to
- * iso_mesh_chain_destroy; iso_mesh_chain_map_close unmaps it (NULL allowed). bytes: the
- * file's size. */
+ * iso_mesh_chain_destroy; iso_mesh_chain_map_close unmaps it (NULL allowed).
+ * iso_mesh_chain_map_grid builds level 0's grid once (level 0 checked first), for the
+ * measures against it that follow (0, ISO_E_CORRUPT or ISO_E_NOMEM); call it before
+ * sharing the chain with threads that measure. bytes: the file's size, plus the grid's
+ * once built. */
 typedef struct iso_mesh_chain_map iso_mesh_chain_map;
 int iso_mesh_chain_map_open(const char *path, uint64_t identity, iso_mesh_chain_map **out, iso_error *err);
 const iso_mesh_chain *iso_mesh_chain_map_chain(const iso_mesh_chain_map *map);
 int iso_mesh_chain_map_check(iso_mesh_chain_map *map, int k, iso_error *err);
 size_t iso_mesh_chain_map_bytes(const iso_mesh_chain_map *map);
+int iso_mesh_chain_map_grid(iso_mesh_chain_map *map, iso_error *err);
 void iso_mesh_chain_map_close(iso_mesh_chain_map *map);
 
 #endif

@@ -11,7 +11,8 @@ restarted between the steps. Checks:
   (no new file, built count unchanged); unknown volume 404 "no volume ..."; a missing level,
   a negative tolerance or an unknown parameter 400;
 - after a restart without the builder, a distance= request maps the file
-  (X-Iso-Chain-Source: file, build 0 ms, nothing extracted);
+  (X-Iso-Chain-Source: file, build 0 ms, nothing extracted); a budget= request then builds
+  the surface's grid once, and the registry weighs it;
 - --chain-mb 0 keeps nothing once used: two levels asked, then the first again, which is
   mapped from its file again; /v1/status counts the evictions and no chain kept.
 Prints PASS/FAIL lines; exit status 1 on failure. Daemons are stopped by their PIDs."""
@@ -120,6 +121,13 @@ def main():
             assert r.getheader("X-Iso-Chain-Source") == "file", r.getheader("X-Iso-Chain-Source")
             assert float(r.getheader("X-Iso-Chain-Build-Ms")) == 0 and int(r.getheader("X-Iso-Cells-Visited")) == 0
             assert float(r.getheader("X-Iso-Chain-Load-Ms")) >= 0 and float(r.getheader("X-Iso-Chain-Cut-Ms")) > 0
+            # A budget measures against the surface: its grid is built once, weighed with the chain.
+            before = d.json("/v1/status")["chains"]["bytes"]
+            r = request(d.port, "/v1/volumes/torus/mesh?level=0.0&budget=300&format=ply&normals=none")
+            assert r.status == 200 and r.getheader("X-Iso-Budget-Source") == "chain", r.status
+            assert int(r.getheader("X-Iso-Cells-Visited")) == 0 and r.getheader("X-Iso-Chain-Source") == "memory"
+            after = d.json("/v1/status")["chains"]["bytes"]
+            assert after > before, (before, after)
         finally:
             log = d.stop()
         assert "built" not in log and "rebuilding" not in log, log[-500:]
