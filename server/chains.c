@@ -135,13 +135,14 @@ static void free_list(srv_chain *e)
     }
 }
 
-static srv_chain *entry_new(srv_chains *r, const char *key, int state)
+/* A new BUILDING entry with the caller's reference (lock held); make_ready turns it ready. */
+static srv_chain *entry_new(srv_chains *r, const char *key)
 {
     srv_chain *e = calloc(1, sizeof *e);
     if (!e)
         return NULL;
     snprintf(e->key, sizeof e->key, "%s", key);
-    e->state = state;
+    e->state = ENTRY_BUILDING;
     e->listed = 1;
     e->refs = 1;
     e->used = ++r->clock;
@@ -208,14 +209,13 @@ srv_chain_acquired srv_chains_acquire(srv_chains *r, const srv_chain_spec *spec,
         double start = iso_clock_ms();
         iso_mesh_chain_map *map;
         int found = map_file(r, spec, &map);
-        e = entry_new(r, spec->key, found ? ENTRY_READY : ENTRY_BUILDING);
+        e = entry_new(r, spec->key);
         if (!e) {
             iso_mesh_chain_map_close(map);
             pthread_mutex_unlock(&r->lock);
             return SRV_CHAIN_BUSY;
         }
         if (found) {
-            e->state = ENTRY_BUILDING; /* make_ready counts it */
             e->map = map;
             make_ready(r, e, iso_mesh_chain_map_bytes(map));
             atomic_fetch_add(&r->mapped, 1);
@@ -338,7 +338,7 @@ int srv_chains_peek(srv_chains *r, const srv_chain_spec *spec, srv_chain **out)
         e->used = ++r->clock;
     } else if (!e) {
         iso_mesh_chain_map *map;
-        if (map_file(r, spec, &map) && (e = entry_new(r, spec->key, ENTRY_BUILDING))) {
+        if (map_file(r, spec, &map) && (e = entry_new(r, spec->key))) {
             e->map = map;
             make_ready(r, e, iso_mesh_chain_map_bytes(map));
             atomic_fetch_add(&r->mapped, 1);
