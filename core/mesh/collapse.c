@@ -142,9 +142,12 @@ static void heap_down(collapser *c, size_t i)
     heap_place(c, i, rank);
 }
 
-/* The heap's entries made a heap, bottom up (Floyd). */
+/* The heap's entries made a heap, bottom up (Floyd). An empty heap (every vertex locked:
+ * a surface all of whose vertices lie on its borders) has no root to sift. */
 static void heapify(collapser *c)
 {
+    if (!c->heap_count)
+        return;
     for (size_t i = c->heap_count / 4 + 1; i-- > 0;)
         heap_down(c, i);
 }
