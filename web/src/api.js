@@ -1,7 +1,8 @@
-// api.js: the isoserve HTTP API as the client uses it: documents, meshes (with the facts
-// their X-Iso headers carry, read while the body streams in so that progress can show its
-// bytes), the simplification chain's figures, and errors turned into sentences
-// (problem+json's detail) that say whether trying again may help.
+// api.js: the isoserve HTTP API as the client uses it: documents, meshes and a
+// segmentation's meshes (with the facts their X-Iso headers carry, read while the body
+// streams in so that progress can show its bytes), the simplification chain's figures,
+// and errors turned into sentences (problem+json's detail) that say whether trying again
+// may help.
 
 // A failure the server explained (status, problem type, detail), or one it could not
 // (status 0: the server did not answer). `retry`: seconds after which trying again may
@@ -83,7 +84,19 @@ async function readBody(response, progress) {
 // headers say about it. `on.headers()` when the server has answered (its work is done),
 // `on.progress(received, total)` while the body arrives.
 export async function getMesh(volume, params, signal, on = {}) {
-  const url = meshUrl(volume, params);
+  return getMeshAt(meshUrl(volume, params), signal, on);
+}
+
+// A segmentation's meshes: segment number n's, or every segment's in one scene glb (n null).
+export function segmentMeshUrl(volume, n, { normals, format, cap = true }) {
+  const q = new URLSearchParams({ normals, format });
+  if (cap) q.set('cap', 'true');
+  const route = n === null ? 'segments/mesh' : `segments/${n}/mesh`;
+  return `v1/volumes/${encodeURIComponent(volume)}/${route}?${q}`;
+}
+
+// getMesh for a mesh route's URL.
+export async function getMeshAt(url, signal, on = {}) {
   const response = await request(url, { signal });
   if (!response.ok) throw await failure(response);
   on.headers?.();

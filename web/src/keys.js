@@ -35,7 +35,7 @@ export function mountKeys(ctx) {
     table.append(tr);
   }
   const note = document.createElement('p');
-  note.textContent = 'The link in the address bar keeps the whole view: camera, surfaces, clipping, colours.';
+  note.textContent = 'The link in the address bar keeps the whole view: camera, surfaces, clipping, colours, the segments shown.';
   help.replaceChildren(title, table, note);
   help.addEventListener('click', () => toggleHelp(ctx, false));
   ctx.$('help-button').addEventListener('click', () => toggleHelp(ctx));

@@ -41,7 +41,8 @@ const seen = {
 };
 
 export class Loader {
-  // ctx: { state, view, info() (the volume's document), onShown(record), onChange() }
+  // ctx: { state, view, info() (the volume's document), shows() (whether the surfaces are
+  // drawn at all), onShown(record), onChange() }
   constructor(ctx) {
     this.ctx = ctx;
     this.live = ctx.state.surfaces.map(() => this.fresh());
@@ -122,7 +123,7 @@ export class Loader {
     l.offer = null;
     l.controller = new AbortController();
     const { signal } = l.controller;
-    if (!s.on || !state.volume) {
+    if (!s.on || !state.volume || !this.ctx.shows()) {
       view.hide(i);
       l.drawn = null;
       this.setPhase(i, mine, null);
@@ -298,6 +299,7 @@ export class Loader {
   // While surface i's slider moves: previews of the latest level, one request in flight.
   async drag(i, level) {
     const l = this.live[i];
+    if (!this.ctx.shows()) return; // the segments alone: the level waits for the release
     l.want = level;
     if (l.inFlight) return;
     l.inFlight = true;

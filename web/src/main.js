@@ -1,13 +1,15 @@
 // main.js: the viewer's life: the state (url.js holds it in the link), the volume opened,
 // the panel's sections (panel-*.js, each with its own module), the requests (loader.js),
-// the view (view.js, camera.js, marker.js), the status line (status.js) and the keys
-// (keys.js). Sections talk to each other only through the context made here.
+// the view (view.js, camera.js, marker.js), the status line (status.js), the keys
+// (keys.js), and a segmentation's segments over the volume (panel-segments.js). Sections
+// talk to each other only through the context made here.
 import { ApiError, getJson } from './api.js';
 import { Loader } from './loader.js';
 import { mountKeys } from './keys.js';
 import { mountClip, applyClip, syncClip } from './panel-clip.js';
 import { mountExport, syncExport } from './panel-export.js';
 import { mountQuality, syncQuality, updateDetail } from './panel-quality.js';
+import { mountSegments, openSegments, reloadSegments, sameGrid, syncSegments } from './panel-segments.js';
 import { drawLevels, mountSurfaces, syncSurfaces } from './panel-surfaces.js';
 import { applyLook, mountView, syncView } from './panel-view.js';
 import { listVolumes, mountVolume, showVolume } from './panel-volume.js';
@@ -25,6 +27,10 @@ let info = null; // the current volume's document
 const ctx = {
   $, state, view,
   info: () => info,
+  volumes: [], // the collection's list (GET /v1/volumes)
+  // Whether the volume's own surfaces are drawn: always, but under a segmentation only when
+  // "CT surface" is ticked (else the segments alone).
+  shows: () => !state.seg.id || state.seg.ct,
   // The volume's LPS box as its file places it: [[x0, y0, z0], [x1, y1, z1]].
   box() {
     const m = info.index_to_world;
@@ -47,6 +53,7 @@ const ctx = {
     syncClip(ctx);
     syncQuality(ctx);
     syncExport(ctx);
+    syncSegments(ctx);
   },
   refresh(i, preview = true) {
     showError('');
@@ -56,6 +63,8 @@ const ctx = {
     return ctx.loader.refresh(i, preview);
   },
   refreshAll() { return Promise.all(state.surfaces.map((_, i) => ctx.refresh(i))); },
+  // The normals or the codec changed: the segments' meshes too.
+  reloadSegments() { reloadSegments(ctx); },
   pickLevel(i, level) {
     state.surfaces[i].level = level;
     ctx.refresh(i);
@@ -90,7 +99,7 @@ const ctx = {
 };
 
 ctx.loader = new Loader({
-  state, view, info: () => info,
+  state, view, info: () => info, shows: ctx.shows,
   onShown(i, record, mesh) {
     // The first surface drawn of a volume opened without a camera in its link frames the
     // view (anterior, superior up) and puts the camera in the link.
@@ -110,10 +119,24 @@ window.isoViewer = { state, shown: ctx.loader.shown, view, ctx, refresh: (i, pre
 // A second passes in the status while something is pending or a retry counts down.
 setInterval(() => { if (ctx.loader.live.some((l) => l.phase || l.retry)) showStatus(ctx); }, 250);
 
+// The segmentation to show over the volume `doc`: the volume itself, or, for an image, one
+// on its grid (the link's, else the collection's first).
+function segmentationOf(doc, fromLink) {
+  if (doc.segments) return doc.id;
+  const on = ctx.volumes.filter((v) => v.segments && sameGrid(v, doc));
+  return on.find((v) => fromLink && v.id === state.seg.id)?.id ?? on[0]?.id ?? null;
+}
+
 async function selectVolume(id, fromLink) {
-  let doc;
+  let doc, seg;
   try {
     doc = await getJson(`v1/volumes/${encodeURIComponent(id)}`);
+    seg = segmentationOf(doc, fromLink);
+    // A segmentation opened shows over the CT on its grid (the series its SEG references,
+    // the image its label map was made from) when the collection has one: that volume is
+    // opened, with the segmentation over it.
+    const ct = doc.segments ? ctx.volumes.find((v) => !v.segments && sameGrid(v, doc)) : null;
+    if (ct) doc = await getJson(`v1/volumes/${encodeURIComponent(ct.id)}`);
   } catch (error) {
     info = null;
     view.clear();
@@ -125,8 +148,13 @@ async function selectVolume(id, fromLink) {
     state.surfaces.forEach((s) => { s.level = null; });
     state.camera = null;
     state.axes = 'LPS';
+    state.seg = { id: null, visible: null, opacity: {}, ct: null };
   }
-  state.volume = id;
+  state.volume = doc.id;
+  state.seg.id = seg; // before the surfaces' requests: they are drawn with "CT surface" only
+  // An image opened shows its own surface under its segmentation; a segmentation opened
+  // shows its segments alone (its CT's surface one tick away).
+  if (state.seg.ct === null) state.seg.ct = doc.id === id && !doc.segments;
   ctx.loader.reset();
   view.clear();
   if (info.orientation !== 'none') state.axes = 'LPS';
@@ -145,12 +173,12 @@ async function selectVolume(id, fromLink) {
   // Detail (capped by them), else fetched beside the first meshes.
   const detail = updateDetail(ctx, true);
   if (state.distance > 0) await detail;
-  await ctx.refreshAll();
+  await Promise.all([ctx.refreshAll(), openSegments(ctx, seg)]);
 }
 ctx.selectVolume = selectVolume;
 
 async function start() {
-  for (const mount of [mountVolume, mountSurfaces, mountView, mountClip, mountQuality, mountExport, mountKeys]) mount(ctx);
+  for (const mount of [mountVolume, mountSurfaces, mountSegments, mountView, mountClip, mountQuality, mountExport, mountKeys]) mount(ctx);
   view.camera.onEnd = () => { view.camera.settle(); ctx.cameraMoved(); };
   const q = new URLSearchParams(location.search);
   readUrl(q, state);
@@ -168,6 +196,7 @@ async function start() {
       await new Promise((r) => setTimeout(r, wait * 1000));
     }
   }
+  ctx.volumes = list;
   listVolumes(ctx, list);
   const wanted = q.get('volume') ?? list[0]?.id;
   if (wanted) await selectVolume(wanted, q.has('volume'));

@@ -39,8 +39,8 @@ export function mountQuality(ctx) {
     ctx.refreshAll();
     setTimeout(() => updateDetail(ctx), 1500); // a first request builds the chain
   });
-  $('normals').addEventListener('change', (e) => { state.normals = e.target.value; ctx.refreshAll(); });
-  $('codec').addEventListener('change', (e) => { state.codec = e.target.value; ctx.refreshAll(); });
+  $('normals').addEventListener('change', (e) => { state.normals = e.target.value; ctx.refreshAll(); ctx.reloadSegments(); });
+  $('codec').addEventListener('change', (e) => { state.codec = e.target.value; ctx.refreshAll(); ctx.reloadSegments(); });
 }
 
 function detailText(ctx, p) {

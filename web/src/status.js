@@ -33,7 +33,7 @@ export function showStatus(ctx) {
   const { state, loader } = ctx, box = ctx.$('status');
   const lines = [];
   state.surfaces.forEach((s, i) => {
-    if (!s.on || !state.volume) return;
+    if (!s.on || !state.volume || !ctx.shows()) return;
     const l = loader.live[i];
     const name = state.surfaces[1].on ? `Surface ${i + 1}: ` : '';
     const d = l.drawn;

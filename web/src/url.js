@@ -2,8 +2,10 @@
 // so that reloading a link draws the same pixels: the volume, per surface its level,
 // colour and opacity, the tolerance, detail, normals and codec, the clipping plane, the
 // camera (eye and target in LPS mm), the assumed axes of a volume without orientation,
-// wireframe and background, and "close at the border" for measures and downloads. Values
-// at their defaults are left out, so short links stay short.
+// wireframe and background, "close at the border" for measures and downloads, and a
+// segmentation's view: which one, which segments are shown (all when left out; ranges such
+// as 1-40,42), their opacities and whether the CT's surface is drawn under them. Values at
+// their defaults are left out, so short links stay short.
 
 export const DEFAULT_CODEC = 'meshopt';
 export const DEFAULT_COLORS = ['#e8dccb', '#6fa8dc'];
@@ -21,7 +23,35 @@ export function defaultState() {
     axes: 'LPS',        // where an unoriented volume's i, j, k are taken to point
     wireframe: false,
     light: false,
+    // A segmentation over the volume (its id: the volume itself, or one on its grid), the
+    // segments shown (null: all), opacities other than 1 by segment number, and whether
+    // the volume's own surfaces (the CT's) are drawn too, else the segments alone (null:
+    // as the volume opened decides, see main.js).
+    seg: { id: null, visible: null, opacity: {}, ct: null },
   };
+}
+
+// "1-3,7" <-> [1, 2, 3, 7]: segment numbers, ascending runs as ranges.
+export function numbersText(numbers) {
+  const sorted = [...numbers].sort((a, b) => a - b), runs = [];
+  for (const n of sorted) {
+    const run = runs.at(-1);
+    if (run && n === run[1] + 1) run[1] = n;
+    else runs.push([n, n]);
+  }
+  return runs.map(([a, b]) => (a === b ? `${a}` : `${a}-${b}`)).join(',');
+}
+
+function parseNumbers(text) {
+  const out = new Set();
+  for (const part of text.split(',')) {
+    const m = /^(\d{1,5})(?:-(\d{1,5}))?$/.exec(part);
+    if (!m) return null;
+    const [a, b] = [Number(m[1]), Number(m[2] ?? m[1])];
+    if (b < a || b - a > 65535) return null;
+    for (let n = a; n <= b; n++) out.add(n);
+  }
+  return out;
 }
 
 const finite = (v) => v !== null && v !== '' && Number.isFinite(Number(v));
@@ -45,6 +75,15 @@ export function readUrl(q, state) {
   if (AXES_CODES.includes((q.get('axes') ?? '').toUpperCase())) state.axes = q.get('axes').toUpperCase();
   if (q.get('wireframe') === 'true') state.wireframe = true;
   if (q.get('background') === 'light') state.light = true;
+  if (/^[A-Za-z0-9._-]{1,64}$/.test(q.get('segmentation') ?? '')) state.seg.id = q.get('segmentation');
+  const shown = q.get('segments');
+  if (shown === 'none') state.seg.visible = new Set();
+  else if (shown) state.seg.visible = parseNumbers(shown);
+  for (const part of (q.get('segopacity') ?? '').split(',')) {
+    const m = /^(\d{1,5}):([0-9.]+)$/.exec(part);
+    if (m && finite(m[2])) state.seg.opacity[m[1]] = Math.min(1, Math.max(0.05, Number(m[2])));
+  }
+  if (['true', 'false'].includes(q.get('ct'))) state.seg.ct = q.get('ct') === 'true';
 }
 
 // The link of state (the query string, with its "?").
@@ -66,6 +105,13 @@ export function urlOf(state) {
   if (state.axes !== 'LPS') q.set('axes', state.axes);
   if (state.wireframe) q.set('wireframe', 'true');
   if (state.light) q.set('background', 'light');
+  if (state.seg.id) {
+    q.set('segmentation', state.seg.id);
+    if (state.seg.visible) q.set('segments', state.seg.visible.size ? numbersText(state.seg.visible) : 'none');
+    const opacities = Object.entries(state.seg.opacity).filter(([, o]) => o !== 1);
+    if (opacities.length) q.set('segopacity', opacities.map(([n, o]) => `${n}:${o}`).join(','));
+    q.set('ct', String(!!state.seg.ct));
+  }
   if (state.camera) q.set('camera', state.camera);
   return `?${q}`.replace(/%2C/g, ',').replace(/%3A/g, ':');
 }

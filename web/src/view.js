@@ -1,8 +1,10 @@
 // view.js: the 3D view: three.js scene in the patient's frame, mesh decoding (Draco in a
 // worker with DRACOLoader, glb-meshopt with GLTFLoader + MeshoptDecoder), one mesh per
-// surface with its own colour and opacity, a clipping plane, the camera (camera.js) and the
-// orientation marker (marker.js), drawn on demand: every change asks for a frame and at
-// most one frame is drawn per animation frame, so input never queues behind drawing.
+// surface and one per segment of a segmentation (a scene glb's nodes, or one segment's
+// mesh), each with its own colour and opacity, a clipping plane, the camera (camera.js)
+// and the orientation marker (marker.js), drawn on demand: every change asks for a frame
+// and at most one frame is drawn per animation frame, so input never queues behind
+// drawing.
 //
 // While the camera turns or the clipping plane moves, a view whose last full frame took
 // more than SLOW_FRAME_MS (software GL, a large mesh) draws each surface's preview mesh
@@ -49,10 +51,12 @@ export class View {
     this.plane = new THREE.Plane(new THREE.Vector3(1, 0, 0), 0);
     this.clipping = [];
     this.surfaces = [];
+    this.segments = new Map(); // segment number -> { material, mesh }: a segmentation's surfaces
+    this.wire = false;
     this.bounds = null; // the volume's box in the corrected frame: THREE.Box3
     this.draco = new DRACOLoader().setDecoderPath('./three/addons/libs/draco/');
     this.draco.preload();
-    this.gltf = new GLTFLoader().setMeshoptDecoder(MeshoptDecoder);
+    this.gltf = new GLTFLoader().setMeshoptDecoder(MeshoptDecoder).setDRACOLoader(this.draco);
     this.onScale = () => {};
     this.onFrame = () => {};
     this.frames = 0; // drawn frames, for the benchmark's frames per second
@@ -109,6 +113,21 @@ export class View {
     gltf.scene.traverse((o) => { if (o.isMesh && !found) found = o; });
     if (!found) return { geometry: new THREE.BufferGeometry(), matrix: new THREE.Matrix4() };
     return { geometry: found.geometry, matrix: found.matrixWorld.clone() };
+  }
+
+  // Decodes a scene glb (a segmentation's segments: one mesh node per segment, its number
+  // in the node's extras.segment) into [{ number, name, geometry, matrix }].
+  async decodeScene(bytes) {
+    const gltf = await this.gltf.parseAsync(bytes, '');
+    gltf.scene.updateMatrixWorld(true);
+    const found = [];
+    gltf.scene.traverse((o) => {
+      if (!o.isMesh) return;
+      const number = o.userData?.segment ?? o.parent?.userData?.segment;
+      found.push({ number, name: o.name, geometry: o.geometry, matrix: o.matrixWorld.clone() });
+      o.material?.dispose?.(); // the viewer's own materials carry colour and opacity
+    });
+    return found;
   }
 
   // The volume: its LPS box as the file places it ([[x0, y0, z0], [x1, y1, z1]]), the
@@ -183,7 +202,8 @@ export class View {
   drawnBox() {
     this.group.updateMatrixWorld(true);
     const box = new THREE.Box3();
-    for (const s of this.surfaces) if (s.mesh?.geometry.getAttribute('position')?.count) box.expandByObject(s.mesh);
+    const drawn = [...this.surfaces, ...[...this.segments.values()].filter((s) => s.mesh?.visible)];
+    for (const s of drawn) if (s.mesh?.geometry.getAttribute('position')?.count) box.expandByObject(s.mesh);
     return box.isEmpty() ? null : box;
   }
 
@@ -212,6 +232,47 @@ export class View {
 
   clear() {
     this.surfaces.forEach((_, i) => this.hide(i));
+    this.clearSegments();
+  }
+
+  // Segment n's decoded mesh, drawn in its colour and opacity (and shown or not), in place
+  // of any it had.
+  showSegment(n, { geometry, matrix }, color, opacity, visible) {
+    if (!geometry.getAttribute('normal') && geometry.getAttribute('position')?.count) geometry.computeVertexNormals();
+    let s = this.segments.get(n);
+    if (!s) {
+      s = { material: new THREE.MeshStandardMaterial({ roughness: 0.55, metalness: 0, side: THREE.DoubleSide,
+        clippingPlanes: this.clipping, wireframe: this.wire }), mesh: null };
+      this.segments.set(n, s);
+    }
+    if (s.mesh) this.drop(s.mesh);
+    s.mesh = this.mesh(s, geometry, matrix);
+    this.group.add(s.mesh);
+    this.styleSegment(n, color, opacity, visible);
+    this.measure = true;
+  }
+
+  // Segment n's colour, opacity and visibility: no request, no decoding, one frame.
+  styleSegment(n, color, opacity, visible) {
+    const s = this.segments.get(n);
+    if (!s) return;
+    const m = s.material;
+    m.color.set(color);
+    if (m.transparent !== opacity < 1) m.needsUpdate = true;
+    m.opacity = opacity;
+    m.transparent = opacity < 1;
+    m.depthWrite = opacity >= 1;
+    if (s.mesh) { s.mesh.visible = visible; s.mesh.renderOrder = m.transparent ? 1 : 0; }
+    this.requestRender();
+  }
+
+  clearSegments() {
+    for (const s of this.segments.values()) {
+      if (s.mesh) this.drop(s.mesh);
+      s.material.dispose();
+    }
+    this.segments.clear();
+    this.requestRender();
   }
 
   // The clipping plane: off, or across `axis` ('x', 'y' or 'z' of the corrected LPS frame)
@@ -227,12 +288,16 @@ export class View {
       this.clipping.push(this.plane);
     }
     // The shaders change only when the plane comes or goes; moving it is a uniform.
-    if (was !== this.clipping.length) for (const s of this.surfaces) s.material.needsUpdate = true;
+    if (was !== this.clipping.length) for (const s of this.materials()) s.material.needsUpdate = true;
     this.moving();
   }
 
+  // Every surface's and segment's { material }.
+  materials() { return [...this.surfaces, ...this.segments.values()]; }
+
   set wireframe(on) {
-    for (const s of this.surfaces) s.material.wireframe = on;
+    this.wire = on;
+    for (const s of this.materials()) s.material.wireframe = on;
     this.requestRender();
   }
 
