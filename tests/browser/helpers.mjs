@@ -46,16 +46,23 @@ export async function stopServer(proc) {
   await new Promise((r) => proc.on('exit', r));
 }
 
-// Waits until every surface that is on has the full mesh of the state's level, tolerance
-// and detail drawn and nothing is pending, then until that frame is on the canvas.
+// Waits until every surface that is on (and drawn: not under segments alone) has the full
+// mesh of the state's level, tolerance and detail drawn, every segment shown is loaded and
+// nothing is pending, then until that frame is on the canvas.
 export async function settled(page, timeout = 120000) {
   await page.waitForFunction(() => {
     const v = window.isoViewer;
     if (!v?.ctx?.loader) return false;
     const { state, loader } = v.ctx;
+    // The volume opened; a segmentation's segments: listed, every one shown here, nothing
+    // on its way (the surfaces may be off: a page that has not opened it yet is not settled).
+    const segs = v.ctx.segs;
+    if (!v.ctx.info() || (state.seg.id && segs?.id !== state.seg.id)) return false;
+    if (segs?.id && (!segs.list.length || segs.pending() ||
+      segs.list.some((x) => (!state.seg.visible || state.seg.visible.has(x.number)) && !segs.loaded.has(x.number)))) return false;
     return state.surfaces.every((s, i) => {
       const d = loader.live[i].drawn;
-      return !s.on || (d?.kind === 'final' && d.level === s.level && d.tolerance === state.tolerance &&
+      return !s.on || !v.ctx.shows() || (d?.kind === 'final' && d.level === s.level && d.tolerance === state.tolerance &&
         d.distance === state.distance && !loader.live[i].phase);
     });
   }, null, { timeout });
@@ -217,4 +224,47 @@ export function headLandmarks(vol, level, front, up, value = (n) => vol.data[n])
   const top = inside.filter((p) => up.sign * p[up.axis] >= crownEdge - 3);
   const crown = [0, 1, 2].map((a) => top.reduce((s, p) => s + p[a], 0) / top.length);
   return { anterior: best.p, crown };
+}
+
+// The canvas's pixels by colour (red, green and blue segments, the beige default surface):
+// per class the count and the centroid (canvas pixels from the top left); the colour at
+// each of `points` (index-space points of the volume, projected as depthProbe does) with
+// where it projects; and the canvas's mm per pixel.
+export async function colourPixels(page, points = []) {
+  return page.evaluate(async (points) => {
+    const THREE = await import('./three/three.module.js');
+    const v = window.isoViewer.view, info = window.isoViewer.ctx.info();
+    const canvas = document.querySelector('#view canvas:not(.marker)');
+    const copy = document.createElement('canvas');
+    copy.width = canvas.width; copy.height = canvas.height;
+    const c2d = copy.getContext('2d');
+    c2d.drawImage(canvas, 0, 0);
+    const { data } = c2d.getImageData(0, 0, copy.width, copy.height);
+    const classes = {
+      red: (r, g, b) => r > g + 60 && r > b + 60,
+      green: (r, g, b) => g > r + 50 && g > b + 40,
+      blue: (r, g, b) => b > r + 60 && b > g + 30,
+      beige: (r, g, b) => r > 110 && g > 100 && b > 80 && r >= b && r - b < 70 && Math.abs(r - g) < 40,
+    };
+    const out = Object.fromEntries(Object.keys(classes).map((k) => [k, { count: 0, x: 0, y: 0 }]));
+    for (let p = 0; p < data.length; p += 4) {
+      const [r, g, b] = [data[p], data[p + 1], data[p + 2]];
+      for (const [name, is] of Object.entries(classes)) {
+        if (!is(r, g, b)) continue;
+        const o = out[name];
+        o.count++; o.x += (p / 4) % copy.width; o.y += Math.floor(p / 4 / copy.width);
+      }
+    }
+    for (const o of Object.values(out)) if (o.count) { o.x /= o.count; o.y /= o.count; }
+    const m = info.index_to_world, cam = v.camera.camera;
+    const at = points.map(([i, j, k]) => {
+      const world = new THREE.Vector3(...[0, 1, 2].map((row) => m[4 * row] * i + m[4 * row + 1] * j + m[4 * row + 2] * k + m[4 * row + 3]));
+      world.applyMatrix4(v.group.matrixWorld);
+      const ndc = world.project(cam);
+      const x = Math.round((ndc.x + 1) / 2 * copy.width), y = Math.round((1 - ndc.y) / 2 * copy.height);
+      const q = 4 * (y * copy.width + x);
+      return { x, y, rgb: [data[q], data[q + 1], data[q + 2]] };
+    });
+    return { ...out, at, pixels: copy.width * copy.height, mmPerPixel: v.camera.mmPerPixel(copy.height) };
+  }, points);
 }

@@ -3,12 +3,14 @@
 // usage: node tests/browser/test_web.mjs   (from the repository root, after make)
 //
 // Volumes: Debian's ch2bet brain and ch2 head (NIfTI with an sform) when installed, else an
-// analytic torus; the shared CThead (no orientation in its header) when ../shared is there.
+// analytic torus; the shared CThead (no orientation in its header) when ../shared is there;
+// a .seg.nrrd of three segments, a CT on its grid and a label map of 100 segments, made here.
+// ISO_WEB_STEPS=segments,link runs only the steps named (while working on them).
 import { existsSync, mkdtempSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join, resolve } from 'node:path';
 import { meshoptIndexHeaders } from '../support/glb.mjs';
-import { CHROMIUM_ARGS, canvasPixels, chromium, faceForwardForeheadUp, headLandmarks, pixelDifference, pixelStats,
+import { CHROMIUM_ARGS, canvasPixels, chromium, colourPixels, faceForwardForeheadUp, headLandmarks, pixelDifference, pixelStats,
   readCThead, readNiftiU8, settled, startServer, stopServer, waitReady } from './helpers.mjs';
 
 // tests/run.sh's asan pass runs the page against build/san/isoserve and says web-san.
@@ -35,9 +37,50 @@ if (existsSync(cthead)) {
   entries.push({ id: 'cthead', path: cthead, modality: 'CT', levels: [700.5] });
   entries.push({ id: 'cthead-lpi', path: cthead, modality: 'CT', levels: [700.5], orientation: 'LPI' });
 }
+const segmentation = writeSegmentation(tmp);
+entries.push({ id: 'seg3', path: join(tmp, 'seg3.seg.nrrd'), labels: true }, { id: 'ct3', path: join(tmp, 'ct3.nrrd'), modality: 'CT', levels: [50] },
+  { id: 'labels100', path: join(tmp, 'labels100.nrrd'), labels: true });
 writeFileSync(join(tmp, 'catalog.json'), JSON.stringify({ volumes: entries }));
 
 const wait = (ms) => new Promise((r) => setTimeout(r, ms));
+
+// A 48x48x40 grid of 1 x 1 x 1.25 mm (LPS, i to the left, j posterior, k superior):
+// seg3.seg.nrrd with three segments of known names, colours and voxels (1 "liver", red, a
+// box in front; 2 "kidney", green, a ball on the patient's left; 3 "spleen", blue, a larger
+// box behind the liver), ct3.nrrd on the same grid (a box of 100 around them), and
+// labels100.nrrd: 100 small cubes numbered 1..100, no names.
+function writeSegmentation(dir) {
+  const dims = [48, 48, 40], spacing = [1, 1, 1.25], n = dims[0] * dims[1] * dims[2];
+  const at = (i, j, k) => (k * dims[1] + j) * dims[0] + i;
+  const inBox = (p, lo, hi) => p.every((x, a) => x >= lo[a] && x < hi[a]);
+  const seg = { boxes: { 1: [[8, 6, 12], [20, 16, 28]], 3: [[4, 24, 8], [26, 34, 32]] }, ball: { 2: [[36, 24, 20], 7] } };
+  const labels = new Uint8Array(n), ct = new Uint8Array(n), many = new Uint8Array(n), voxels = [0, 0, 0, 0];
+  for (let k = 0; k < dims[2]; k++) for (let j = 0; j < dims[1]; j++) for (let i = 0; i < dims[0]; i++) {
+    const p = [i, j, k];
+    let l = 0;
+    if (inBox(p, ...seg.boxes[1])) l = 1;
+    else if (inBox(p, ...seg.boxes[3])) l = 3;
+    else if (Math.hypot(i - 36, j - 24, k - 20) <= 7) l = 2;
+    labels[at(i, j, k)] = l;
+    voxels[l]++;
+    ct[at(i, j, k)] = inBox(p, [2, 2, 2], [46, 46, 38]) ? 100 : 0;
+  }
+  for (let c = 0; c < 100; c++) { // 100 cubes of 2^3 on a 5 x 5 x 4 lattice
+    const [i0, j0, k0] = [4 + 9 * (c % 5), 4 + 9 * (Math.floor(c / 5) % 5), 4 + 9 * Math.floor(c / 25)];
+    for (let k = k0; k < k0 + 2; k++) for (let j = j0; j < j0 + 2; j++) for (let i = i0; i < i0 + 2; i++) many[at(i, j, k)] = c + 1;
+  }
+  const header = (extra) => Buffer.from(`NRRD0004\ntype: uint8\ndimension: 3\nsizes: ${dims.join(' ')}\nspace: left-posterior-superior\n` +
+    `space directions: (${spacing[0]},0,0) (0,${spacing[1]},0) (0,0,${spacing[2]})\nspace origin: (0,0,0)\nencoding: raw\n${extra}\n`);
+  const names = { 1: ['liver', '0.9 0.1 0.1'], 2: ['kidney', '0.1 0.8 0.15'], 3: ['spleen', '0.15 0.3 0.95'] };
+  const keys = Object.entries(names).map(([l, [name, color]], s) => `Segment${s}_ID:=Segment_${l}\nSegment${s}_Name:=${name}\n` +
+    `Segment${s}_Color:=${color}\nSegment${s}_LabelValue:=${l}\nSegment${s}_Layer:=0\n`).join('');
+  writeFileSync(join(dir, 'seg3.seg.nrrd'), Buffer.concat([header(keys), labels]));
+  writeFileSync(join(dir, 'ct3.nrrd'), Buffer.concat([header(''), ct]));
+  writeFileSync(join(dir, 'labels100.nrrd'), Buffer.concat([header(''), many]));
+  const voxelMm3 = spacing[0] * spacing[1] * spacing[2];
+  const centre = (l) => (seg.boxes[l] ? seg.boxes[l][0].map((lo, a) => (lo + seg.boxes[l][1][a] - 1) / 2) : seg.ball[l][0]);
+  return { names, voxels, ml: voxels.map((v) => (v * voxelMm3) / 1000), centre };
+}
 const meshOf = (responses) => responses.filter((r) => r.url().includes('/mesh?'));
 
 // 1. One preview, then the surface: two mesh requests, the first at the preview tolerance
@@ -390,6 +433,133 @@ async function panelTests(page, base) {
   await page.setViewportSize({ width: 1100, height: 760 });
 }
 
+// 10. A segmentation: opening the .seg.nrrd opens the CT on its grid with the segments
+// over it (alone at first); the panel lists each segment's name, colour and volume in mL
+// (the voxels counted here); one request brings them all; each colour shows where its
+// segment projects, goes when it is hidden (no request) and comes back; the clipping plane
+// cuts the ball on the left; a translucent liver shows the spleen behind it; the CT's
+// surface covers them; the link restores the same state and pixels; "none" and "all"; a
+// label map of 100 segments lists them all in a list that scrolls, the panel within 800 px.
+async function segmentTests(page, base, responses) {
+  const seg = segmentation;
+  const segRequests = () => responses.filter((r) => /\/segments\/(\d+\/)?mesh\?/.test(r.url())).map((r) => r.url());
+  const points = [1, 2, 3].map((l) => seg.centre(l));
+  const near = (c, p, mm) => Math.hypot(c.x - p.x, c.y - p.y) * c.mmPerPixel <= mm;
+  responses.length = 0;
+  await page.goto(`${base}?volume=seg3`);
+  await settled(page, 60000);
+  const opened = await page.evaluate(() => ({ volume: window.isoViewer.state.volume, url: location.search,
+    rows: [...document.querySelectorAll('#segment-list .segment')].map((r) => ({ name: r.querySelector('.seg-name').textContent,
+      swatch: getComputedStyle(r.querySelector('.seg-swatch')).backgroundColor, ml: r.querySelector('.seg-ml').textContent,
+      on: r.querySelector('input[type=checkbox]').checked })) }));
+  const doc = await (await fetch(`${base}v1/volumes/seg3/segments`)).json();
+  const wantRows = [1, 2, 3].map((l) => ({ name: seg.names[l][0], ml: `${Number(seg.ml[l].toPrecision(4)).toLocaleString('en-US')} mL` }));
+  const rgb = (hex) => `rgb(${[1, 3, 5].map((k) => parseInt(hex.slice(k, k + 2), 16)).join(', ')})`;
+  report('segments_panel_lists_names_colours_ml', opened.rows.length === 3 && opened.rows.every((r, k) => r.name === wantRows[k].name &&
+    r.ml === wantRows[k].ml && r.on && r.swatch === rgb(doc.segments[k].color_hex) && doc.segments[k].voxels === seg.voxels[k + 1]),
+    JSON.stringify({ rows: opened.rows, want: wantRows, voxels: seg.voxels }));
+  report('segmentation_opens_over_its_ct', opened.volume === 'ct3' && /segmentation=seg3/.test(opened.url) &&
+    meshOf(responses).every((r) => !/volumes\/ct3\/mesh/.test(r.url())), JSON.stringify(opened.url));
+  report('segments_one_request_for_all', segRequests().length === 1 && /\/seg3\/segments\/mesh\?/.test(segRequests()[0]), segRequests().join(' '));
+  const all = await colourPixels(page, points);
+  report('segment_colours_where_they_project', ['red', 'green', 'blue'].every((c, k) => all[c].count > 0.002 * all.pixels &&
+    near({ ...all[c], mmPerPixel: all.mmPerPixel }, all.at[k], k === 2 ? 4 : 2)) && all.beige.count === 0,
+    JSON.stringify({ ...all, at: all.at }));
+  // Hidden: gone, without a request; shown again: back, still without one.
+  await page.uncheck('#seg-2-on');
+  await page.evaluate(() => window.isoViewer.view.drawn());
+  const hidden = await colourPixels(page);
+  await page.check('#seg-2-on');
+  await page.evaluate(() => window.isoViewer.view.drawn());
+  const back = await colourPixels(page);
+  report('segment_hidden_and_shown_without_requests', hidden.green.count === 0 && Math.abs(hidden.red.count - all.red.count) <= 0.02 * all.red.count &&
+    back.green.count === all.green.count && segRequests().length === 1, JSON.stringify({ all: all.green.count, hidden: hidden.green.count, back: back.green.count, requests: segRequests().length }));
+  await page.check('#clip');
+  await page.evaluate(() => window.isoViewer.view.drawn());
+  const cut = await colourPixels(page);
+  report('clip_plane_cuts_segments', cut.green.count === 0 && cut.red.count >= 0.9 * all.red.count, JSON.stringify({ all, cut }));
+  // The liver at 40%: the spleen behind it shows through where the liver projects.
+  await page.evaluate(() => {
+    const el = document.getElementById('seg-1-opacity');
+    el.value = '40';
+    el.dispatchEvent(new Event('input'));
+  });
+  await page.evaluate(() => window.isoViewer.view.drawn());
+  const blend = await colourPixels(page, points);
+  report('segment_opacity_blends', all.at[0].rgb[2] < 80 && blend.at[0].rgb[2] >= all.at[0].rgb[2] + 40 && blend.at[0].rgb[0] < all.at[0].rgb[0],
+    JSON.stringify({ before: all.at[0].rgb, after: blend.at[0].rgb }));
+  await page.uncheck('#seg-2-on');
+  await page.check('#seg-ct');
+  await settled(page, 60000);
+  const ct = await colourPixels(page, points);
+  report('ct_surface_under_segments', ct.beige.count > 0.02 * ct.pixels && ct.blue.count < 0.01 * blend.blue.count &&
+    meshOf(responses).some((r) => /volumes\/ct3\/mesh/.test(r.url())), JSON.stringify({ ct, blend }));
+  const link = page.url();
+  const picture = await canvasPixels(page);
+  report('segments_state_in_the_link', /segmentation=seg3/.test(link) && /segments=1,3(&|$)/.test(link) && /segopacity=1:0.4(&|$)/.test(link) &&
+    /ct=true/.test(link) && /clip=x:0.5/.test(link), link);
+  responses.length = 0;
+  await page.goto(link);
+  await settled(page, 60000);
+  const diff = await pixelDifference(page, picture);
+  const restored = await page.evaluate(() => [1, 2, 3].map((n) => [document.getElementById(`seg-${n}-on`).checked,
+    document.getElementById(`seg-${n}-opacity-value`).textContent]).concat([document.getElementById('seg-ct').checked]));
+  report('segments_link_restores_state_and_pixels', diff.differ === 0 && JSON.stringify(restored) ===
+    JSON.stringify([[true, '40%'], [false, '100%'], [true, '100%'], true]) && segRequests().length === 1,
+    `${diff.differ} pixels differ; ${JSON.stringify(restored)}; ${segRequests().join(' ')}`);
+  await page.uncheck('#seg-ct');
+  await page.uncheck('#clip');
+  await page.click('#seg-none');
+  await page.evaluate(() => window.isoViewer.view.drawn());
+  const none = await colourPixels(page);
+  const noneUrl = page.url();
+  await page.click('#seg-all');
+  await settled(page, 60000);
+  const every = await colourPixels(page);
+  report('segments_none_and_all', none.red.count + none.green.count + none.blue.count === 0 && /segments=none/.test(noneUrl) &&
+    every.green.count > 0 && every.blue.count > 0 && !/segments=/.test(page.url()) && segRequests().length === 1,
+    JSON.stringify({ none, every: [every.red.count, every.green.count, every.blue.count], noneUrl, requests: segRequests() }));
+  // The CT opened: the segmentation on its grid comes with it, under the CT's own surface.
+  await page.goto(`${base}?volume=ct3`);
+  await settled(page, 60000);
+  const image = await page.evaluate(() => ({ seg: window.isoViewer.state.seg.id, ct: document.getElementById('seg-ct').checked,
+    rows: document.querySelectorAll('#segment-list .segment').length, url: location.search }));
+  const imagePixels = await colourPixels(page);
+  report('ct_opened_with_its_segmentation_under_its_surface', image.seg === 'seg3' && image.ct && image.rows === 3 && /ct=true/.test(image.url) &&
+    imagePixels.beige.count > 0.02 * imagePixels.pixels, JSON.stringify({ image, beige: imagePixels.beige.count }));
+  // One segment of three shown: its own mesh (Draco); another ticked: that one's alone.
+  responses.length = 0;
+  const camera = new URL(link).searchParams.get('camera'); // framed on all three
+  await page.goto(`${base}?volume=ct3&segmentation=seg3&segments=2&ct=false&codec=draco&camera=${camera}`);
+  await settled(page, 60000);
+  const one = await colourPixels(page);
+  const oneRequests = segRequests();
+  await page.check('#seg-1-on');
+  await settled(page, 60000);
+  const two = await colourPixels(page);
+  report('segments_fetched_one_by_one_never_twice', oneRequests.length === 1 && /\/segments\/2\/mesh\?.*format=draco/.test(oneRequests[0]) &&
+    one.green.count > 0 && one.red.count === 0 && segRequests().length === 2 && /\/segments\/1\/mesh\?/.test(segRequests()[1]) &&
+    two.red.count > 0 && two.green.count === one.green.count, JSON.stringify({ requests: segRequests(), one: [one.red.count, one.green.count], two: [two.red.count, two.green.count] }));
+  // A hundred segments (the scene glb with Draco): every row, a list that scrolls, a panel within 800 px.
+  await page.setViewportSize({ width: 1100, height: 800 });
+  responses.length = 0;
+  await page.goto(`${base}?volume=labels100&codec=draco`);
+  await settled(page, 60000);
+  const many = await page.evaluate(() => {
+    const list = document.getElementById('segment-list'), panel = document.getElementById('panel');
+    return { rows: list.querySelectorAll('.segment').length, scrolls: list.scrollHeight > list.clientHeight, panel: [panel.scrollHeight, panel.clientHeight],
+      last: list.querySelector('.segment:last-child .seg-name')?.textContent, ml: list.querySelector('.segment .seg-ml')?.textContent, loaded: window.isoViewer.ctx.segs.loaded.size };
+  });
+  report('hundred_segments_scroll_and_fit_800px', many.rows === 100 && many.scrolls && many.panel[0] <= many.panel[1] && many.loaded === 100 &&
+    many.ml === '0.01 mL' && segRequests().length === 1, JSON.stringify({ many, requests: segRequests().length }));
+  const labels = await page.evaluate(() => [...document.querySelectorAll('#panel input, #panel select')].filter((el) => {
+    if (el.closest('label') || el.getAttribute('aria-label')) return false;
+    return !(el.id && document.querySelector(`label[for="${el.id}"]`));
+  }).map((el) => el.id));
+  report('segment_controls_labelled', labels.length === 0, labels.join(', '));
+  await page.setViewportSize({ width: 1100, height: 760 });
+}
+
 async function main() {
   const server = await startServer(join(tmp, 'catalog.json'));
   const limited = await startServer(join(tmp, 'catalog.json'), ['--max-triangles', '20000']);
@@ -426,8 +596,11 @@ async function main() {
     const steps = [['first_view', () => firstView(page, base, responses)], ['progress', () => progressAndCancel(page, base)],
       ['retries', async () => { quiet.refused = true; try { await retries(page, base); } finally { quiet.refused = false; } }], ['drag', () => dragTests(page, base)], ['link', () => linkTests(page, base)],
       ['codec_detail', () => codecAndDetail(page, base, firstView)], ['orientation', () => orientationTests(page, base)],
-      ['too_large', () => tooLarge(context, `http://127.0.0.1:${limited.port}/`)], ['panel', () => panelTests(page, base)]];
+      ['too_large', () => tooLarge(context, `http://127.0.0.1:${limited.port}/`)], ['panel', () => panelTests(page, base)],
+      ['segments', () => segmentTests(page, base, responses)]];
+    const only = process.env.ISO_WEB_STEPS?.split(',');
     for (const [name, run] of steps) {
+      if (only && !only.includes(name)) continue;
       const t0 = Date.now();
       try { await run(); } catch (e) { report(name, false, e.stack || String(e)); }
       console.log(`  info: ${name}: ${((Date.now() - t0) / 1000).toFixed(1)} s`);
