@@ -211,14 +211,15 @@ async function load(ctx, mine, which, url, decode) {
       segs.loaded.add(s.number);
     }
     segs.requests.push({ url, segments: which.length, triangles: mesh.triangles, bytes: mesh.size, ms: performance.now() - started });
-    // A view opened without a camera in its link frames what is drawn first.
-    if (!state.camera && segs.loaded.size) ctx.resetView();
   } finally {
     if (mine === segs.generation) {
       which.forEach((s) => segs.inFlight.delete(s.number));
       syncSegments(ctx);
     }
   }
+  // A view opened without a camera in its link is framed on the segments once they are all
+  // here, when they are alone (else on the surface, as it comes: see main.js).
+  if (mine === segs.generation && !state.camera && !ctx.shows() && !segs.inFlight.size && segs.loaded.size) ctx.resetView();
 }
 
 export function syncSegments(ctx) {
@@ -226,7 +227,9 @@ export function syncSegments(ctx) {
   if (!segs?.id) return;
   const info = ctx.info();
   $('seg-ct').checked = state.seg.ct;
-  $('seg-ct-label').textContent = info && info.id !== segs.id ? `CT surface (${info.name || info.id})` : 'the label map\'s surface (Level)';
+  // "CT surface" names the image's modality when it is not CT (an atlas over an MR).
+  const modality = info?.modality && info.modality !== 'CT' ? info.modality : 'CT';
+  $('seg-ct-label').textContent = info && info.id !== segs.id ? `${modality} surface (${info.name || info.id})` : 'the label map\'s surface (Level)';
   const count = segs.list.filter((s) => shown(state, s.number)).length;
   $('segments-count').textContent = segs.list.length ? `${count} of ${segs.list.length} shown` : '';
   for (const s of segs.list) {
