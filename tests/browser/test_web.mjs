@@ -440,7 +440,7 @@ async function panelTests(page, base) {
 // cuts the ball on the left; a translucent liver shows the spleen behind it; the CT's
 // surface covers them; the link restores the same state and pixels; "none" and "all"; a
 // label map of 100 segments lists them all in a list that scrolls, the panel within 800 px.
-async function segmentTests(page, base, responses) {
+async function segmentTests(page, base, responses, browserContext) {
   const seg = segmentation;
   const segRequests = () => responses.filter((r) => /\/segments\/(\d+\/)?mesh\?/.test(r.url())).map((r) => r.url());
   const points = [1, 2, 3].map((l) => seg.centre(l));
@@ -540,6 +540,24 @@ async function segmentTests(page, base, responses) {
   report('segments_fetched_one_by_one_never_twice', oneRequests.length === 1 && /\/segments\/2\/mesh\?.*format=draco/.test(oneRequests[0]) &&
     one.green.count > 0 && one.red.count === 0 && segRequests().length === 2 && /\/segments\/1\/mesh\?/.test(segRequests()[1]) &&
     two.red.count > 0 && two.green.count === one.green.count, JSON.stringify({ requests: segRequests(), one: [one.red.count, one.green.count], two: [two.red.count, two.green.count] }));
+  // All of them over the server's triangle limit (a 422, made here: the page of its own
+  // keeps the browser's log of it out of the console check): each shown segment alone.
+  const limited = await browserContext.newPage();
+  try {
+    await limited.route((u) => u.pathname.endsWith('/segments/mesh'), (route) => route.fulfill({ status: 422,
+      contentType: 'application/problem+json', body: JSON.stringify({ type: 'urn:isoserve:problem:mesh-too-large', title: 'too large',
+        status: 422, detail: 'the mesh has 7,616 triangles, over this server\'s limit of 5,000' }) }));
+    const asked = [];
+    limited.on('request', (r) => { if (/\/segments\//.test(r.url()) && /mesh\?/.test(r.url())) asked.push(new URL(r.url()).pathname); });
+    await limited.goto(`${base}?volume=seg3&camera=${camera}`);
+    await settled(limited, 60000);
+    const got = await limited.evaluate(() => ({ loaded: [...window.isoViewer.ctx.segs.loaded].sort(), error: document.getElementById('segments-status').textContent }));
+    report('segments_over_the_limit_come_one_by_one', JSON.stringify(got.loaded) === '[1,2,3]' && asked.length === 4 &&
+      asked[0].endsWith('/seg3/segments/mesh') && asked.slice(1).sort().join() === [1, 2, 3].map((n) => `/v1/volumes/seg3/segments/${n}/mesh`).join(),
+      JSON.stringify({ got, asked }));
+  } finally {
+    await limited.close();
+  }
   // A hundred segments (the scene glb with Draco): every row, a list that scrolls, a panel within 800 px.
   await page.setViewportSize({ width: 1100, height: 800 });
   responses.length = 0;
@@ -597,7 +615,7 @@ async function main() {
       ['retries', async () => { quiet.refused = true; try { await retries(page, base); } finally { quiet.refused = false; } }], ['drag', () => dragTests(page, base)], ['link', () => linkTests(page, base)],
       ['codec_detail', () => codecAndDetail(page, base, firstView)], ['orientation', () => orientationTests(page, base)],
       ['too_large', () => tooLarge(context, `http://127.0.0.1:${limited.port}/`)], ['panel', () => panelTests(page, base)],
-      ['segments', () => segmentTests(page, base, responses)]];
+      ['segments', () => segmentTests(page, base, responses, context)]];
     const only = process.env.ISO_WEB_STEPS?.split(',');
     for (const [name, run] of steps) {
       if (only && !only.includes(name)) continue;

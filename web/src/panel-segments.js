@@ -156,20 +156,27 @@ function setVisible(ctx, visible) {
 // Fetches the shown segments that are neither here nor on their way (see the top).
 async function ensure(ctx) {
   const { state } = ctx, segs = ctx.segs, mine = segs.generation;
-  const missing = segs.list.filter((s) => shown(state, s.number) && !segs.loaded.has(s.number) && !segs.inFlight.has(s.number));
-  if (!missing.length) return;
+  const missing = () => segs.list.filter((s) => shown(state, s.number) && !segs.loaded.has(s.number) && !segs.inFlight.has(s.number));
+  if (!missing().length) return;
   const codec = state.codec, normals = state.normals;
   const nothingYet = !segs.loaded.size && !segs.inFlight.size;
+  segs.failure = null;
   try {
-    if (nothingYet && missing.length >= 2 && missing.length >= segs.list.length / 2) {
+    if (nothingYet && missing().length >= 2 && missing().length >= segs.list.length / 2) {
       const format = codec === 'meshopt' ? 'glb-meshopt' : 'glb';
-      await load(ctx, mine, segs.list, segmentMeshUrl(segs.id, null, { normals, format }), async (bytes) => {
-        const nodes = await ctx.view.decodeScene(bytes);
-        return new Map(nodes.map((node) => [node.number, node]));
-      });
-    } else {
+      try {
+        await load(ctx, mine, segs.list, segmentMeshUrl(segs.id, null, { normals, format }), async (bytes) => {
+          const nodes = await ctx.view.decodeScene(bytes);
+          return new Map(nodes.map((node) => [node.number, node]));
+        });
+      } catch (error) {
+        // All of them over the server's triangle limit (422): each one alone may fit.
+        if (error.status !== 422 || mine !== segs.generation) throw error;
+      }
+    }
+    if (missing().length && mine === segs.generation) {
       const format = codec === 'meshopt' ? 'glb-meshopt' : 'draco';
-      const queue = [...missing];
+      const queue = missing();
       queue.forEach((s) => segs.inFlight.add(s.number));
       const worker = async () => {
         for (let s = queue.shift(); s && mine === segs.generation; s = queue.shift()) {
