@@ -8,9 +8,9 @@
 // Meshes: when the view opens with at least half of the segments shown, one request for
 // them all (GET .../segments/mesh: one glb, a node per segment): one round trip, and the
 // server extracts the segments across its threads; the hidden ones come along, so ticking
-// one later only shows a mesh already decoded. Otherwise, and for every segment ticked
-// later that is not loaded yet, that segment's own mesh (GET .../segments/{n}/mesh), a few
-// in flight at a time: a toggle never downloads again a segment already here (hiding keeps
+// one later only shows a mesh already decoded. Otherwise, for every segment ticked later
+// that is not loaded yet, and when the scene is over the server's triangle limit, each
+// segment's own mesh (GET .../segments/{n}/mesh), a few in flight at a time: a toggle never downloads again a segment already here (hiding keeps
 // the mesh; nothing is dropped until the volume, the normals or the codec change).
 import { getJson, getMeshAt, segmentMeshUrl } from './api.js';
 import { formatNumber } from './ui.js';
