@@ -4,18 +4,23 @@
  *   1. keep: the exact surface's positions and triangles become level 0, and its census
  *      (pinches, closed or not, enclosed volume) is taken beside level 1's simplification,
  *      with PASS 3's grid and samples of it (prepare: level 1 reads none of them);
- *   2. simplify: level k (k = 1..ISO_CHAIN_LEVELS) is level k - 1 simplified to half its
- *      triangles by collapses that keep the link condition (collapse.c), borders locked,
- *      in up to two slabs on their own threads (simplify_level: 2a gather, 2b collapse
- *      in steps of error, 2c join), mapped back to the chain's vertices (so that every
- *      level indexes the one position array);
+ *   2. simplify: level k (k = 1..ISO_CHAIN_LEVELS) is level k - 1 simplified to
+ *      1/sqrt(2) of its triangles (iso_mesh_chain_target) by collapses that keep the link
+ *      condition and every component (collapse.c), borders locked, in up to two slabs on
+ *      their own threads (simplify_level: 2a gather, 2b collapse in steps of error, 2c
+ *      join), mapped back to the chain's vertices (so that every level indexes the one
+ *      position array); a level that cannot shed 1/CHAIN_STALL of the triangles ends the
+ *      chain;
  *   3. measure: each level's distance from level 0 (iso_mesh_distance_between, samples three
  *      voxels apart, against level 0's grid built once and kept with the chain), so the
  *      answers below rest on measurements, not on estimates; a level's triangles left as
  *      they were in the level before keep that level's bounds on their distance, so that
  *      the search for the largest distance skips those that cannot raise it (distance.h).
  *      Levels are measured in order beside the simplification of the next ones (the
- *      pipeline below), each on the threads the simplification leaves. */
+ *      pipeline below), each on the threads the simplification leaves.
+ * Level k depends only on level k - 1 (and, for level 1, the thread count): a build
+ * stopped at a request's level (iso_mesh_chain_build_until) and extended later makes the
+ * same levels as a full one (grow). */
 #include "collapse.h"
 #include "distance.h"
 
@@ -98,7 +103,7 @@ static int level_pinches(const iso_mesh *m, uint32_t *remap, size_t *used, iso_m
  * cheaper; later levels, small and decided by fewer collapses, keep cost order, which
  * their p99 depends on more (docs/performance.md, "Faithful chains"). */
 #define CHAIN_COARSE 0.5
-#define CHAIN_COARSE_LEVELS 2
+#define CHAIN_COARSE_LEVELS 4
 
 /* One slab of a level: its triangles over its own vertices, and their collapser. */
 typedef struct slab {
@@ -314,8 +319,12 @@ static int measure_level(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid,
 }
 
 /* PASS 2 for level k on `threads`. The level is the chain's once this returns, even
- * failing (the builder counts it for destroy). */
-static int add_level(iso_mesh_chain *chain, int k, int threads, uint32_t *remap, iso_error *err)
+ * failing (the builder counts it for destroy). A level that could not lose 1/CHAIN_STALL
+ * of the triangles (the surface's topology allows few more collapses) is not made:
+ * *stalled is set, the chain ends before it. */
+#define CHAIN_STALL 20
+static int add_level(iso_mesh_chain *chain, int k, int threads, uint32_t *remap, int *stalled,
+                     iso_error *err)
 {
     const iso_mesh_chain_level *prev = &chain->level[k - 1];
     iso_mesh_chain_level *lv = &chain->level[k];
@@ -323,7 +332,7 @@ static int add_level(iso_mesh_chain *chain, int k, int threads, uint32_t *remap,
     if (!(m.indices = malloc(3 * prev->triangle_count * sizeof *m.indices)))
         return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for level %d", k);
     memcpy(m.indices, prev->indices, 3 * prev->triangle_count * sizeof *m.indices);
-    size_t target = chain->level[0].triangle_count >> k;
+    size_t target = iso_mesh_chain_target(chain->level[0].triangle_count, k);
     target = target ? target : 1;
     iso_simplify_result r;
     double start = iso_clock_ms();
@@ -333,6 +342,10 @@ static int add_level(iso_mesh_chain *chain, int k, int threads, uint32_t *remap,
         return rc;
     }
     r.ms = iso_clock_ms() - start;
+    if ((*stalled = m.triangle_count > prev->triangle_count - prev->triangle_count / CHAIN_STALL)) {
+        free(m.indices);
+        return 0;
+    }
     uint32_t *shrunk = realloc(m.indices, (3 * m.triangle_count + 1) * sizeof *m.indices);
     lv->indices = m.indices = shrunk ? shrunk : m.indices;
     lv->triangle_count = m.triangle_count;
@@ -340,6 +353,14 @@ static int add_level(iso_mesh_chain *chain, int k, int threads, uint32_t *remap,
     chain->bytes += 3 * lv->triangle_count * sizeof *lv->indices;
     lv->estimate = r.error;
     lv->folds_dropped = r.folds_dropped;
+    if (k >= 2 && prev->nonmanifold_edges == 0 && prev->pinch_vertices == 0) {
+        /* One collapser over a level without pinches makes none, and each collapse takes
+         * one vertex, two triangles and three edges: nothing to count. */
+        size_t collapses = (prev->triangle_count - lv->triangle_count) / 2;
+        lv->vertex_count = prev->vertex_count - collapses;
+        lv->edges = prev->edges - 3 * collapses;
+        return 0;
+    }
     iso_mesh_pinches pinches;
     if ((rc = level_pinches(&m, remap, &lv->vertex_count, &pinches)))
         return iso_error_set(err, rc, "chain: no memory to count level %d's pinches", k);
@@ -371,22 +392,44 @@ static int measure_step(iso_mesh_chain *chain, const iso_mesh_grid *exact_grid,
  * beside it), so the levels already made are measured meanwhile on the chain's other
  * threads, each after the one before (it reuses that one's bounds), and on all of them
  * once the last level is made. Level k's measure writes only level k's measured fields,
- * which nothing else touches; levels are handed over under the lock. */
+ * which nothing else touches; levels are handed over under the lock. A partial build
+ * (stop_distance or stop_triangles) stops at the first level that meets either: then the
+ * simplification runs at most one level ahead of the measure, and a level made but not
+ * measured when the measure stops is dropped. */
 typedef struct pipeline {
     iso_mesh_chain *chain;
     uint32_t *remap;           /* the simplification's scratch, per chain vertex */
-    int levels, threads;       /* levels to make; the chain's threads */
+    int levels, threads;       /* the last level to make; the chain's threads */
+    int first;                 /* the first level to make and measure */
+    double stop_distance;      /* >= 0: stop after the first level measured beyond it */
+    size_t stop_triangles;     /* > 0: stop after the first level made within it */
     pthread_mutex_t lock;
-    pthread_cond_t made_one;
+    pthread_cond_t changed;    /* made, measured or stop changed */
     int made;                  /* levels simplified (under the lock) */
+    int measured;              /* levels measured (under the lock) */
     int over;                  /* the simplification stopped: no more levels (under the lock) */
-    int stop;                  /* a measure failed: simplify no further (under the lock) */
+    int stalled;               /* a level lost no triangle: the chain ends (under the lock) */
+    int stop;                  /* a measure failed or met stop_distance: simplify no further
+                                * (under the lock) */
     int rc_simplify, rc_measure, rc_prepare;
     iso_error err_simplify, err_measure;
-    iso_mesh_grid *grid;       /* level 0's (PASS 3), made by prepare */
+    iso_mesh_grid *grid;       /* level 0's (PASS 3), made by prepare or the chain's */
     iso_mesh_samples *samples; /* level 0's (NULL without memory: each measure counts) */
     double samples_ms;
 } pipeline;
+
+/* Level 0's samples for the measures. Out of memory here leaves them NULL: each measure
+ * then counts level 0's samples itself, and reports its own lack of memory if that fails
+ * too. */
+static void prepare_samples(pipeline *p)
+{
+    iso_mesh level0 = view_of(p->chain, 0);
+    double start = iso_clock_ms();
+    if (p->levels >= p->first &&
+        iso_mesh_samples_build(&level0, ISO_CHAIN_SPACING_VOXELS * p->chain->voxel_size, &p->samples))
+        p->samples = NULL;
+    p->samples_ms = iso_clock_ms() - start;
+}
 
 /* PASS 1's census of level 0 (its pinches, whether it is closed, its volume) and PASS 3's
  * grid and samples of it: all the measure needs before level 1's, and nothing level 1's
@@ -410,12 +453,13 @@ static void prepare(pipeline *p)
         p->rc_prepare = ISO_E_NOMEM;
         return;
     }
-    double start = iso_clock_ms();
-    /* Out of memory here leaves samples NULL: each measure then counts level 0's samples
-     * itself, and reports its own lack of memory if that fails too. */
-    if (p->levels > 0 && iso_mesh_samples_build(&level0, ISO_CHAIN_SPACING_VOXELS * c->voxel_size, &p->samples))
-        p->samples = NULL;
-    p->samples_ms = iso_clock_ms() - start;
+    prepare_samples(p);
+}
+
+/* Whether level k ends a partial build made for stop_triangles. */
+static int enough_triangles(const pipeline *p, int k)
+{
+    return p->stop_triangles && p->chain->level[k].triangle_count <= p->stop_triangles;
 }
 
 /* Level 1 (share 0, on all threads: its slabs' shares go to any thread free, so also to
@@ -429,9 +473,9 @@ static void first_stage(void *context, int t, int threads)
         return;
     }
     if (p->levels > 0) {
-        p->rc_simplify = add_level(p->chain, 1, p->threads, p->remap, &p->err_simplify);
-        p->made = 1;
-        p->over = p->rc_simplify || p->levels == 1;
+        p->rc_simplify = add_level(p->chain, 1, p->threads, p->remap, &p->stalled, &p->err_simplify);
+        p->made = !p->stalled;
+        p->over = p->rc_simplify || p->stalled || p->levels == 1 || enough_triangles(p, 1);
     } else {
         p->over = 1;
     }
@@ -439,42 +483,53 @@ static void first_stage(void *context, int t, int threads)
 
 static void simplify_all(pipeline *p)
 {
-    for (int k = p->made + 1; k <= p->levels && !p->rc_simplify; k++) {
+    for (int k = p->made + 1; k <= p->levels && !p->rc_simplify && !p->over; k++) {
         pthread_mutex_lock(&p->lock);
+        /* A partial build for a distance makes level k once level k - 2 is measured: one
+         * level made ahead of the measure, not more that may be dropped. */
+        while (p->stop_distance >= 0 && !p->stop && p->measured < k - 2)
+            pthread_cond_wait(&p->changed, &p->lock);
         int stop = p->stop;
         pthread_mutex_unlock(&p->lock);
-        int rc = stop ? 0 : add_level(p->chain, k, 1, p->remap, &p->err_simplify);
+        int stalled = 0, rc = stop ? 0 : add_level(p->chain, k, 1, p->remap, &stalled, &p->err_simplify);
         pthread_mutex_lock(&p->lock);
-        p->made = stop ? p->made : k; /* a failed level is still the chain's, to free */
-        p->over = stop || rc || k == p->levels;
+        p->made = stop || stalled ? p->made : k; /* a failed level is still the chain's, to free */
+        p->stalled = stalled;
+        p->over = stop || rc || stalled || k == p->levels || enough_triangles(p, k);
         p->rc_simplify = rc;
-        pthread_cond_broadcast(&p->made_one);
+        pthread_cond_broadcast(&p->changed);
         pthread_mutex_unlock(&p->lock);
-        if (stop || rc)
-            break;
     }
+    pthread_mutex_lock(&p->lock);
+    p->over = 1;
+    pthread_cond_broadcast(&p->changed);
+    pthread_mutex_unlock(&p->lock);
 }
 
 static void measure_all(pipeline *p)
 {
     double *bound = NULL;
-    for (int k = 1; k <= p->levels; k++) {
+    for (int k = p->first; k <= p->levels; k++) {
         pthread_mutex_lock(&p->lock);
         while (p->made < k && !p->over)
-            pthread_cond_wait(&p->made_one, &p->lock);
+            pthread_cond_wait(&p->changed, &p->lock);
         int ready = p->made >= k && !(p->made == k && p->rc_simplify), all = p->over;
         pthread_mutex_unlock(&p->lock);
         if (!ready)
             break;
         int threads = all || p->threads < 2 ? p->threads : p->threads - 1;
-        if ((p->rc_measure = measure_step(p->chain, p->grid, p->samples, k, threads, &bound, &p->err_measure))) {
-            pthread_mutex_lock(&p->lock);
-            p->stop = 1;
-            pthread_mutex_unlock(&p->lock);
+        int rc = measure_step(p->chain, p->grid, p->samples, k, threads, &bound, &p->err_measure);
+        if (k == p->first) /* level 0's samples, counted once for all levels, in the first one's time */
+            p->chain->level[k].measure_ms += p->samples_ms;
+        pthread_mutex_lock(&p->lock);
+        p->rc_measure = rc;
+        p->measured = rc ? p->measured : k;
+        p->stop = rc || (p->stop_distance >= 0 && p->chain->level[k].distance.p99 > p->stop_distance);
+        pthread_cond_broadcast(&p->changed);
+        int stop = p->stop;
+        pthread_mutex_unlock(&p->lock);
+        if (stop)
             break;
-        }
-        if (k == 1) /* level 0's samples, counted once for all levels, in level 1's time */
-            p->chain->level[1].measure_ms += p->samples_ms;
     }
     free(bound);
 }
@@ -488,29 +543,121 @@ static void pipeline_stage(void *context, int t, int threads)
         measure_all(context);
 }
 
-int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
-                         iso_mesh_chain **out, iso_error *err)
+size_t iso_mesh_chain_target(size_t triangles, int k)
+{
+    size_t half = k / 2 < 64 ? triangles >> (k / 2) : 0;
+    return k % 2 ? (size_t)((double)half * M_SQRT1_2) : half;
+}
+
+/* The levels past 0 a full chain of a surface of `triangles` has: each with fewer
+ * triangles than the one before, at least 1. */
+static int levels_for(size_t triangles)
+{
+    int k = 0;
+    while (k < ISO_CHAIN_LEVELS && iso_mesh_chain_target(triangles, k + 1) >= 1 &&
+           iso_mesh_chain_target(triangles, k + 1) < iso_mesh_chain_target(triangles, k))
+        k++;
+    return k;
+}
+
+int iso_mesh_chain_covers(const iso_mesh_chain *chain, double distance, size_t triangles)
+{
+    const iso_mesh_chain_level *last = &chain->level[chain->levels - 1];
+    return !chain->partial || (distance >= 0 && chain->levels > 1 && last->distance.p99 > distance) ||
+           (triangles && last->triangle_count <= triangles);
+}
+
+/* Level 0's vertices, counted after level 1 (whose scratch remap is). */
+static void count_level0_vertices(iso_mesh_chain *c, uint32_t *remap)
+{
+    const iso_mesh_chain_level *l0 = &c->level[0];
+    memset(remap, 0, c->vertex_count * sizeof *remap);
+    size_t used = 0;
+    for (size_t i = 0; i < 3 * l0->triangle_count; i++)
+        used += !remap[l0->indices[i]]++;
+    c->level[0].vertex_count = used;
+}
+
+/* PASS 2 and 3 from the chain's last level on, until the stop (grow's callers). Level 0's
+ * census and grid come first when the chain has only level 0. On return the chain holds
+ * the levels measured (those made past them are dropped), counted in levels, bytes and
+ * partial, even on failure (then the levels before the failing one). */
+static int grow(iso_mesh_chain *c, int threads, double stop_distance, size_t stop_triangles, iso_error *err)
+{
+    double start = iso_clock_ms();
+    uint32_t *remap = malloc((c->vertex_count ? c->vertex_count : 1) * sizeof *remap);
+    if (!remap)
+        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory");
+    int fresh = c->levels == 1;
+    pipeline p = {.chain = c, .remap = remap, .threads = iso_parallel_threads(threads),
+                  .levels = levels_for(c->level[0].triangle_count), .first = c->levels,
+                  .made = c->levels - 1, .measured = c->levels - 1, .stop_distance = stop_distance,
+                  .stop_triangles = stop_triangles, .lock = PTHREAD_MUTEX_INITIALIZER,
+                  .changed = PTHREAD_COND_INITIALIZER};
+    int rc = 0;
+    if (fresh && p.threads > 1) {
+        iso_parallel_run(2, first_stage, &p);
+    } else if (fresh) {
+        prepare(&p);
+        first_stage(&p, 0, 1);
+    } else {
+        p.over = p.made >= p.levels;
+        if (!(rc = iso_mesh_chain_grid_build(c) ? ISO_E_NOMEM : 0))
+            prepare_samples(&p);
+        p.grid = c->grid;
+    }
+    if (fresh) {
+        count_level0_vertices(c, remap);
+        c->grid = p.grid;
+        c->bytes += iso_mesh_grid_bytes(c->grid);
+        rc = p.rc_prepare;
+    }
+    if (rc)
+        rc = iso_error_set(err, ISO_E_NOMEM, "chain: no memory for the grid of %zu triangles",
+                           c->level[0].triangle_count);
+    if (!rc && p.threads > 1 && !p.over) { /* share 0 makes the levels, share 1 measures them */
+        iso_parallel_run(2, pipeline_stage, &p);
+    } else if (!rc) {
+        simplify_all(&p);
+        measure_all(&p);
+    }
+    iso_mesh_samples_destroy(p.samples);
+    for (int k = p.measured + 1; k <= p.made; k++) { /* made, not measured: dropped */
+        c->bytes -= 3 * c->level[k].triangle_count * sizeof *c->level[k].indices;
+        free(c->level[k].indices);
+        c->level[k] = (iso_mesh_chain_level){0};
+    }
+    c->levels = 1 + p.measured;
+    c->partial = !(p.stalled && p.measured == p.made) && p.measured < p.levels;
+    if (!rc && (p.rc_simplify || p.rc_measure)) {
+        rc = p.rc_simplify ? p.rc_simplify : p.rc_measure;
+        if (err)
+            *err = p.rc_simplify ? p.err_simplify : p.err_measure;
+    }
+    pthread_mutex_destroy(&p.lock);
+    pthread_cond_destroy(&p.changed);
+    free(remap);
+    c->build_ms += iso_clock_ms() - start;
+    return rc;
+}
+
+int iso_mesh_chain_build_until(const iso_mesh *exact, double voxel_size, int threads, double distance,
+                               size_t triangles, iso_mesh_chain **out, iso_error *err)
 {
     *out = NULL;
     if (!(voxel_size > 0) || !isfinite(voxel_size))
         return iso_error_set(err, ISO_E_ARGUMENT, "chain: voxel size %g must be > 0", voxel_size);
     double start = iso_clock_ms();
     iso_mesh_chain *c = calloc(1, sizeof *c);
-    uint32_t *remap = malloc((exact->vertex_count ? exact->vertex_count : 1) * sizeof *remap);
-    if (!c || !remap) {
-        free(c);
-        free(remap);
+    if (!c)
         return iso_error_set(err, ISO_E_NOMEM, "chain: no memory");
-    }
     c->voxel_size = voxel_size;
     c->vertex_count = exact->vertex_count;
     c->positions = malloc((3 * exact->vertex_count + 1) * sizeof *c->positions);
     c->level[0].indices = malloc((3 * exact->triangle_count + 1) * sizeof *c->level[0].indices);
+    c->levels = 1;
     if (!c->positions || !c->level[0].indices) {
-        free(c->level[0].indices);
-        c->levels = 0;
         iso_mesh_chain_destroy(c);
-        free(remap);
         return iso_error_set(err, ISO_E_NOMEM, "chain: no memory for %zu triangles", exact->triangle_count);
     }
     /* PASS 1 */
@@ -519,54 +666,36 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
     if (exact->triangle_count)
         memcpy(c->level[0].indices, exact->indices, 3 * exact->triangle_count * sizeof *exact->indices);
     c->level[0].triangle_count = exact->triangle_count;
-    c->levels = 1;
     c->level[0].vertex_count = exact->vertex_count;
     c->bytes = sizeof *c + 3 * exact->vertex_count * sizeof *c->positions +
                3 * exact->triangle_count * sizeof *exact->indices;
-    pipeline p = {.chain = c, .remap = remap, .threads = iso_parallel_threads(threads),
-                  .lock = PTHREAD_MUTEX_INITIALIZER, .made_one = PTHREAD_COND_INITIALIZER};
-    while (p.levels < ISO_CHAIN_LEVELS && (exact->triangle_count >> (p.levels + 1)) >= 1)
-        p.levels++;
-    if (p.threads > 1) {
-        iso_parallel_run(2, first_stage, &p);
-    } else {
-        prepare(&p);
-        first_stage(&p, 0, 1);
-    }
-    /* Level 0's vertices, counted after level 1 (whose scratch remap is) */
-    memset(remap, 0, exact->vertex_count * sizeof *remap);
-    size_t used = 0;
-    for (size_t i = 0; i < 3 * exact->triangle_count; i++)
-        used += !remap[exact->indices[i]]++;
-    c->level[0].vertex_count = used;
-    c->grid = p.grid;
-    c->bytes += iso_mesh_grid_bytes(c->grid);
-    int rc = p.rc_prepare ? iso_error_set(err, ISO_E_NOMEM, "chain: no memory for the grid of %zu triangles",
-                                          exact->triangle_count)
-                          : 0;
-    if (!rc && p.threads > 1 && !p.over) { /* share 0 makes the levels, share 1 measures them */
-        iso_parallel_run(2, pipeline_stage, &p);
-    } else if (!rc) {
-        simplify_all(&p);
-        measure_all(&p);
-    }
-    iso_mesh_samples_destroy(p.samples);
-    c->levels = 1 + p.made;
-    if (!rc && (p.rc_simplify || p.rc_measure)) {
-        rc = p.rc_simplify ? p.rc_simplify : p.rc_measure;
-        if (err)
-            *err = p.rc_simplify ? p.err_simplify : p.err_measure;
-    }
-    pthread_mutex_destroy(&p.lock);
-    pthread_cond_destroy(&p.made_one);
-    free(remap);
+    c->build_ms = iso_clock_ms() - start;
+    int rc = grow(c, threads, distance, triangles, err);
     if (rc) {
         iso_mesh_chain_destroy(c);
         return rc;
     }
-    c->build_ms = iso_clock_ms() - start;
     *out = c;
     return 0;
+}
+
+int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
+                         iso_mesh_chain **out, iso_error *err)
+{
+    return iso_mesh_chain_build_until(exact, voxel_size, threads, -1, 0, out, err);
+}
+
+int iso_mesh_chain_extend_until(iso_mesh_chain *chain, int threads, double distance, size_t triangles,
+                                iso_error *err)
+{
+    if (!chain->partial || ((distance >= 0 || triangles) && iso_mesh_chain_covers(chain, distance, triangles)))
+        return 0;
+    return grow(chain, threads, distance, triangles, err);
+}
+
+int iso_mesh_chain_extend(iso_mesh_chain *chain, int threads, iso_error *err)
+{
+    return iso_mesh_chain_extend_until(chain, threads, -1, 0, err);
 }
 
 int iso_mesh_chain_grid_build(iso_mesh_chain *chain)
@@ -591,9 +720,8 @@ int iso_mesh_chain_distance(const iso_mesh_chain *chain, const iso_mesh *mesh, i
 int iso_mesh_chain_pick_distance(const iso_mesh_chain *chain, double distance)
 {
     int best = 0;
-    for (int k = 1; k < chain->levels; k++)
-        if (chain->level[k].distance.p99 <= distance &&
-            chain->level[k].triangle_count < chain->level[best].triangle_count)
+    for (int k = 1; k < chain->levels && chain->level[k].distance.p99 <= distance; k++)
+        if (chain->level[k].triangle_count < chain->level[best].triangle_count)
             best = k;
     return best;
 }

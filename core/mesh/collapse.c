@@ -285,8 +285,8 @@ static int turns_over(const float *pu, const float *pv, const float *px, const f
 #define MAX_VALENCE 64 /* a free vertex with more triangles stays (its checks' scratch) */
 
 /* Whether the edge u->v's collapse keeps the surface a manifold without turning a
- * triangle over: 1 yes, 0 no, 2 the two ends are corners of a lone tetrahedron (the
- * collapse would fold it: it goes whole). a and b receive the edge's opposite corners.
+ * triangle over, and leaves no component without a closed form: 1 yes, 0 no. a and b
+ * receive the edge's opposite corners.
  * One walk over u's triangles gathers its neighbours (on the stack: no per-vertex marks
  * to write), finds the edge's two triangles and checks the others' turning; one over
  * v's checks the link condition. */
@@ -336,8 +336,10 @@ static int allowed(const collapser *c, uint32_t u, uint32_t v, uint32_t *a, uint
                 return 0;
         tetrahedron |= (x == *a && y == *b) || (x == *b && y == *a);
     }
-    if (facing_ab && tetrahedron)
-        return valence_v == 3 ? 2 : 0;
+    /* A lone tetrahedron's collapse would fold it; it stays, as its component's smallest
+     * closed form (no component of the surface goes). */
+    if (facing_ab && tetrahedron && valence_v == 3)
+        return 0;
     return 1;
 }
 
@@ -358,26 +360,6 @@ static void remove_vertex(collapser *c, uint32_t v)
     c->flags[v] |= REMOVED;
     c->head[v] = NONE;
     heap_remove(c, v);
-}
-
-/* The lone tetrahedron of u, v, a and b goes whole: u's and v's triangles are its four. */
-static void drop_tetrahedron(collapser *c, uint32_t u, uint32_t v, uint32_t a, uint32_t b)
-{
-    uint32_t ends[2] = {u, v};
-    for (int i = 0; i < 2; i++)
-        for (uint32_t k = c->head[ends[i]]; k != NONE; k = c->next[k])
-            if (!c->dead[k / 3])
-                c->dead[k / 3] = 1, c->alive--;
-    remove_vertex(c, u);
-    remove_vertex(c, v);
-    uint32_t corners[2] = {a, b};
-    for (int i = 0; i < 2; i++) {
-        compact(c, corners[i]);
-        if (c->head[corners[i]] == NONE)
-            remove_vertex(c, corners[i]);
-        else
-            order(c, corners[i]);
-    }
 }
 
 /* PASS 5: u onto v, the edge's opposite corners a and b. */
@@ -641,10 +623,7 @@ size_t iso_collapser_run(collapser *c, size_t target_triangles, double target_er
             continue;
         }
         c->worst = fmax(c->worst, c->key[u]);
-        if (ok == 2)
-            drop_tetrahedron(c, u, c->to[u], a, b);
-        else
-            collapse(c, u, c->to[u], a, b);
+        collapse(c, u, c->to[u], a, b);
     }
     return c->alive;
 }

@@ -262,6 +262,23 @@ typedef struct iso_simplify_result {
 int iso_simplify(iso_mesh *mesh, const iso_simplify_params *params,
                  iso_simplify_result *result, iso_error *err);
 
+/* Connected components: triangles joined through shared vertices (components.c).
+ * iso_mesh_count_components counts them; iso_mesh_remove_components removes the closed
+ * ones (every edge used once each way) whose enclosed volume, |signed|, is under
+ * min_volume (position units cubed: mm3 in world space), with the vertices only they
+ * used; components with an open edge (cut by the volume's border) always stay. Vertices
+ * left keep their order, normals follow. Both O(V + T) and allocate 8 bytes per vertex
+ * (remove: and 24 per triangle, 40 per component) for the call; 0 or ISO_E_NOMEM (mesh
+ * unchanged). */
+typedef struct iso_mesh_components {
+    size_t components;        /* before the removal */
+    size_t removed, removed_triangles;
+    double removed_largest;   /* the largest bounding-box diagonal among those removed
+                               * (position units), 0 when none was */
+} iso_mesh_components;
+int iso_mesh_count_components(const iso_mesh *mesh, size_t *count);
+int iso_mesh_remove_components(iso_mesh *mesh, double min_volume, iso_mesh_components *out);
+
 /* Pinches: where two sheets of a surface meet at an edge of three or more triangles or at
  * a vertex whose triangles make two fans or more (joined through corners other than the
  * vertex). A watertight extraction has none; edge collapses that ignore the link
@@ -287,8 +304,8 @@ int iso_mesh_find_pinches(const iso_mesh *mesh, unsigned char *mark, iso_mesh_pi
  * open edges, on edges not used once each way, or whose triangles make more than one fan,
  * and free vertices of more than 64 triangles, do not move (collapses onto them stay
  * allowed), so the input's pinches stay as they were and are counted in
- * result->nonmanifold_edges and pinch_vertices. A lone tetrahedron (a speck) may go
- * whole. Every vertex is still an input vertex, the result watertight wherever the input
+ * result->nonmanifold_edges and pinch_vertices. No connected component goes: a lone
+ * tetrahedron (a speck's smallest closed form) is not collapsed. Every vertex is still an input vertex, the result watertight wherever the input
  * was; where topology allows no more collapses, more triangles than the target remain.
  * result->locked_vertices counts the vertices left that had a collapse refused. Needs
  * params->lock_border (without it, this is iso_simplify). O(T log T), allocates about 120
@@ -314,9 +331,11 @@ double iso_mesh_value_error(const iso_volume *vol, const iso_mesh *mesh, iso_spa
 
 /* A simplification chain: one surface at a few levels of detail, each measured.
  *
- * Level 0 is the surface given (the exact one); level k halves level k - 1's triangles
- * (iso_simplify_manifold's collapses with borders locked: 50%, 25%, 12.5%, ... of level
- * 0), each from the one before, so the chain costs little more than its first step; each
+ * Level 0 is the surface given (the exact one); level k has 1/sqrt(2) of level k - 1's
+ * triangles (iso_mesh_chain_target: 70.7%, 50%, 35.4%, 25%, ... 1.56% of level 0 at level
+ * 12) by iso_simplify_manifold's collapses with borders locked, each from the one before,
+ * so that doubling a distance changes the level wherever the surface allows, and no
+ * connected component of level 0 goes (a speck keeps its smallest closed form). Each
  * level is simplified over its own compact vertices, level 1 in two slabs on two threads
  * (each with its cut locked, collapsing in steps of error), the others on one thread while
  * another measures (chain.c). Every level indexes the one position array, a copy of
@@ -331,7 +350,7 @@ double iso_mesh_value_error(const iso_volume *vol, const iso_mesh *mesh, iso_spa
  * distance from level 0, measured (iso_mesh_distance_compute's measure, a = level 0,
  * samples three voxels apart), and meshoptimizer's estimate beside it. A built chain is read-only:
  * any number of threads may pick from it and copy meshes out of it at once. */
-#define ISO_CHAIN_LEVELS 6
+#define ISO_CHAIN_LEVELS 12
 #define ISO_CHAIN_SPACING_VOXELS 3 /* the measures' sample spacing */
 #define ISO_CHAIN_VOLUME_SLACK 1e-3 /* a closed level whose enclosed volume strays further
                                      * (relative) is moved along its normals */
@@ -370,8 +389,15 @@ typedef struct iso_mesh_chain {
     struct iso_mesh_grid *grid;   /* level 0's search grid, kept for later measures against
                                    * level 0 (iso_mesh_chain_distance); NULL below 2 triangles */
     size_t bytes;                 /* what it holds in memory, the grid included */
-    double build_ms;
+    double build_ms;              /* all of its building, extensions included */
+    int partial;                  /* 1: built only down to a stop (iso_mesh_chain_build_until);
+                                   * iso_mesh_chain_extend makes the rest. A file keeps no such
+                                   * flag: save only complete chains */
 } iso_mesh_chain;
+
+/* Level k's triangle target for a level 0 of `triangles`: floor(triangles / 2^(k/2)),
+ * the odd levels' from the even level before times 1/sqrt(2). */
+size_t iso_mesh_chain_target(size_t triangles, int k);
 
 /* Builds the chain of `exact` (copied; the caller keeps its mesh). voxel_size: position
  * units per voxel (> 0). threads: for the measures, 0 = all cores. On success *out is a
@@ -380,9 +406,32 @@ typedef struct iso_mesh_chain {
  * exact triangle). Returns 0, ISO_E_ARGUMENT or ISO_E_NOMEM. */
 int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
                          iso_mesh_chain **out, iso_error *err);
+/* The same chain built only down to the first level whose measured p99 is over
+ * `distance` (>= 0; < 0: no such stop) or that has at most `triangles` (> 0; 0: no such
+ * stop), whichever comes first: what a request for that distance or budget needs, each
+ * level made and measured as in the full build (a level made beyond the stop is dropped
+ * unmeasured). chain->partial says whether levels are left. Errors as the build's. */
+int iso_mesh_chain_build_until(const iso_mesh *exact, double voxel_size, int threads, double distance,
+                               size_t triangles, iso_mesh_chain **out, iso_error *err);
+/* Makes a partial chain's remaining levels (all of them, or down to the same kind of
+ * stop), each from the one before as the full build does: build_until then extend gives
+ * the full build's levels, index for index, and its measures. Levels already there are not
+ * moved or changed; the new ones are appended and chain->levels, partial, bytes and
+ * build_ms updated at the end: the caller keeps readers off the chain meanwhile (or reads
+ * levels below the count it saw under its own lock). On failure the chain keeps the
+ * levels made and measured before the failing one. Returns 0 (also when there was nothing
+ * to do), ISO_E_NOMEM. */
+int iso_mesh_chain_extend(iso_mesh_chain *chain, int threads, iso_error *err);
+int iso_mesh_chain_extend_until(iso_mesh_chain *chain, int threads, double distance, size_t triangles,
+                                iso_error *err);
+/* 1 when the chain answers a request for `distance` (>= 0) or `triangles` (> 0) as its
+ * full build would: it is complete, or its last level is beyond the distance or within
+ * the triangles. */
+int iso_mesh_chain_covers(const iso_mesh_chain *chain, double distance, size_t triangles);
 void iso_mesh_chain_destroy(iso_mesh_chain *chain);
-/* The level with the fewest triangles whose measured p99 distance is at most `distance`
- * (0, the exact surface, when none is). O(levels). */
+/* The level with the fewest triangles among levels 1..k whose measured p99 distances are
+ * all at most `distance` (0, the exact surface, when level 1's is over it), so that a
+ * partial chain (iso_mesh_chain_covers) answers as the full one. O(levels). */
 int iso_mesh_chain_pick_distance(const iso_mesh_chain *chain, double distance);
 /* The finest level with at most `triangles` triangles, else the coarsest. O(levels). */
 int iso_mesh_chain_pick_budget(const iso_mesh_chain *chain, size_t triangles);

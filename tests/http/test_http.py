@@ -590,8 +590,9 @@ draco3d.createDecoderModule({}).then(m => {
         assert r.status == 200 and 340 < nt <= 3004 >> 3, nt
         assert r.getheader("X-Iso-Budget-Fits") == "true" and r.getheader("X-Iso-Simplified") == "true"
         assert float(r.getheader("X-Iso-Tolerance")) == 0
-        # From the chain: its finest level within the budget, the measured distance beside.
-        assert int(r.getheader("X-Iso-Chain-Level")) == 3 and float(r.getheader("X-Iso-Distance-Mm")) > 0
+        # From the chain: its finest level within the budget (level 6: 3004 / 2^3 = 375; its
+        # levels are 1/sqrt(2) apart), the measured distance beside.
+        assert int(r.getheader("X-Iso-Chain-Level")) == 6 and float(r.getheader("X-Iso-Distance-Mm")) > 0
         mm = float(r.getheader("X-Iso-Simplify-Error-Mm"))
         voxels = float(r.getheader("X-Iso-Simplify-Error-Voxels"))
         assert 0 < mm < 2 and abs(voxels - mm / 0.75) <= 1e-5 * voxels, (mm, voxels)
@@ -638,6 +639,11 @@ draco3d.createDecoderModule({}).then(m => {
             best[i:i + 256] = d.min(axis=1)
         return best
 
+    def chain_target(triangles, k):
+        """Level k's triangle target (iso_mesh_chain_target): levels 1/sqrt(2) apart."""
+        half = triangles >> (k // 2)
+        return int(half * 0.7071067811865476) if k % 2 else half
+
     def distance_from_chain():
         exact = s.get(f"/v1/volumes/blob/mesh?level={level}&format=ply&normals=none&measures=true")
         zero = s.get(f"/v1/volumes/blob/mesh?level={level}&distance=0&format=ply&normals=none")
@@ -648,7 +654,7 @@ draco3d.createDecoderModule({}).then(m => {
         assert r.status == 200 and int(r.getheader("X-Iso-Cells-Visited")) == 0  # from the chain
         k, nt = int(r.getheader("X-Iso-Chain-Level")), int(r.getheader("X-Iso-Triangles"))
         p99, top = float(r.getheader("X-Iso-Distance-Mm")), float(r.getheader("X-Iso-Distance-Max-Mm"))
-        assert k >= 1 and nt <= 3004 >> k and 0 < p99 <= 0.3 and p99 <= top, (k, nt, p99, top)
+        assert k >= 1 and nt <= chain_target(3004, k) and 0 < p99 <= 0.3 and p99 <= top, (k, nt, p99, top)
         assert abs(float(r.getheader("X-Iso-Distance-Voxels")) - p99 / 0.75) <= 1e-5 * p99
         pos, faces = ply_mesh(r)
         exact_pos, exact_faces = ply_mesh(exact)
@@ -672,7 +678,8 @@ draco3d.createDecoderModule({}).then(m => {
                f"max {top:.4f} mm, enclosed volume {100 * (v - v0) / v0:+.3f}%", flush=True)
         assert abs(v - v0) <= 0.005 * v0, (v, v0)
         coarse = s.get(f"/v1/volumes/blob/mesh?level={level}&distance=100&format=ply&normals=none")
-        assert int(coarse.getheader("X-Iso-Chain-Level")) == 6 and int(coarse.getheader("X-Iso-Triangles")) <= 3004 >> 6
+        assert int(coarse.getheader("X-Iso-Chain-Level")) == 12, coarse.getheader("X-Iso-Chain-Level")
+        assert int(coarse.getheader("X-Iso-Triangles")) <= chain_target(3004, 12) == 3004 >> 6
         both = s.get(f"/v1/volumes/blob/mesh?level={level}&distance=1&budget=100")
         assert both.status == 400 and b"distance" in both.body, (both.status, both.body[:200])
         bad = s.get(f"/v1/volumes/blob/mesh?level={level}&distance=-1")

@@ -8,6 +8,7 @@
  * sort: the maxima and the 99th percentiles must agree to float rounding. Then the
  * simplification chain of a torus, level by level, against the same brute force. */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -466,8 +467,8 @@ static void test_chain_levels_are_measured_and_closed(void)
         CHECK_OK(iso_mesh_chain_mesh(chain, k, &m, &err), &err);
         CHECK_EQ(m.triangle_count, lv->triangle_count);
         CHECK_EQ(m.vertex_count, lv->vertex_count);
-        CHECKF(lv->triangle_count <= exact.triangle_count >> k &&
-               lv->triangle_count >= (exact.triangle_count >> k) * 8 / 10,
+        size_t target = iso_mesh_chain_target(exact.triangle_count, k);
+        CHECKF(lv->triangle_count <= target && lv->triangle_count >= target * 8 / 10,
                "level %d: %zu triangles of %zu", k, lv->triangle_count, exact.triangle_count);
         iso_census c;
         CHECK_OK(iso_census_compute(vol, &m, ISO_SPACE_INDEX, &c, &err), &err);
@@ -546,8 +547,8 @@ static void test_chain_in_slabs_stays_closed(void)
     for (int k = 1; k < two->levels && !check_failed(); k++) {
         const iso_mesh_chain_level *lv = &two->level[k];
         CHECK_OK(iso_mesh_chain_mesh(two, k, &m, &err), &err);
-        CHECKF(lv->triangle_count <= exact.triangle_count >> k &&
-               lv->triangle_count >= (exact.triangle_count >> k) * 9 / 10,
+        size_t target = iso_mesh_chain_target(exact.triangle_count, k);
+        CHECKF(lv->triangle_count <= target && lv->triangle_count >= target * 9 / 10,
                "level %d: %zu triangles of %zu", k, lv->triangle_count, exact.triangle_count);
         CHECKF(lv->triangle_count * 10 >= one->level[k].triangle_count * 9, "level %d: %zu and %zu", k,
                lv->triangle_count, one->level[k].triangle_count);
@@ -783,6 +784,107 @@ static void test_selected_percentile_is_exact(void)
     iso_vol_destroy(vol);
 }
 
+/* The chain's steps on a torus of about 10,000 triangles: every level has 0.6 to 0.8 of
+ * the triangles of the one before (1/sqrt(2) asked), measured p99 distances never fall
+ * from one level to the next, and doubling the distance of a level past 1 picks another,
+ * coarser level. */
+static void test_chain_steps_are_fine(void)
+{
+    iso_error err;
+    iso_mesh exact;
+    iso_volume *vol = field_surface("field:torus:64", 1.0, &exact);
+    if (!vol)
+        return;
+    iso_mesh_chain *chain = NULL;
+    CHECK_OK(iso_mesh_chain_build(&exact, 1, 2, &chain, &err), &err);
+    if (!chain)
+        return;
+    CHECKF(exact.triangle_count >= 8000, "%zu triangles", exact.triangle_count);
+    CHECK_EQ(chain->levels, ISO_CHAIN_LEVELS + 1);
+    CHECK_EQ(chain->partial, 0);
+    for (int k = 1; k < chain->levels; k++) {
+        const iso_mesh_chain_level *lv = &chain->level[k], *prev = &chain->level[k - 1];
+        double ratio = (double)lv->triangle_count / (double)prev->triangle_count;
+        printf("  level %d: %zu triangles (%.3f of the level before), p99 %.4f\n", k, lv->triangle_count, ratio,
+               lv->distance.p99);
+        CHECKF(ratio >= 0.6 && ratio <= 0.8, "level %d: %.3f of the level before", k, ratio);
+        CHECKF(lv->distance.p99 >= prev->distance.p99, "level %d: p99 %g after %g", k, lv->distance.p99,
+               prev->distance.p99);
+        double d = lv->distance.p99;
+        if (k >= 2 && k + 1 < chain->levels) /* level 1's p99 is near 0: level 2's is more than twice it */
+            CHECKF(iso_mesh_chain_pick_distance(chain, 2 * d) > iso_mesh_chain_pick_distance(chain, d),
+                   "level %d: %g and %g pick the same level", k, d, 2 * d);
+    }
+    iso_mesh_chain_destroy(chain);
+    iso_mesh_free(&exact);
+    iso_vol_destroy(vol);
+}
+
+/* Chains a and b have the same first `levels` levels: triangles, index arrays, measures. */
+static void check_same_levels(const iso_mesh_chain *a, const iso_mesh_chain *b, int levels)
+{
+    for (int k = 0; k < levels; k++) {
+        const iso_mesh_chain_level *x = &a->level[k], *y = &b->level[k];
+        CHECK_EQ(x->triangle_count, y->triangle_count);
+        CHECK_EQ(x->vertex_count, y->vertex_count);
+        CHECK_EQ(x->edges, y->edges);
+        CHECKF(x->triangle_count == y->triangle_count &&
+                   !memcmp(x->indices, y->indices, 3 * x->triangle_count * sizeof *x->indices),
+               "level %d: other triangles", k);
+        CHECKF(x->distance.p99 == y->distance.p99 && x->distance.max == y->distance.max &&
+                   x->offset == y->offset && x->volume_change == y->volume_change,
+               "level %d: p99 %g and %g, max %g and %g", k, x->distance.p99, y->distance.p99, x->distance.max,
+               y->distance.max);
+    }
+}
+
+/* A chain built only down to a request's level, then extended, is the full build's, level
+ * for level; built for a budget it stops at the first level within it. */
+static void test_partial_chain_then_extended(void)
+{
+    iso_error err;
+    iso_mesh exact;
+    iso_volume *vol = field_surface("field:torus:64", 1.0, &exact);
+    if (!vol)
+        return;
+    iso_mesh_chain *full = NULL, *part = NULL, *budget = NULL;
+    CHECK_OK(iso_mesh_chain_build(&exact, 1, 2, &full, &err), &err);
+    if (!full)
+        return;
+    double d = full->level[5].distance.p99; /* level 6's is larger (test_chain_steps_are_fine) */
+    CHECK_OK(iso_mesh_chain_build_until(&exact, 1, 2, d, 0, &part, &err), &err);
+    CHECK_OK(iso_mesh_chain_build_until(&exact, 1, 2, -1, full->level[3].triangle_count, &budget, &err), &err);
+    if (!part || !budget)
+        return;
+    CHECK_EQ(part->levels, 7);
+    CHECK_EQ(part->partial, 1);
+    CHECK(iso_mesh_chain_covers(part, d, 0) && !iso_mesh_chain_covers(part, 2 * full->level[6].distance.p99, 0));
+    CHECK_EQ(iso_mesh_chain_pick_distance(part, d), iso_mesh_chain_pick_distance(full, d));
+    CHECK(part->bytes < full->bytes);
+    check_same_levels(part, full, part->levels);
+    CHECK_EQ(budget->levels, 4);
+    CHECK(budget->partial && iso_mesh_chain_covers(budget, -1, full->level[3].triangle_count));
+    CHECK_EQ(iso_mesh_chain_pick_budget(budget, full->level[3].triangle_count), 3);
+    check_same_levels(budget, full, budget->levels);
+    /* Covered: nothing to do; then the rest, from a chain with no bounds of its last level. */
+    CHECK_OK(iso_mesh_chain_extend_until(part, 2, d, 0, &err), &err);
+    CHECK_EQ(part->levels, 7);
+    CHECK_OK(iso_mesh_chain_extend(part, 2, &err), &err);
+    CHECK_OK(iso_mesh_chain_extend(budget, 1, &err), &err);
+    CHECK_EQ(part->levels, full->levels);
+    CHECK_EQ(budget->levels, full->levels);
+    CHECK(!part->partial && !budget->partial && part->bytes == full->bytes);
+    check_same_levels(part, full, full->levels);
+    check_same_levels(budget, full, full->levels);
+    CHECK_OK(iso_mesh_chain_extend(part, 2, &err), &err); /* complete: nothing to do */
+    CHECK_EQ(part->levels, full->levels);
+    iso_mesh_chain_destroy(part);
+    iso_mesh_chain_destroy(budget);
+    iso_mesh_chain_destroy(full);
+    iso_mesh_free(&exact);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_parallel_squares_are_a_quarter_apart);
@@ -792,6 +894,8 @@ int main(void)
     CHECK_RUN(test_drawn_percentile_is_within_its_stated_error);
     CHECK_RUN(test_chain_levels_are_measured_and_closed);
     CHECK_RUN(test_chain_in_slabs_stays_closed);
+    CHECK_RUN(test_chain_steps_are_fine);
+    CHECK_RUN(test_partial_chain_then_extended);
     CHECK_RUN(test_reuse_between_levels_changes_nothing);
     CHECK_RUN(test_block_bounds_change_nothing);
     CHECK_RUN(test_selected_percentile_is_exact);

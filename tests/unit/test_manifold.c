@@ -147,9 +147,10 @@ static void test_thin_tube_is_not_pinched(void)
 }
 
 /* The thin tube with a lone tetrahedron (a speck) beside it, simplified as far as it
- * goes: the speck goes whole (its collapses would lay two of its faces onto each other,
- * so it is dropped at once, not folded), and what is left is closed, with no pinch. */
-static void test_speck_goes_whole(void)
+ * goes: the speck stays, its four triangles as they were (its collapses would lay two of
+ * its faces onto each other: no component of a surface goes), the tube is simplified, and
+ * what is left is closed, with no pinch. */
+static void test_speck_stays(void)
 {
     iso_mesh m;
     thin_tube(&m, 40, 0.5);
@@ -173,8 +174,11 @@ static void test_speck_goes_whole(void)
     size_t on_speck = 0;
     for (size_t i = 0; i < 3 * grown.triangle_count; i++)
         on_speck += grown.indices[i] >= s;
-    CHECKF(on_speck == 0, "%zu corners on the speck", on_speck);
-    CHECK(grown.triangle_count < m.triangle_count);
+    CHECKF(on_speck == 12, "%zu corners on the speck", on_speck);
+    CHECK(grown.triangle_count - 4 < m.triangle_count);
+    size_t components = 0;
+    CHECK_EQ(iso_mesh_count_components(&grown, &components), 0);
+    CHECK_EQ(components, 2);
     iso_mesh_free(&m);
     iso_mesh_free(&grown);
 }
@@ -198,7 +202,8 @@ static void check_real_chain(const iso_volume *vol, const iso_tree *tree, double
     CHECK_OK(iso_mesh_chain_build(&m, 1, 0, &chain, &err), &err);
     if (!chain)
         return;
-    CHECK_EQ(chain->levels, ISO_CHAIN_LEVELS + 1);
+    /* thin bone allows few collapses past 2.4% (level 11): the chain ends there */
+    CHECKF(chain->levels >= ISO_CHAIN_LEVELS && !chain->partial, "%d levels", chain->levels);
     size_t pinched_levels = 0;
     for (int k = 1; k < chain->levels; k++) {
         const iso_mesh_chain_level *lv = &chain->level[k];
@@ -391,7 +396,7 @@ int main(void)
 {
     CHECK_RUN(test_counts_on_hand_built_meshes);
     CHECK_RUN(test_thin_tube_is_not_pinched);
-    CHECK_RUN(test_speck_goes_whole);
+    CHECK_RUN(test_speck_stays);
     CHECK_RUN(test_real_chain_is_not_pinched);
     CHECK_RUN(test_chain_file_round_trip);
     return check_finish();
