@@ -40,6 +40,29 @@ static double voxel_size(const iso_volume *vol, const proto_pipeline_request *re
     return req->extract.space == ISO_SPACE_INDEX ? 1 : iso_vol_min_spacing(vol);
 }
 
+/* min_component in the mesh's units cubed: mm3, or index space's (a voxel encloses |det|
+ * of the index-to-world map's mm3). */
+static double component_volume(const iso_volume *vol, const proto_pipeline_request *req)
+{
+    double a[3][3], inv[3][3], det = 1;
+    if (req->extract.space == ISO_SPACE_INDEX && iso_vol_frame(vol, a, inv, &det) == 0)
+        return req->min_component / fabs(det);
+    return req->min_component;
+}
+
+/* The closed components under req->min_component removed from mesh (none unless asked),
+ * counted into *out. */
+static int remove_components(const iso_volume *vol, const proto_pipeline_request *req, iso_mesh *mesh,
+                             iso_mesh_components *out, iso_error *err)
+{
+    if (!(req->min_component > 0))
+        return 0;
+    if (iso_mesh_remove_components(mesh, component_volume(vol, req), out))
+        return iso_error_set(err, ISO_E_NOMEM, "no memory to find the surface's %zu triangles' components",
+                             mesh->triangle_count);
+    return 0;
+}
+
 /* The surface a request names: the level's (extract.h), or a segment's (segment.h). */
 static int surface(const iso_tree *tree, const proto_pipeline_request *req, iso_mesh *mesh,
                    iso_extract_stats *stats, iso_error *err)
@@ -127,21 +150,45 @@ static int complete_chain(const iso_tree *tree, const iso_volume *vol,
     return rc;
 }
 
+/* The surface's chain, built here (res->chain_built): the whole chain, or with
+ * req->chain_partial only down to the level the request needs; the surface first loses
+ * the components req->min_component removes. */
+static int build_chain(const iso_tree *tree, const iso_volume *vol, const proto_pipeline_request *req,
+                       proto_pipeline_result *res, iso_error *err)
+{
+    int rc;
+    if ((rc = surface(tree, req, &res->mesh, &res->stats, err)) ||
+        (rc = remove_components(vol, req, &res->mesh, &res->components, err)))
+        return rc;
+    rc = req->chain_partial ? iso_mesh_chain_build_until(&res->mesh, voxel_size(vol, req), req->extract.threads,
+                                                         req->budget ? -1 : req->distance, req->budget,
+                                                         &res->chain_built, err)
+                            : iso_mesh_chain_build(&res->mesh, voxel_size(vol, req), req->extract.threads,
+                                                   &res->chain_built, err);
+    if (rc)
+        return rc;
+    res->chain_built->min_component = req->min_component;
+    res->chain_built->components = res->components;
+    return complete_chain(tree, vol, req, res, res->chain_built, err);
+}
+
 /* Step 2 from the chain: the level that answers, copied out; built first when the caller
- * has none. A budget below the coarsest level simplifies that level further. */
+ * has none that answers the request as a full chain of the same surface would. A budget
+ * below the coarsest level simplifies that level further. */
 static int from_chain(const iso_tree *tree, const iso_volume *vol,
                       const proto_pipeline_request *req, proto_pipeline_result *res, iso_error *err)
 {
     const iso_mesh_chain *chain = req->chain;
     int rc = 0;
+    if (chain && (chain->min_component != req->min_component ||
+                  !iso_mesh_chain_covers(chain, req->budget ? -1 : req->distance, req->budget)))
+        chain = NULL;
     if (!chain) {
-        if ((rc = surface(tree, req, &res->mesh, &res->stats, err)) ||
-            (rc = iso_mesh_chain_build(&res->mesh, voxel_size(vol, req), req->extract.threads,
-                                       &res->chain_built, err)) ||
-            (rc = complete_chain(tree, vol, req, res, res->chain_built, err)))
+        if ((rc = build_chain(tree, vol, req, res, err)))
             return rc;
         chain = res->chain_built;
     }
+    res->components = chain->components;
     int k = req->budget ? iso_mesh_chain_pick_budget(chain, req->budget)
                         : iso_mesh_chain_pick_distance(chain, req->distance);
     if ((rc = iso_mesh_chain_mesh(chain, k, &res->mesh, err)))
@@ -203,13 +250,15 @@ static int budget_by_measure(const iso_tree *tree, const iso_volume *vol,
     res->budget_other_p99 = -1;
     if (rc || needs_chain)
         return rc;
-    const iso_mesh_chain *chain = req->chain ? req->chain : res->chain_built;
+    const iso_mesh_chain *chain = res->chain_built ? res->chain_built : req->chain;
+    iso_mesh_components removed = {0};
     iso_mesh ladder;
     iso_mesh_init(&ladder);
     iso_extract_stats stats;
     iso_budget_result chosen = {.tolerance = req->extract.tolerance, .fits = -1};
     iso_mesh_distance d;
     if ((rc = iso_extract_budget_faithful(tree, &req->extract, req->budget, &ladder, &stats, &chosen, err)) ||
+        (rc = remove_components(vol, req, &ladder, &removed, err)) ||
         (rc = iso_mesh_chain_distance(chain, &ladder, req->extract.threads, &d, err))) {
         iso_mesh_free(&ladder);
         return rc;
@@ -226,6 +275,9 @@ static int budget_by_measure(const iso_tree *tree, const iso_volume *vol,
     iso_mesh_free(&res->mesh);
     res->mesh = ladder;
     res->stats = stats;
+    res->stats.triangles = ladder.triangle_count;
+    res->stats.vertices = ladder.vertex_count;
+    res->components = removed;
     add_work(&res->stats, &before);
     res->chosen = chosen;
     res->distance = d;
@@ -412,8 +464,11 @@ int proto_pipeline_run(const iso_tree *tree, const iso_volume *vol,
     int measured_budget = !req->full_scan && req->budget && req->budget_chain && !req->budget_ladder_only;
     if (measured_budget)
         rc = budget_needs_chain(tree, req, res, &needs_chain, err);
-    if (!rc && !chained && !measured_budget)
-        rc = extract(tree, vol, req, res, err);
+    if (!rc && !chained && !measured_budget && !(rc = extract(tree, vol, req, res, err)) &&
+        !(rc = remove_components(vol, req, &res->mesh, &res->components, err))) {
+        res->stats.triangles = res->mesh.triangle_count;
+        res->stats.vertices = res->mesh.vertex_count;
+    }
     double t1 = iso_clock_ms();
     if (!rc && measured_budget)
         rc = budget_by_measure(tree, vol, req, needs_chain, res, err);

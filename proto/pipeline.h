@@ -36,8 +36,16 @@ typedef struct proto_pipeline_request {
                                  * distance, in position units; < 0 (the default): none */
     int budget_chain;           /* 1: a budget the faithful ladder cannot meet is answered
                                  * from the chain instead of a fresh simplification */
-    const iso_mesh_chain *chain;/* the chain of (level, tolerance, cap, space) when the
-                                 * caller has one; NULL: built here when needed */
+    const iso_mesh_chain *chain;/* the chain of (level, tolerance, cap, space, min_component)
+                                 * when the caller has one; NULL: built here when needed.
+                                 * One built with another min_component, or partial and not
+                                 * covering the request (iso_mesh_chain_covers), is not used */
+    int chain_partial;          /* 1: a chain built here stops at the request's level
+                                 * (iso_mesh_chain_build_until; the caller may extend it);
+                                 * 0: the whole chain */
+    double min_component;       /* > 0: the surface's closed components enclosing less than
+                                 * this many mm3 are removed before anything else is done
+                                 * with it (iso_mesh_remove_components); 0: none */
     size_t max_triangles;       /* refuse a larger mesh (ISO_E_LIMIT); 0: no limit */
     int normals;                /* B-spline order: 0 none, 2, 3 or 4 */
     int measure;                /* 1: census, area, enclosed volume */
@@ -82,6 +90,8 @@ typedef struct proto_pipeline_result {
     size_t faithful_triangles;  /* the mesh at the faithful tolerance has this many
                                  * triangles: the chain's count when req->chain has one,
                                  * else found here when a budget needed it */
+    iso_mesh_components components; /* what min_component removed (zero when not asked);
+                                 * removed_largest in the mesh's units (mm in world space) */
     int distance_measured;      /* `distance` below holds the final mesh's measured distance
                                  * from the surface of req->extract (a = that surface) */
     iso_mesh_distance distance;

@@ -98,10 +98,10 @@ const char *proto_format_extension(proto_format format) { return format_extensio
 
 /* The parameters, in the order the key lists them. */
 enum { P_LEVEL, P_TOLERANCE, P_NORMALS, P_FORMAT, P_QP, P_QN, P_SPEED, P_BUDGET, P_CAP, P_MEASURES,
-       P_DISTANCE, P_SMOOTHING, P_COUNT };
+       P_DISTANCE, P_SMOOTHING, P_MIN_COMPONENT, P_COUNT };
 static const char *const param_names[P_COUNT] = {"level", "tolerance", "normals", "format",
                                                  "qp", "qn", "speed", "budget", "cap",
-                                                 "measures", "distance", "smoothing"};
+                                                 "measures", "distance", "smoothing", "min_component"};
 
 static int parse_one(int which, const char *value, proto_mesh_request *out, proto_problem *problem)
 {
@@ -117,8 +117,10 @@ static int parse_one(int which, const char *value, proto_mesh_request *out, prot
         out->level += 0.0;
         return 0;
     case P_TOLERANCE:
-    case P_DISTANCE: {
-        double *v = which == P_TOLERANCE ? &out->tolerance : &out->distance;
+    case P_DISTANCE:
+    case P_MIN_COMPONENT: {
+        double *v = which == P_TOLERANCE ? &out->tolerance : which == P_DISTANCE ? &out->distance
+                                                                                 : &out->min_component;
         if (parse_decimal(key, value, v, problem))
             return -1;
         if (!(*v >= 0) || *v > PROTO_TOLERANCE_MAX)
@@ -199,15 +201,15 @@ static int takes(route_kind route, int which)
         return which != P_SMOOTHING;
     if (which == P_LEVEL || which == P_TOLERANCE || which == P_BUDGET)
         return 0;
-    return route == ROUTE_SEGMENT || (which != P_DISTANCE && which != P_MEASURES);
+    return route == ROUTE_SEGMENT || (which != P_DISTANCE && which != P_MEASURES && which != P_MIN_COMPONENT);
 }
 
 static int parse_params(route_kind route, const proto_param *params, size_t count, proto_mesh_request *out,
                         int seen[P_COUNT], proto_problem *problem)
 {
     static const char *const taken[] = {
-        "level, tolerance, normals, format, qp, qn, speed, budget, cap, measures and distance",
-        "normals, format, qp, qn, speed, cap, measures, distance and smoothing",
+        "level, tolerance, normals, format, qp, qn, speed, budget, cap, measures, distance and min_component",
+        "normals, format, qp, qn, speed, cap, measures, distance, smoothing and min_component",
         "normals, format (glb or glb-meshopt), qp, qn, speed, cap and smoothing"};
     char buf[40];
     *out = (proto_mesh_request){.normals = PROTO_NORMALS_DEFAULT,
@@ -283,6 +285,11 @@ size_t proto_mesh_request_key(const proto_mesh_request *req, char *buf, size_t s
     if (n >= 0 && req->distance >= 0) {
         size_t used = (size_t)n < size ? (size_t)n : size;
         int more = snprintf(buf ? buf + used : NULL, size - used, "&distance=%.17g", req->distance);
+        n = more < 0 ? more : n + more;
+    }
+    if (n >= 0 && req->min_component > 0) {
+        size_t used = (size_t)n < size ? (size_t)n : size;
+        int more = snprintf(buf ? buf + used : NULL, size - used, "&min_component=%.17g", req->min_component);
         n = more < 0 ? more : n + more;
     }
     if (n >= 0 && req->smoothing > 0) {

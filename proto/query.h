@@ -50,6 +50,8 @@ typedef struct proto_mesh_request {
     int measures;          /* measures=true: area, enclosed volume and the edge census in the
                             * headers; they cost more than the extraction, so only on request */
     double smoothing;      /* the segment routes: Gaussian sigma in mm, 0 (default) none */
+    double min_component;  /* mm3: closed components enclosing less are removed first; 0
+                            * (default) none */
 } proto_mesh_request;
 
 /* What went wrong with a request, for an application/problem+json body (RFC 9457). */

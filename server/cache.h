@@ -40,6 +40,9 @@ typedef struct srv_body {
     size_t exact_triangles;         /* the exact surface's triangles, when from a chain */
     size_t edges, pinch_edges, pinch_vertices; /* the answer's, when from a chain (mesh.h) */
     double vertex_offset_mm;        /* its vertices' move along the normals (0: none) */
+    int min_component_asked;        /* min_component was given: the two below count */
+    size_t components_removed;      /* closed components it removed */
+    double removed_largest_mm;      /* the largest one's bounding-box diagonal (0: none) */
     const char *budget_source;      /* static: "chain" or "tolerance" (pipeline.h), or NULL */
     double budget_other_mm;         /* the measured p99 of the candidate not chosen, or -1 */
     const char *chain_source;       /* static: how the chain was had (chains.h), or NULL */

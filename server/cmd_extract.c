@@ -41,8 +41,8 @@ static json_t *chain_json(const proto_pipeline_result *res)
             "folds_dropped", (json_int_t)c->level[k].folds_dropped,
             "offset", c->level[k].offset, "volume_change", c->level[k].volume_change,
             "simplify_ms", c->level[k].simplify_ms, "measure_ms", c->level[k].measure_ms));
-    return json_pack("{s:i, s:I, s:I, s:I, s:I, s:I, s:f, s:f, s:o}", "level", res->chain_level,
-                     "levels", (json_int_t)res->chain_levels, "exact_triangles",
+    return json_pack("{s:i, s:I, s:b, s:I, s:I, s:I, s:I, s:f, s:f, s:o}", "level", res->chain_level,
+                     "levels", (json_int_t)res->chain_levels, "partial", c ? c->partial : 0, "exact_triangles",
                      (json_int_t)res->exact_triangles, "edges", (json_int_t)res->pinches.edges,
                      "pinch_edges", (json_int_t)res->pinches.pinch_edges,
                      "pinch_vertices", (json_int_t)res->pinches.pinch_vertices,
@@ -53,8 +53,8 @@ static json_t *chain_json(const proto_pipeline_result *res)
 
 enum {
     EX_LEVEL, EX_TOLERANCE, EX_OUT, EX_JSON, EX_NORMALS, EX_CAP, EX_BUDGET, EX_NO_SIMPLIFY, EX_SIMPLIFY,
-    EX_DISTANCE, EX_THREADS, EX_HIERARCHY, EX_RESAMPLE, EX_INDEX_SPACE, EX_FULL_SCAN, EX_COARSEN,
-    EX_OPTIONS
+    EX_DISTANCE, EX_MIN_COMPONENT, EX_THREADS, EX_HIERARCHY, EX_RESAMPLE, EX_INDEX_SPACE, EX_FULL_SCAN,
+    EX_COARSEN, EX_OPTIONS
 };
 static const srv_option extract_options[EX_OPTIONS] = {
     [EX_LEVEL] = {"--level", "L", "the iso-level, in the volume's values (required)"},
@@ -67,6 +67,8 @@ static const srv_option extract_options[EX_OPTIONS] = {
     [EX_NO_SIMPLIFY] = {"--no-simplify", NULL, "with --budget: climb the whole tolerance ladder instead"},
     [EX_SIMPLIFY] = {"--simplify", "N", "simplify the mesh to N triangles (meshoptimizer)"},
     [EX_DISTANCE] = {"--distance", "D", "the coarsest simplification of the surface within D mm of it (p99)"},
+    [EX_MIN_COMPONENT] = {"--min-component", "V", "first remove the closed pieces of surface enclosing less than "
+                          "V mm3 (default 0: every piece is kept)"},
     [EX_THREADS] = {"--threads", "N", "threads of the build and of exact extraction (default: all cores)"},
     [EX_HIERARCHY] = {"--hierarchy", "FILE", "read the hierarchy from a file `isoserve build` wrote"},
     [EX_RESAMPLE] = {"--resample", "WxHxD", "box-filter the volume to these dims first (or N for NxNxN)"},
@@ -99,6 +101,7 @@ static int srv_cmd_extract(int argc, char **argv)
     int no_simplify = 0, i = 0, arg;
     double budget = 0, simplify = 0; /* triangles; 0: none */
     double distance = -1;            /* position units; < 0: none */
+    double min_component = 0;        /* mm3; 0: none */
     while ((arg = srv_next_arg(&srv_extract_command, argc, argv, &i, &value)) != SRV_ARG_END) {
         switch (arg) {
         case SRV_ARG_HELP: return 0;
@@ -123,6 +126,10 @@ static int srv_cmd_extract(int argc, char **argv)
         case EX_DISTANCE:
             if (srv_parse_number(value, &distance) || distance < 0)
                 return srv_fail("extract: --distance '%s' must be a finite number >= 0", value);
+            break;
+        case EX_MIN_COMPONENT:
+            if (srv_parse_number(value, &min_component) || min_component < 0)
+                return srv_fail("extract: --min-component '%s' must be a finite number of mm3 >= 0", value);
             break;
         case EX_THREADS:
             if (srv_parse_threads("extract", value, &params.threads))
@@ -178,6 +185,8 @@ static int srv_cmd_extract(int argc, char **argv)
     req.budget_ladder_only = no_simplify;
     req.simplify = (size_t)simplify;
     req.distance = distance;
+    req.chain_partial = 1; /* nothing keeps the chain: build what the request needs */
+    req.min_component = min_component;
     req.budget_chain = !no_simplify;
     req.normals = normals;
     req.measure = as_json;
@@ -239,6 +248,14 @@ static int srv_cmd_extract(int argc, char **argv)
             json_object_set_new(doc, "distance", distance_json(&res.distance));
         if (doc && res.chain_level >= 0)
             json_object_set_new(doc, "chain", chain_json(&res));
+        /* --min-component's removals; "removed_largest": the largest removed piece's
+         * bounding-box diagonal, in the mesh's units (mm in world space). */
+        if (doc && min_component > 0)
+            json_object_set_new(doc, "components", json_pack(
+                "{s:f, s:I, s:I, s:I, s:f}", "min_component_mm3", min_component,
+                "before", (json_int_t)res.components.components, "removed", (json_int_t)res.components.removed,
+                "removed_triangles", (json_int_t)res.components.removed_triangles,
+                "removed_largest", res.components.removed_largest));
         if (doc && watertight)
             json_object_update(doc, watertight);
         json_decref(watertight);

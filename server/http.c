@@ -47,7 +47,8 @@ static const char expose_headers[] =
     "X-Iso-Distance-Max-Mm, X-Iso-Distance-Voxels, X-Iso-Chain-Level, X-Iso-Exact-Triangles, "
     "X-Iso-Edges, X-Iso-Pinch-Edges, X-Iso-Pinch-Vertices, X-Iso-Vertex-Offset-Mm, "
     "X-Iso-Budget-Source, X-Iso-Budget-Other-Distance-Mm, X-Iso-Chain-Source, X-Iso-Chain-Load-Ms, "
-    "X-Iso-Chain-Cut-Ms, X-Iso-Chain-Build-Ms, X-Iso-Cache, X-Iso-Replica, X-Iso-Load, X-Iso-Total, Link";
+    "X-Iso-Chain-Cut-Ms, X-Iso-Chain-Build-Ms, X-Iso-Components-Removed, X-Iso-Removed-Largest-Mm, "
+    "X-Iso-Cache, X-Iso-Replica, X-Iso-Load, X-Iso-Total, Link";
 
 /* ---------------------------------------------------------------- responses */
 
@@ -574,6 +575,10 @@ static enum MHD_Result send_body(srv_server *s, struct MHD_Connection *c, srv_re
         add_number(r, "X-Iso-Pinch-Edges", "%.0f", (double)body->pinch_edges);
         add_number(r, "X-Iso-Pinch-Vertices", "%.0f", (double)body->pinch_vertices);
         add_number(r, "X-Iso-Vertex-Offset-Mm", "%.6g", body->vertex_offset_mm);
+    }
+    if (body->min_component_asked) {
+        add_number(r, "X-Iso-Components-Removed", "%.0f", (double)body->components_removed);
+        add_number(r, "X-Iso-Removed-Largest-Mm", "%.6g", body->removed_largest_mm);
     }
     if (body->measured) {
         add_number(r, "X-Iso-Measure-Ms", "%.3f", body->measure_ms);

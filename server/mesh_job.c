@@ -4,6 +4,7 @@
 
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "base/base.h"
 #include "pipeline.h"
@@ -33,6 +34,7 @@ static void pipeline_request(const srv_mesh_job *job, proto_pipeline_request *re
     req->budget = r->budget;
     req->budget_chain = 1;
     req->distance = r->distance;
+    req->min_component = r->min_component;
     req->max_triangles = job->max_triangles;
     req->normals = r->normals;
     req->measure = r->measures;
@@ -135,6 +137,9 @@ static void chain_params(const srv_mesh_job *job, char *params, size_t size)
                  r->smoothing, r->cap);
     else
         srv_chain_level_params(params, size, r->level, r->tolerance, r->cap);
+    size_t used = strlen(params); /* a chain of a surface with components removed is another */
+    if (r->min_component > 0 && used < size)
+        snprintf(params + used, size - used, "&min_component=%.17g", r->min_component);
 }
 
 /* The chain a request uses: its registry entry (held until chain_done), how it was found
@@ -304,6 +309,9 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     body->pinch_edges = res.pinches.pinch_edges;
     body->pinch_vertices = res.pinches.pinch_vertices;
     body->vertex_offset_mm = res.vertex_offset;
+    body->min_component_asked = req.min_component > 0;
+    body->components_removed = res.components.removed;
+    body->removed_largest_mm = res.components.removed_largest;
     body->budget_source = res.budget_source;
     body->budget_other_mm = res.budget_other_p99;
     body->area_mm2 = res.area;

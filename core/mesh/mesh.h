@@ -393,6 +393,11 @@ typedef struct iso_mesh_chain {
     int partial;                  /* 1: built only down to a stop (iso_mesh_chain_build_until);
                                    * iso_mesh_chain_extend makes the rest. A file keeps no such
                                    * flag: save only complete chains */
+    double min_component;         /* the caller's: the surface had its closed components
+                                   * enclosing less than this removed before the chain was
+                                   * built (iso_mesh_remove_components, what it removed in
+                                   * `components`); 0: none. Not in the file */
+    iso_mesh_components components;
 } iso_mesh_chain;
 
 /* Level k's triangle target for a level 0 of `triangles`: floor(triangles / 2^(k/2)),

@@ -127,12 +127,26 @@ else
 fi
 # ijk's surface at 3000 is open strips: simplified far enough, a level has every vertex on a
 # border, so the next step's heap is empty (it crashed the collapser). The chain then ends
-# at that level.
-if $bin extract field:ijk:32 --level 3000 --distance 0 --normals none --json > "$tmp/lk.json" &&
-   [ "$(json "$tmp/lk.json" "(d['chain']['level'], d['triangles'] == d['chain']['built'][0]['triangles'], all(a['triangles'] >= b['triangles'] > 0 for a, b in zip(d['chain']['built'], d['chain']['built'][1:])), len(d['chain']['built']) > 2)")" = "(0, True, True, True)" ]; then
+# at that level; a distance of 1000 mm asks for all of it.
+if $bin extract field:ijk:32 --level 3000 --distance 1000 --normals none --json > "$tmp/lk.json" &&
+   [ "$(json "$tmp/lk.json" "(d['chain']['level'] == len(d['chain']['built']) - 1, d['triangles'] == d['chain']['built'][-1]['triangles'], all(a['triangles'] >= b['triangles'] > 0 for a, b in zip(d['chain']['built'], d['chain']['built'][1:])), len(d['chain']['built']) > 2)")" = "(True, True, True, True)" ]; then
     pass distance_all_locked
 else
     fail distance_all_locked "$(cat "$tmp/lk.json")"
+fi
+# --distance builds the chain only down to the level it needs (the first one beyond D),
+# marked partial. --min-component V: closed pieces enclosing less than V mm3 go first,
+# counted in "components"; the sphere (radius 16.5: a bounding-box diagonal of 57 mm)
+# stays under V = 1, goes under V = 1e9.
+check_refusal min_component_negative "--min-component '-1'" $bin extract field:sphere:16 --level 1 --min-component -1
+if $bin extract field:sphere:40 --level 3 --distance 0.1 --min-component 1 --normals none --json > "$tmp/mc1.json" &&
+   $bin extract field:sphere:40 --level 3 --min-component 1e9 --normals none --json > "$tmp/mc9.json" &&
+   [ "$(json "$tmp/dd.json" "(d['chain']['partial'], d['chain']['built'][-1]['p99'] > 0.3, len(d['chain']['built']) == d['chain']['level'] + 2)")" = "(True, True, True)" ] &&
+   [ "$(json "$tmp/mc1.json" "(d['components'], d['chain']['level'] > 0)")" = "({'min_component_mm3': 1.0, 'before': 1, 'removed': 0, 'removed_triangles': 0, 'removed_largest': 0.0}, True)" ] &&
+   [ "$(json "$tmp/mc9.json" "(d['components']['removed'], d['components']['removed_triangles'] == $(json "$tmp/dx.json" "d['triangles']"), 57 < d['components']['removed_largest'] < 58, d['triangles'])")" = "(1, True, True, 0)" ]; then
+    pass min_component
+else
+    fail min_component "$(cat "$tmp/dd.json" "$tmp/mc1.json" "$tmp/mc9.json")"
 fi
 printf 'NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n\nshort' > "$tmp/short.nrrd"
 check_refusal truncated_nrrd "short.nrrd" $bin extract "$tmp/short.nrrd" --level 1

@@ -686,6 +686,28 @@ draco3d.createDecoderModule({}).then(m => {
         assert bad.status == 400 and b"distance" in bad.body, (bad.status, bad.body[:200])
     check("distance_from_chain", distance_from_chain)
 
+    # min_component=: closed components enclosing less (mm3) go before anything else, counted
+    # in X-Iso-Components-Removed with the largest one's bounding-box diagonal; the blob is
+    # one closed component of about 3004 triangles.
+    def min_component_removed():
+        exact = s.get(f"/v1/volumes/blob/mesh?level={level}&format=ply&normals=none")
+        assert exact.getheader("X-Iso-Components-Removed") is None
+        kept = s.get(f"/v1/volumes/blob/mesh?level={level}&distance=0.3&min_component=1&format=ply&normals=none")
+        assert kept.status == 200 and kept.getheader("X-Iso-Components-Removed") == "0", kept.status
+        assert float(kept.getheader("X-Iso-Removed-Largest-Mm")) == 0
+        gone = s.get(f"/v1/volumes/blob/mesh?level={level}&distance=0.3&min_component=1e12&format=ply&normals=none")
+        assert gone.status == 200 and gone.getheader("X-Iso-Components-Removed") == "1", gone.status
+        assert int(gone.getheader("X-Iso-Triangles")) == 0
+        pos, _ = ply_mesh(exact)
+        diagonal = float(np.linalg.norm(pos.max(axis=0).astype(np.float64) - pos.min(axis=0)))
+        largest = float(gone.getheader("X-Iso-Removed-Largest-Mm"))
+        assert abs(largest - diagonal) <= 1e-5 * diagonal, (largest, diagonal)
+        exact_gone = s.get(f"/v1/volumes/blob/mesh?level={level}&min_component=1e12&format=ply&normals=none")
+        assert exact_gone.status == 200 and exact_gone.getheader("X-Iso-Components-Removed") == "1"
+        bad = s.get(f"/v1/volumes/blob/mesh?level={level}&min_component=-1")
+        assert bad.status == 400 and b"min_component" in bad.body, (bad.status, bad.body[:200])
+    check("min_component_removed", min_component_removed)
+
     # measures=true: the same bytes, another cache entry, and the area and closedness of
     # exactly those triangles in the headers.
     def measures_on_request():

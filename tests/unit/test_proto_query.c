@@ -57,6 +57,38 @@ static void test_query_distance(void)
     CHECKF(pr.status == 400 && !strcmp(pr.parameter, "distance") && strstr(pr.detail, "budget"), "%s", pr.detail);
 }
 
+/* min_component=: mm3, >= 0, with distance or budget or alone; spelt in the key only when
+ * above 0, after distance; not on the all-segments route. */
+static void test_query_min_component(void)
+{
+    proto_mesh_request r;
+    proto_problem pr;
+    proto_param none[] = {P("level", "700")};
+    CHECK_EQ(parse(none, 1, &r, &pr), 0);
+    CHECK(r.min_component == 0);
+    char key[512], plain[512];
+    proto_mesh_request_key(&r, plain, sizeof plain);
+    CHECK(!strstr(plain, "min_component"));
+    proto_param given[] = {P("level", "700"), P("distance", "1"), P("min_component", "2.5")};
+    CHECK_EQ(parse(given, 3, &r, &pr), 0);
+    CHECK(r.min_component == 2.5);
+    size_t n = proto_mesh_request_key(&r, key, sizeof key);
+    CHECKF(n == strlen(key) && !strcmp(strstr(key, "&distance="), "&distance=1&min_component=2.5"), "%s", key);
+    proto_param zero[] = {P("level", "700"), P("min_component", "0")};
+    CHECK_EQ(parse(zero, 2, &r, &pr), 0);
+    proto_mesh_request_key(&r, key, sizeof key);
+    CHECKF(!strcmp(key, plain), "%s", key);
+    proto_param negative[] = {P("level", "700"), P("min_component", "-1")};
+    CHECK_EQ(parse(negative, 2, &r, &pr), -1);
+    CHECK(pr.status == 400 && !strcmp(pr.parameter, "min_component"));
+    proto_param all[] = {P("min_component", "1")};
+    memset(&pr, 0, sizeof pr);
+    CHECK_EQ(proto_segment_request_parse(all, 1, 1, &r, &pr), -1);
+    CHECK(pr.status == 400 && !strcmp(pr.parameter, "min_component"));
+    CHECK_EQ(proto_segment_request_parse(all, 1, 0, &r, &pr), 0);
+    CHECK(r.min_component == 1);
+}
+
 static void test_query_defaults_and_values(void)
 {
     proto_mesh_request r;
@@ -461,5 +493,6 @@ int main(void)
     CHECK_RUN(test_levels_skip_padding);
     CHECK_RUN(test_budget_picks_finest_fit);
     CHECK_RUN(test_query_distance);
+    CHECK_RUN(test_query_min_component);
     return check_finish();
 }
