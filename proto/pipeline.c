@@ -197,6 +197,11 @@ static int from_chain(const iso_tree *tree, const iso_volume *vol,
     res->chain_levels = (size_t)chain->levels;
     res->exact_triangles = chain->level[0].triangle_count;
     res->distance = chain->level[k].distance;
+    /* A level a build for another distance measured without its maximum: measured here,
+     * as the chain would (the same p99 and maximum). */
+    if (isnan(res->distance.max) &&
+        (rc = iso_mesh_chain_distance(chain, &res->mesh, req->extract.threads, &res->distance, err)))
+        return rc;
     res->distance_measured = 1;
     res->pinches = (iso_mesh_pinches){.edges = chain->level[k].edges,
                                       .pinch_edges = chain->level[k].nonmanifold_edges,

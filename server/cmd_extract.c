@@ -30,17 +30,23 @@ static json_t *chain_json(const proto_pipeline_result *res)
 {
     const iso_mesh_chain *c = res->chain_built;
     json_t *levels = json_array();
-    for (int k = 0; c && levels && k < c->levels; k++)
-        json_array_append_new(levels, json_pack(
+    for (int k = 0; c && levels && k < c->levels; k++) {
+        json_t *level = json_pack(
             "{s:I, s:f, s:f, s:f, s:I, s:I, s:I, s:I, s:f, s:f, s:f, s:f}", "triangles",
             (json_int_t)c->level[k].triangle_count, "p99", c->level[k].distance.p99,
-            "max", c->level[k].distance.max, "estimate", c->level[k].estimate,
+            "max", isnan(c->level[k].distance.max) ? 0.0 : c->level[k].distance.max,
+            "estimate", c->level[k].estimate,
             "edges", (json_int_t)c->level[k].edges,
             "nonmanifold_edges", (json_int_t)c->level[k].nonmanifold_edges,
             "pinch_vertices", (json_int_t)c->level[k].pinch_vertices,
             "folds_dropped", (json_int_t)c->level[k].folds_dropped,
             "offset", c->level[k].offset, "volume_change", c->level[k].volume_change,
-            "simplify_ms", c->level[k].simplify_ms, "measure_ms", c->level[k].measure_ms));
+            "simplify_ms", c->level[k].simplify_ms, "measure_ms", c->level[k].measure_ms);
+        /* a partial chain's level measured without its maximum (mesh.h) */
+        if (level && isnan(c->level[k].distance.max))
+            json_object_set_new(level, "max", json_null());
+        json_array_append_new(levels, level);
+    }
     return json_pack("{s:i, s:I, s:b, s:I, s:I, s:I, s:I, s:f, s:f, s:o}", "level", res->chain_level,
                      "levels", (json_int_t)res->chain_levels, "partial", c ? c->partial : 0, "exact_triangles",
                      (json_int_t)res->exact_triangles, "edges", (json_int_t)res->pinches.edges,

@@ -1203,12 +1203,14 @@ static int one_way(const iso_mesh *src, const iso_mesh *dst_mesh, const iso_mesh
     for (size_t i = 0; i < n; i++)
         d.start_max = d.start_max > dist[i] ? d.start_max : dist[i];
     atomic_init(&d.next_chunk, 0);
-    iso_parallel_run(workers, measure_max, &d); /* PASS 5 */
-    out->max = d.start_max;
+    if (!(reuse && reuse->without_max))
+        iso_parallel_run(workers, measure_max, &d); /* PASS 5 */
+    out->max = reuse && reuse->without_max ? NAN : d.start_max;
     for (int w = 0; w < workers; w++) {
         if (d.part_failed[w])
             goto done;
-        out->max = out->max > d.part_max[w] ? out->max : d.part_max[w];
+        if (!isnan(out->max))
+            out->max = out->max > d.part_max[w] ? out->max : d.part_max[w];
     }
     if ((rc = percentile(dist, weight, n, &out->p99, &out->mean))) /* PASS 6 */
         goto done;
@@ -1264,6 +1266,7 @@ int iso_mesh_distance_between(const iso_mesh *a, const iso_mesh_grid *ga, const 
         goto done;
     one_way_result ab, ba;
     iso_mesh_distance_reuse plain = {.exhaustive = reuse && reuse->exhaustive,
+                                     .without_max = reuse && reuse->without_max,
                                      .without_mean = reuse && reuse->without_mean};
     if ((rc = one_way(a, b, gb ? gb : own_b, spacing, cap, threads, &plain, sa, &ab)) ||
         (rc = one_way(b, a, ga ? ga : own_a, spacing, cap, threads, reuse, NULL, &ba)))

@@ -41,6 +41,8 @@ typedef struct iso_mesh_distance_reuse {
     int exhaustive;                /* nonzero: every sample searched on its own, no block of
                                     * them skipped by a bound (for checks: same results) */
     const iso_mesh_samples *a_samples; /* a's at this spacing (NULL: counted for the call) */
+    int without_max;               /* nonzero: the maximum is not wanted: PASS 5 is skipped
+                                    * (max comes out NAN; the p99 is the same bit for bit) */
     int without_mean;              /* nonzero: the mean is not wanted (it comes out NAN), so
                                     * that of the points drawn for the percentile only those
                                     * that may lie in its top 1% are measured exactly (the

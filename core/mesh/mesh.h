@@ -359,7 +359,8 @@ typedef struct iso_mesh_chain_level {
     uint32_t *indices;            /* 3 * triangle_count, into the chain's positions */
     size_t triangle_count, vertex_count;
     iso_mesh_distance distance;   /* from level 0; all zero for level 0; means NAN (the
-                                   * chain measures p99 and max only) */
+                                   * chain measures p99 and max only); max NAN where a
+                                   * build for a distance left it out (build_until) */
     double estimate;              /* meshoptimizer's error for the step, position units */
     size_t nonmanifold_edges, folds_dropped;
     size_t pinch_vertices, edges; /* pinches left (iso_simplify_manifold), all edges */
@@ -414,18 +415,23 @@ int iso_mesh_chain_build(const iso_mesh *exact, double voxel_size, int threads,
 /* The same chain built only down to the first level whose measured p99 is over
  * `distance` (>= 0; < 0: no such stop) or that has at most `triangles` (> 0; 0: no such
  * stop), whichever comes first: what a request for that distance or budget needs, each
- * level made and measured as in the full build (a level made beyond the stop is dropped
- * unmeasured). chain->partial says whether levels are left. Errors as the build's. */
+ * level made as in the full build (a level made beyond the stop is dropped unmeasured).
+ * chain->partial says whether levels are left. For a distance, the levels' p99 are
+ * measured as the full build's and only the level answering it
+ * (iso_mesh_chain_pick_distance) gets its maximum: the others' distance.max is NAN (the
+ * maximum's pass over every sample is about a third of a measure). Errors as the build's. */
 int iso_mesh_chain_build_until(const iso_mesh *exact, double voxel_size, int threads, double distance,
                                size_t triangles, iso_mesh_chain **out, iso_error *err);
 /* Makes a partial chain's remaining levels (all of them, or down to the same kind of
- * stop), each from the one before as the full build does: build_until then extend gives
- * the full build's levels, index for index, and its measures. Levels already there are not
- * moved or changed; the new ones are appended and chain->levels, partial, bytes and
- * build_ms updated at the end: the caller keeps readers off the chain meanwhile (or reads
- * levels below the count it saw under its own lock). On failure the chain keeps the
- * levels made and measured before the failing one. Returns 0 (also when there was nothing
- * to do), ISO_E_NOMEM. */
+ * stop), each from the one before as the full build does, and the maxima left out
+ * (extend: every level's; extend_until a distance: its answer's): build_until then extend
+ * gives the full build's levels, index for index, and its measures. Levels already there
+ * keep their triangles (their indices are not moved), a missing maximum is written in
+ * place; new levels are appended and chain->levels, partial, bytes and build_ms updated
+ * at the end: the caller keeps readers off the chain meanwhile (or reads levels below the
+ * count it saw under its own lock, and no distance.max it saw NAN). On failure the chain
+ * keeps the levels made and measured before the failing one. Returns 0 (also when there
+ * was nothing to do), ISO_E_NOMEM. */
 int iso_mesh_chain_extend(iso_mesh_chain *chain, int threads, iso_error *err);
 int iso_mesh_chain_extend_until(iso_mesh_chain *chain, int threads, double distance, size_t triangles,
                                 iso_error *err);

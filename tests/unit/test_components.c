@@ -6,7 +6,8 @@
  * from the others. By default every level of the chain has the five components of the
  * exact surface, the specks at their smallest closed forms; with min_component between
  * the specks' enclosed volumes and the sphere's the specks go, counted exactly, and the
- * largest one's bounding-box diagonal is reported. */
+ * largest one's bounding-box diagonal is reported. A chain built only down to one
+ * distance serves a finer one as the whole chain would. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -190,9 +191,57 @@ static void test_min_component_removes_the_specks(void)
     iso_vol_destroy(vol);
 }
 
+/* A chain the pipeline built only down to distance=0.5 answers 0.1 too (it covers it),
+ * from a level measured without its maximum: the pipeline measures it, as the full
+ * chain's. */
+static void test_partial_chain_serves_a_finer_distance(void)
+{
+    iso_volume *vol = specks_volume();
+    if (!vol)
+        return;
+    iso_tree *tree = surface_build(vol);
+    iso_error err = {0};
+    proto_pipeline_request req;
+    proto_pipeline_request_init(&req);
+    req.extract = (iso_extract_params){.level = 0, .space = ISO_SPACE_WORLD};
+    req.distance = 0.5;
+    req.chain_partial = 1;
+    req.normals = 0;
+    req.format = PROTO_FORMAT_NONE;
+    proto_pipeline_result res;
+    CHECK_OK(proto_pipeline_run(tree, vol, &req, &res, &err), &err);
+    iso_mesh_chain *part = res.chain_built, *full = NULL;
+    res.chain_built = NULL;
+    proto_pipeline_result_free(&res);
+    iso_mesh exact;
+    iso_mesh_init(&exact);
+    iso_extract_stats st;
+    CHECK_OK(iso_extract(tree, &req.extract, &exact, &st, &err), &err);
+    CHECK_OK(iso_mesh_chain_build(&exact, 1, 0, &full, &err), &err);
+    if (part && full) {
+        CHECK(part->partial && part->levels < full->levels);
+        req.chain = part;
+        req.distance = 0.1;
+        int k = iso_mesh_chain_pick_distance(part, 0.1);
+        CHECK(k > 0 && k < iso_mesh_chain_pick_distance(part, 0.5) && isnan(part->level[k].distance.max));
+        CHECK_OK(proto_pipeline_run(tree, vol, &req, &res, &err), &err);
+        CHECK(res.chain_built == NULL && res.chain_level == k);
+        CHECKF(res.distance.p99 == full->level[k].distance.p99 && res.distance.max == full->level[k].distance.max,
+               "level %d: p99 %g max %g, the full chain's %g %g", k, res.distance.p99, res.distance.max,
+               full->level[k].distance.p99, full->level[k].distance.max);
+        proto_pipeline_result_free(&res);
+    }
+    iso_mesh_chain_destroy(part);
+    iso_mesh_chain_destroy(full);
+    iso_mesh_free(&exact);
+    iso_tree_destroy(tree);
+    iso_vol_destroy(vol);
+}
+
 int main(void)
 {
     CHECK_RUN(test_every_level_keeps_every_component);
     CHECK_RUN(test_min_component_removes_the_specks);
+    CHECK_RUN(test_partial_chain_serves_a_finer_distance);
     return check_finish();
 }
