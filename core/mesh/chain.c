@@ -584,6 +584,14 @@ static int levels_for(size_t triangles)
     return k;
 }
 
+int iso_mesh_chain_complete(const iso_mesh_chain *chain)
+{
+    for (int k = 1; k < chain->levels; k++)
+        if (isnan(chain->level[k].distance.max))
+            return 0;
+    return !chain->partial;
+}
+
 int iso_mesh_chain_covers(const iso_mesh_chain *chain, double distance, size_t triangles)
 {
     const iso_mesh_chain_level *last = &chain->level[chain->levels - 1];

@@ -439,6 +439,9 @@ int iso_mesh_chain_extend_until(iso_mesh_chain *chain, int threads, double dista
  * full build would: it is complete, or its last level is beyond the distance or within
  * the triangles. */
 int iso_mesh_chain_covers(const iso_mesh_chain *chain, double distance, size_t triangles);
+/* 1 when the chain is what a full build makes: every level made and measured, maxima
+ * included (what a file should keep); iso_mesh_chain_extend makes any chain so. */
+int iso_mesh_chain_complete(const iso_mesh_chain *chain);
 void iso_mesh_chain_destroy(iso_mesh_chain *chain);
 /* The level with the fewest triangles among levels 1..k whose measured p99 distances are
  * all at most `distance` (0, the exact surface, when level 1's is over it), so that a

@@ -861,6 +861,7 @@ static void test_partial_chain_then_extended(void)
         return;
     CHECK_EQ(part->levels, 7);
     CHECK_EQ(part->partial, 1);
+    CHECK(iso_mesh_chain_complete(full) && !iso_mesh_chain_complete(part));
     CHECK(iso_mesh_chain_covers(part, d, 0) && !iso_mesh_chain_covers(part, 2 * full->level[6].distance.p99, 0));
     CHECK_EQ(iso_mesh_chain_pick_distance(part, d), iso_mesh_chain_pick_distance(full, d));
     CHECK(part->bytes < full->bytes);
@@ -885,6 +886,18 @@ static void test_partial_chain_then_extended(void)
     check_same_levels(budget, full, full->levels);
     for (int k = 1; k < part->levels; k++)
         CHECK(!isnan(part->level[k].distance.max));
+    CHECK(iso_mesh_chain_complete(part) && iso_mesh_chain_complete(budget));
+    /* Built for a distance every level is within: all levels made, not all maxima. */
+    iso_mesh_chain *all = NULL;
+    CHECK_OK(iso_mesh_chain_build_until(&exact, 1, 2, 1e30, 0, &all, &err), &err);
+    if (all) {
+        CHECK(all->levels == full->levels && !all->partial && !iso_mesh_chain_complete(all));
+        CHECK(isnan(all->level[1].distance.max) && !isnan(all->level[all->levels - 1].distance.max));
+        CHECK_OK(iso_mesh_chain_extend(all, 2, &err), &err);
+        CHECK(iso_mesh_chain_complete(all));
+        check_same_levels(all, full, full->levels);
+    }
+    iso_mesh_chain_destroy(all);
     CHECK_OK(iso_mesh_chain_extend(part, 2, &err), &err); /* complete: nothing to do */
     CHECK_EQ(part->levels, full->levels);
     iso_mesh_chain_destroy(part);
