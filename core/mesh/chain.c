@@ -537,6 +537,9 @@ static void measure_all(pipeline *p)
         while (p->made < k && !p->over)
             pthread_cond_wait(&p->changed, &p->lock);
         int ready = p->made >= k && !(p->made == k && p->rc_simplify), all = p->over;
+        /* A partial build's simplifier waits for this measure once it is a level ahead:
+         * then this one has its thread too. */
+        all |= p->stop_distance >= 0 && p->made >= k + 1;
         pthread_mutex_unlock(&p->lock);
         if (!ready)
             break;
