@@ -36,7 +36,8 @@
 #include "base/base.h"
 
 #define CHAIN_MAGIC "ISOCHAIN"
-#define CHAIN_VERSION 3u /* 3: sections at aligned offsets, each with its own checksum */
+#define CHAIN_VERSION 4u /* 3: sections at aligned offsets, each with its own checksum; 4: levels
+                           * 1/sqrt(2) apart, every component kept (a 3 is a halving chain) */
 #define CHAIN_ALIGN 64u  /* a cache line: every array starts aligned for any element type */
 #define CHAIN_SECTIONS_MAX (ISO_CHAIN_LEVELS + 3)
 
