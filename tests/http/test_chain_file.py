@@ -118,7 +118,7 @@ def main():
         """(offset, bytes) of section i of a chain file: 0 the level records, 1 the positions."""
         with open(path, "rb") as f:
             head = f.read(72 + 24 * (i + 1))
-        assert head[:8] == b"ISOCHAIN" and struct.unpack_from("<I", head, 8)[0] == 3
+        assert head[:8] == b"ISOCHAIN" and struct.unpack_from("<I", head, 8)[0] == 4
         return struct.unpack_from("<QQ", head, 72 + 24 * i)
 
     def flip_in(i):
