@@ -52,9 +52,10 @@ def extract(path, level, *args):
 
 
 def print_levels(row, tag):
+    """A build for a distance measures only its answer's maximum: the others print "-"."""
     levels = row["chain_levels"][1:]
     print(f"  {tag or 'levels':<6} p99 " + " ".join(f"{b['p99']:.4f}" for b in levels) +
-          " | max " + " ".join(f"{b['max']:.3f}" for b in levels) +
+          " | max " + " ".join("-" if b["max"] is None else f"{b['max']:.3f}" for b in levels) +
           " | simplify ms " + " ".join(f"{b['simplify_ms']:.0f}" for b in levels), flush=True)
 
 
@@ -74,7 +75,7 @@ def compare_levels(path, level, built):
         rows.append({"level": k, "chain_triangles": b["triangles"], "single_triangles": single["triangles"],
                      "chain_p99": b["p99"], "single_p99": d["p99"], "chain_max": b["max"], "single_max": d["max"],
                      "single_nonmanifold_edges": single["nonmanifold_edges"]})
-        print(f"    level {k}: {b['triangles']:>7} tris p99 {b['p99']:.4f} max {b['max']:.3f} | single "
+        print(f"    level {k}: {b['triangles']:>7} tris p99 {b['p99']:.4f} max {'-' if b['max'] is None else format(b['max'], '.3f')} | single "
               f"{single['triangles']:>7} tris p99 {d['p99']:.4f} max {d['max']:.3f} pinch edges "
               f"{single['nonmanifold_edges']} | p99 chain/single {b['p99'] / d['p99'] if d['p99'] else float('nan'):.3f}",
               flush=True)
