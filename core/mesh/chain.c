@@ -44,6 +44,34 @@ void iso_mesh_chain_destroy(iso_mesh_chain *chain)
 
 static int level_mesh(const iso_mesh_chain *chain, int k, iso_mesh *mesh, iso_error *err);
 
+int iso_mesh_chain_copy(const iso_mesh_chain *chain, iso_mesh_chain **out, iso_error *err)
+{
+    *out = NULL;
+    iso_mesh_chain *c = malloc(sizeof *c);
+    if (!c)
+        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory to copy it");
+    *c = *chain;
+    c->grid = NULL; /* built again when a measure needs it: a grid has no copy */
+    c->bytes = chain->bytes - iso_mesh_grid_bytes(chain->grid);
+    c->positions = malloc((3 * chain->vertex_count + 1) * sizeof *c->positions);
+    int ok = c->positions != NULL;
+    for (int k = 0; k < c->levels; k++) {
+        size_t n = 3 * chain->level[k].triangle_count;
+        c->level[k].indices = ok ? malloc((n + 1) * sizeof *c->level[k].indices) : NULL;
+        if (c->level[k].indices && n)
+            memcpy(c->level[k].indices, chain->level[k].indices, n * sizeof *c->level[k].indices);
+        ok = ok && c->level[k].indices;
+    }
+    if (!ok) {
+        iso_mesh_chain_destroy(c);
+        return iso_error_set(err, ISO_E_NOMEM, "chain: no memory to copy %zu triangles", chain->level[0].triangle_count);
+    }
+    if (chain->vertex_count)
+        memcpy(c->positions, chain->positions, 3 * chain->vertex_count * sizeof *c->positions);
+    *out = c;
+    return 0;
+}
+
 /* A mesh over the chain's positions with level k's triangles (nothing owned). */
 static iso_mesh view_of(const iso_mesh_chain *chain, int k)
 {

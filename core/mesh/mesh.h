@@ -443,6 +443,11 @@ int iso_mesh_chain_covers(const iso_mesh_chain *chain, double distance, size_t t
  * included (what a file should keep); iso_mesh_chain_extend makes any chain so. */
 int iso_mesh_chain_complete(const iso_mesh_chain *chain);
 void iso_mesh_chain_destroy(iso_mesh_chain *chain);
+/* A copy of `chain` (an in-memory one, complete or partial) to extend while readers keep
+ * the original: every level and measure alike, without level 0's search grid (a measure
+ * builds it again, about a tenth of a level's measure). *out for iso_mesh_chain_destroy.
+ * 0 or ISO_E_NOMEM (nothing left allocated). */
+int iso_mesh_chain_copy(const iso_mesh_chain *chain, iso_mesh_chain **out, iso_error *err);
 /* The level with the fewest triangles among levels 1..k whose measured p99 distances are
  * all at most `distance` (0, the exact surface, when level 1's is over it), so that a
  * partial chain (iso_mesh_chain_covers) answers as the full one. O(levels). */

@@ -874,6 +874,19 @@ static void test_partial_chain_then_extended(void)
     CHECK(budget->partial && iso_mesh_chain_covers(budget, -1, full->level[3].triangle_count));
     CHECK_EQ(iso_mesh_chain_pick_budget(budget, full->level[3].triangle_count), 3);
     check_same_levels(budget, full, budget->levels);
+    /* A copy is extended alone (the server extends copies while readers keep the original):
+     * it becomes the full chain, the original keeps its levels and missing maxima. */
+    iso_mesh_chain *copy = NULL;
+    CHECK_OK(iso_mesh_chain_copy(part, &copy, &err), &err);
+    if (copy) {
+        CHECK(!copy->grid && copy->partial && copy->levels == part->levels && copy->positions != part->positions);
+        CHECK_OK(iso_mesh_chain_extend(copy, 2, &err), &err);
+        CHECK(copy->levels == full->levels && iso_mesh_chain_complete(copy) && copy->bytes == full->bytes);
+        check_same_levels(copy, full, full->levels);
+        CHECK(part->levels == 7 && part->partial && isnan(part->level[1].distance.max));
+        check_same_levels(part, full, part->levels);
+    }
+    iso_mesh_chain_destroy(copy);
     /* Covered: nothing to do; then the rest, from a chain with no bounds of its last level. */
     CHECK_OK(iso_mesh_chain_extend_until(part, 2, d, 0, &err), &err);
     CHECK_EQ(part->levels, 7);
