@@ -128,18 +128,15 @@ static int budget_needs_chain(const iso_tree *tree, const proto_pipeline_request
     return rc;
 }
 
-/* A chain just built keeps what later requests would otherwise find again: the faithful
- * mesh's triangle count (for budgets) and each moved level's vertices' value error. */
-static int complete_chain(const iso_tree *tree, const iso_volume *vol,
-                          const proto_pipeline_request *req, proto_pipeline_result *res,
-                          iso_mesh_chain *chain, iso_error *err)
+/* Each moved level's vertices' value error, measured once for the chain (mesh.h). A
+ * segment's surface is not on a level of the samples: its moved vertices' distance is what
+ * the chain measures, and their value error is not defined (0). */
+static int value_errors(const iso_volume *vol, const proto_pipeline_request *req, iso_mesh_chain *chain,
+                        iso_error *err)
 {
-    int rc = req->segmentation ? 0 : faithful_triangles(tree, req, res, err); /* budgets only */
-    chain->faithful_triangles = res->faithful_triangles;
+    int rc = 0;
     iso_mesh m;
     iso_mesh_init(&m);
-    /* A segment's surface is not on a level of the samples: its moved vertices' distance
-     * is what the chain measures, and their value error is not defined (0). */
     for (int k = 1; !rc && k < chain->levels; k++)
         if (chain->level[k].value_error < 0 && req->segmentation)
             chain->level[k].value_error = 0;
@@ -148,6 +145,26 @@ static int complete_chain(const iso_tree *tree, const iso_volume *vol,
                                                                req->extract.level);
     iso_mesh_free(&m);
     return rc;
+}
+
+/* A chain just built keeps what later requests would otherwise find again: the faithful
+ * mesh's triangle count (for budgets) and each moved level's vertices' value error. */
+static int complete_chain(const iso_tree *tree, const iso_volume *vol,
+                          const proto_pipeline_request *req, proto_pipeline_result *res,
+                          iso_mesh_chain *chain, iso_error *err)
+{
+    int rc = req->segmentation ? 0 : faithful_triangles(tree, req, res, err); /* budgets only */
+    chain->faithful_triangles = res->faithful_triangles;
+    return rc ? rc : value_errors(vol, req, chain, err);
+}
+
+int proto_pipeline_chain_extend(const iso_volume *vol, const proto_pipeline_request *req, iso_mesh_chain *chain,
+                                double distance, size_t triangles, iso_error *err)
+{
+    int rc = distance >= 0 || triangles
+                 ? iso_mesh_chain_extend_until(chain, req->extract.threads, distance, triangles, err)
+                 : iso_mesh_chain_extend(chain, req->extract.threads, err);
+    return rc ? rc : value_errors(vol, req, chain, err);
 }
 
 /* The surface's chain, built here (res->chain_built): the whole chain, or with

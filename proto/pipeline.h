@@ -119,4 +119,12 @@ int proto_pipeline_run(const iso_tree *tree, const iso_volume *vol,
 /* Frees what a successful run left in res; an emptied result may be freed again. */
 void proto_pipeline_result_free(proto_pipeline_result *res);
 
+/* Extends a partial chain that req's surface built (iso_mesh_chain_extend_until to
+ * `distance` or `triangles`; both unset, distance < 0 and triangles 0: the whole chain,
+ * iso_mesh_chain_extend) on req->extract.threads, and measures the new moved levels' value
+ * error as a build does. In place: the caller keeps every reader off `chain` meanwhile.
+ * 0, ISO_E_NOMEM. */
+int proto_pipeline_chain_extend(const iso_volume *vol, const proto_pipeline_request *req, iso_mesh_chain *chain,
+                                double distance, size_t triangles, iso_error *err);
+
 #endif
