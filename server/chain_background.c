@@ -1,6 +1,6 @@
 /* chain_background.c: the chains of every preloaded volume's suggested levels, built one
- * at a time on a thread of the lowest priority once preloading is done (see
- * chain_background.h). */
+ * at a time on a thread of the lowest priority once preloading is done, then the partial
+ * chains requests made, completed on the same thread (see chain_background.h). */
 #define _GNU_SOURCE /* SCHED_IDLE */
 #include "chain_background.h"
 
@@ -68,13 +68,9 @@ static void build_volume(srv_chain_background *b, const srv_volume *v, size_t *d
     }
 }
 
-static void *background_main(void *arg)
+/* Every preloaded volume's suggested levels' chains, one at a time. */
+static void build_suggested(srv_chain_background *b)
 {
-    srv_chain_background *b = arg;
-    while (!atomic_load(&b->collection->ready) && !atomic_load(&b->stop)) {
-        struct timespec pause = {0, 100 * 1000 * 1000};
-        nanosleep(&pause, NULL);
-    }
     /* The preloaded volumes and their levels, counted first for the progress. */
     size_t total = b->collection->total, planned = 0, done = 0;
     srv_collection_lock(b->collection);
@@ -110,20 +106,60 @@ static void *background_main(void *arg)
     if (planned && !atomic_load(&b->stop))
         fprintf(stderr, "isoserve: chains: done (%zu built, %zu there already, %zu failed)\n",
                 b->chains->progress.built, b->chains->progress.loaded, b->chains->progress.failed);
+}
+
+/* The partial chains requests made (srv_chains_defer), completed one at a time until the
+ * stop: each is written beside the hierarchy and mapped, replacing the one in memory. */
+static void complete_deferred(srv_chain_background *b)
+{
+    while (!atomic_load(&b->stop)) {
+        srv_mesh_chain_task *task = (srv_mesh_chain_task *)srv_chains_next_deferred(b->chains, 100);
+        if (!task)
+            continue;
+        lowest_priority(); /* again: a request that waited for the last one raised it */
+        char what[160];
+        srv_mesh_chain_task_name(task, what, sizeof what);
+        set_progress(b, what);
+        iso_error err = {0};
+        double ms;
+        int rc = srv_mesh_chain_task_run(task, b->chains, &ms, &err);
+        if (rc == 0)
+            fprintf(stderr, "isoserve: chains: %s completed in %.1f s\n", what, ms / 1000);
+        else if (rc < 0)
+            fprintf(stderr, "isoserve: chains: %s not completed: %s\n", what, err.message);
+        set_progress(b, "");
+        srv_mesh_chain_task_free(task);
+    }
+}
+
+static void *background_main(void *arg)
+{
+    srv_chain_background *b = arg;
+    lowest_priority();
+    while (!atomic_load(&b->collection->ready) && !atomic_load(&b->stop)) {
+        struct timespec pause = {0, 100 * 1000 * 1000};
+        nanosleep(&pause, NULL);
+    }
+    if (b->suggested)
+        build_suggested(b);
+    complete_deferred(b);
     atomic_store(&b->finished, 1);
     return NULL;
 }
 
-int srv_chain_background_start(srv_chain_background *b, srv_collection *collection, srv_chains *chains)
+int srv_chain_background_start(srv_chain_background *b, srv_collection *collection, srv_chains *chains,
+                               int suggested)
 {
     memset(b, 0, sizeof *b);
     b->collection = collection;
     b->chains = chains;
-    pthread_mutex_lock(&chains->lock);
-    chains->progress.enabled = 1;
-    pthread_mutex_unlock(&chains->lock);
+    b->suggested = suggested;
     if (pthread_create(&b->thread, NULL, background_main, b))
         return ISO_E_NOMEM;
+    pthread_mutex_lock(&chains->lock);
+    chains->progress.enabled = suggested;
+    chains->completer = 1;
+    pthread_mutex_unlock(&chains->lock);
     b->started = 1;
     return 0;
 }
@@ -132,6 +168,9 @@ int srv_chain_background_stop(srv_chain_background *b, double timeout_ms)
 {
     if (!b->started)
         return 0;
+    pthread_mutex_lock(&b->chains->lock);
+    b->chains->completer = 0; /* no more work queued */
+    pthread_mutex_unlock(&b->chains->lock);
     atomic_store(&b->stop, 1);
     double until = iso_clock_ms() + timeout_ms;
     while (!atomic_load(&b->finished) && iso_clock_ms() < until) {
@@ -142,5 +181,9 @@ int srv_chain_background_stop(srv_chain_background *b, double timeout_ms)
         return 1;
     pthread_join(b->thread, NULL);
     b->started = 0;
+    /* What was left queued: its volumes' references go back, the chains stay partial. */
+    srv_chain_deferred *task;
+    while ((task = srv_chains_next_deferred(b->chains, 0)))
+        srv_mesh_chain_task_free((srv_mesh_chain_task *)task);
     return 0;
 }

@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "hash.h"
@@ -22,13 +23,15 @@ struct srv_chain {
     iso_mesh_chain_map *map;    /* mapped from its file, or */
     iso_mesh_chain *owned;      /* held as built (no file) */
     size_t bytes;               /* what it weighs against the limit */
-    pthread_t builder;          /* while BUILDING at the lowest priority (idle_builder) */
+    int partial;                /* READY, owned, built only down to a request's level */
+    int extending;              /* a partial one's copy is being extended (one caller) */
+    pthread_t builder;          /* while BUILDING or extending at the lowest priority */
     int idle_builder;
 };
 
 const char *srv_chain_source_name(srv_chain_source source)
 {
-    static const char *const names[] = {"memory", "file", "waited", "built"};
+    static const char *const names[] = {"memory", "file", "waited", "built", "partial", "extended"};
     return names[source];
 }
 
@@ -177,34 +180,52 @@ static int map_file(srv_chains *r, const srv_chain_spec *spec, iso_mesh_chain_ma
     return 0;
 }
 
-srv_chain_acquired srv_chains_acquire(srv_chains *r, const srv_chain_spec *spec, int wait, srv_chain **out,
-                                      srv_chain_source *source, double *load_ms)
+/* Does ready entry e answer a caller that needs `distance` or `triangles` (neither: the
+ * whole chain)? A partial one only as far as it goes (iso_mesh_chain_covers). */
+static int answers(const srv_chain *e, double distance, size_t triangles)
+{
+    return !e->partial || ((distance >= 0 || triangles) && iso_mesh_chain_covers(e->owned, distance, triangles));
+}
+
+/* A request waits for a background build or extension: that thread runs at the request's
+ * priority from now on (it goes back to the lowest for its next chain), so that other work
+ * cannot hold the request up behind it. Failing that, it is only slower. */
+static void raise_builder(srv_chain *e)
+{
+    if (e->idle_builder) {
+        struct sched_param normal = {0};
+        pthread_setschedparam(e->builder, SCHED_OTHER, &normal);
+        e->idle_builder = 0;
+    }
+}
+
+srv_chain_acquired srv_chains_acquire(srv_chains *r, const srv_chain_spec *spec, double distance, size_t triangles,
+                                      int wait, srv_chain **out, srv_chain_source *source, double *load_ms)
 {
     *out = NULL;
     *load_ms = 0;
     *source = SRV_CHAIN_MEMORY;
     pthread_mutex_lock(&r->lock);
     srv_chain *e;
-    while ((e = find(r, spec->key)) && e->state == ENTRY_BUILDING) {
+    while ((e = find(r, spec->key)) &&
+           (e->state == ENTRY_BUILDING || (e->extending && !answers(e, distance, triangles)))) {
         if (!wait) {
             pthread_mutex_unlock(&r->lock);
             return SRV_CHAIN_BUSY;
         }
         *source = SRV_CHAIN_WAITED;
-        /* A request waits for the background builder: it runs at the request's priority
-         * from now on (it goes back to the lowest for its next chain), so that other work
-         * cannot hold the request up behind it. Failing that, it is only slower. */
-        if (e->idle_builder) {
-            struct sched_param normal = {0};
-            pthread_setschedparam(e->builder, SCHED_OTHER, &normal);
-            e->idle_builder = 0;
-        }
+        raise_builder(e);
         pthread_cond_wait(&r->changed, &r->lock);
     }
     srv_chain_acquired outcome = SRV_CHAIN_READY_NOW;
     if (e) {
         e->refs++;
         e->used = ++r->clock;
+        if (!answers(e, distance, triangles)) { /* a partial chain, extended by this caller */
+            e->extending = 1;
+            e->idle_builder = 0;
+            outcome = SRV_CHAIN_TO_EXTEND;
+        }
     } else {
         double start = iso_clock_ms();
         iso_mesh_chain_map *map;
@@ -229,6 +250,11 @@ srv_chain_acquired srv_chains_acquire(srv_chains *r, const srv_chain_spec *spec,
     pthread_mutex_unlock(&r->lock);
     *out = e;
     return outcome;
+}
+
+int srv_chain_partial(const srv_chain *c)
+{
+    return c->partial;
 }
 
 const iso_mesh_chain *srv_chain_get(const srv_chain *c)
@@ -260,23 +286,77 @@ int srv_chain_prepare_grid(srv_chains *r, srv_chain *c, double *ms, iso_error *e
     return rc;
 }
 
-void srv_chains_publish(srv_chains *r, srv_chain *c, const srv_chain_spec *spec, iso_mesh_chain *built)
+/* A built or extended chain's map from spec's file, written now when the chain is
+ * complete and there is a file; NULL when it stays in memory (partial, no cache dir, or
+ * the write failed: reported, it only costs a rebuild after a restart). */
+static iso_mesh_chain_map *save(const srv_chain_spec *spec, const iso_mesh_chain *built)
 {
     iso_error err = {0};
     iso_mesh_chain_map *map = NULL;
-    if (spec->path[0] && iso_mesh_chain_save(built, spec->path, spec->identity, &err))
+    if (!spec->path[0] || !iso_mesh_chain_complete(built))
+        return NULL;
+    if (iso_mesh_chain_save(built, spec->path, spec->identity, &err))
         fprintf(stderr, "isoserve: %s: chain not written: %s\n", spec->id, err.message);
-    else if (spec->path[0] && iso_mesh_chain_map_open(spec->path, spec->identity, &map, &err))
+    else if (iso_mesh_chain_map_open(spec->path, spec->identity, &map, &err))
         fprintf(stderr, "isoserve: %s: the chain just written cannot be mapped: %s\n", spec->id, err.message);
-    if (map) {
-        iso_mesh_chain_destroy(built); /* the file holds it now */
-        built = NULL;
-    }
+    return map;
+}
+
+/* Entry e (lock held, not yet ready) holds the chain: mapped (built is then the caller's
+ * to destroy, outside the lock: the file holds it now), or built as it is. */
+static void hold(srv_chains *r, srv_chain *e, iso_mesh_chain_map *map, iso_mesh_chain *built)
+{
+    e->map = map;
+    e->owned = map ? NULL : built;
+    e->partial = !map && !iso_mesh_chain_complete(built);
+    make_ready(r, e, map ? iso_mesh_chain_map_bytes(map) : built->bytes);
+}
+
+void srv_chains_publish(srv_chains *r, srv_chain *c, const srv_chain_spec *spec, iso_mesh_chain *built)
+{
+    iso_mesh_chain_map *map = save(spec, built);
     pthread_mutex_lock(&r->lock);
-    c->map = map;
-    c->owned = built;
-    make_ready(r, c, map ? iso_mesh_chain_map_bytes(map) : built->bytes);
+    hold(r, c, map, built);
     atomic_fetch_add(&r->built, 1);
+    pthread_cond_broadcast(&r->changed);
+    pthread_mutex_unlock(&r->lock);
+    if (map)
+        iso_mesh_chain_destroy(built);
+}
+
+const iso_mesh_chain *srv_chain_owned(const srv_chain *c)
+{
+    return c->owned;
+}
+
+srv_chain *srv_chains_replace(srv_chains *r, srv_chain *c, const srv_chain_spec *spec, iso_mesh_chain *extended)
+{
+    iso_mesh_chain_map *map = save(spec, extended);
+    pthread_mutex_lock(&r->lock);
+    c->extending = 0;
+    c->idle_builder = 0;
+    srv_chain *e = c->listed ? entry_new(r, c->key) : NULL;
+    if (e) {
+        unlist(r, c); /* its readers keep it until they release it */
+        hold(r, e, map, extended);
+        e->used = c->used;
+        if (!e->partial)
+            atomic_fetch_add(&r->completed, 1);
+    }
+    pthread_cond_broadcast(&r->changed);
+    pthread_mutex_unlock(&r->lock);
+    if (!e) /* discarded meanwhile, or no memory: dropped */
+        iso_mesh_chain_map_close(map);
+    if (!e || map)
+        iso_mesh_chain_destroy(extended);
+    return e;
+}
+
+void srv_chains_extend_abandon(srv_chains *r, srv_chain *c)
+{
+    pthread_mutex_lock(&r->lock);
+    c->extending = 0;
+    c->idle_builder = 0;
     pthread_cond_broadcast(&r->changed);
     pthread_mutex_unlock(&r->lock);
 }
@@ -332,8 +412,8 @@ int srv_chains_peek(srv_chains *r, const srv_chain_spec *spec, srv_chain **out)
     *out = NULL;
     pthread_mutex_lock(&r->lock);
     srv_chain *e = find(r, spec->key);
-    int state = e ? (e->state == ENTRY_READY ? 2 : 1) : 0;
-    if (e && state == 2) {
+    int state = e ? (e->state == ENTRY_READY && !e->partial ? 2 : 1) : 0;
+    if (e && e->state == ENTRY_READY) {
         e->refs++;
         e->used = ++r->clock;
     } else if (!e) {
@@ -348,6 +428,47 @@ int srv_chains_peek(srv_chains *r, const srv_chain_spec *spec, srv_chain **out)
         }
     }
     pthread_mutex_unlock(&r->lock);
-    *out = state == 2 ? e : NULL;
+    *out = state == 2 || (e && e->partial) ? e : NULL;
     return state;
+}
+
+int srv_chains_defer(srv_chains *r, srv_chain_deferred *task)
+{
+    pthread_mutex_lock(&r->lock);
+    int taken = r->completer;
+    if (taken) {
+        task->next = NULL;
+        *(r->deferred ? r->deferred_tail : &r->deferred) = task;
+        r->deferred_tail = &task->next;
+        pthread_cond_broadcast(&r->changed);
+    }
+    pthread_mutex_unlock(&r->lock);
+    return taken;
+}
+
+srv_chain_deferred *srv_chains_next_deferred(srv_chains *r, double timeout_ms)
+{
+    struct timespec until;
+    clock_gettime(CLOCK_REALTIME, &until); /* the condition's clock */
+    long long ns = until.tv_nsec + (long long)(timeout_ms * 1e6);
+    until.tv_sec += (time_t)(ns / 1000000000);
+    until.tv_nsec = (long)(ns % 1000000000);
+    pthread_mutex_lock(&r->lock);
+    while (!r->deferred && pthread_cond_timedwait(&r->changed, &r->lock, &until) == 0)
+        ;
+    srv_chain_deferred *task = r->deferred;
+    if (task)
+        r->deferred = task->next;
+    pthread_mutex_unlock(&r->lock);
+    return task;
+}
+
+size_t srv_chains_partial_count(srv_chains *r)
+{
+    size_t n = 0;
+    pthread_mutex_lock(&r->lock);
+    for (const srv_chain *e = r->entries; e; e = e->next)
+        n += e->state == ENTRY_READY && e->partial;
+    pthread_mutex_unlock(&r->lock);
+    return n;
 }

@@ -10,7 +10,20 @@
  * file, held in memory as built. A ready entry weighs its file's size (or the built
  * chain's bytes); above the limit, the least recently used entries nobody holds are
  * dropped (their files stay: the next request maps them again in well under a
- * millisecond). A file found corrupt, at mapping or at a level's first check, is reported,
+ * millisecond).
+ *
+ * A request builds a chain only down to the level it needs (iso_mesh_chain_build_until):
+ * that partial chain is READY in memory (never written: files hold complete chains) and
+ * answers every request it covers (iso_mesh_chain_covers). A request it does not cover
+ * extends it, and the background completer completes it, the same way: on a copy
+ * (iso_mesh_chain_copy), by one caller at a time, while the entry keeps answering the
+ * requests it covers; the extended chain then replaces the entry (a new entry under the
+ * same key, written and mapped when complete), and readers of the old one keep it until
+ * they release it. Why a copy rather than a lock readers hold while cutting: an extension
+ * takes seconds, and the completer runs at the lowest priority, so a reader blocked on it
+ * would wait behind idle work; with a copy no reader ever waits for levels it does not
+ * need, nor sees a chain that is being written. Callers needing levels beyond it wait for
+ * the extension in progress, then extend further if it still falls short. A file found corrupt, at mapping or at a level's first check, is reported,
  * removed and rebuilt, never served. One mutex guards the registry; there are a few
  * entries per volume, so lookups are linear. */
 #ifndef SRV_CHAINS_H
@@ -51,7 +64,9 @@ typedef enum srv_chain_source {
     SRV_CHAIN_MEMORY,  /* already in the registry */
     SRV_CHAIN_FILE,    /* mapped from its file now */
     SRV_CHAIN_WAITED,  /* built meanwhile by another request or in the background */
-    SRV_CHAIN_BUILT    /* built by this caller */
+    SRV_CHAIN_BUILT,   /* built by this caller */
+    SRV_CHAIN_PARTIAL, /* built by this caller down to its level only */
+    SRV_CHAIN_EXTENDED /* a partial chain extended by this caller down to its level */
 } srv_chain_source;
 const char *srv_chain_source_name(srv_chain_source source);
 
@@ -70,7 +85,10 @@ typedef struct srv_chains {
     size_t bytes, limit, ready;     /* ready entries' weight, the limit, their count */
     unsigned long long clock;       /* the LRU clock */
     _Atomic unsigned long long evictions, mapped, built, corrupt;
+    _Atomic unsigned long long extended, completed; /* partial chains extended, completed */
     srv_chain_progress progress;
+    int completer;                  /* a background completer takes deferred work */
+    struct srv_chain_deferred *deferred, **deferred_tail;
 } srv_chains;
 
 int srv_chains_init(srv_chains *r, size_t limit_bytes);
@@ -81,15 +99,25 @@ typedef enum srv_chain_acquired {
     SRV_CHAIN_READY_NOW, /* *out is ready (srv_chain_get), with a reference */
     SRV_CHAIN_TO_BUILD,  /* *out is BUILDING and the caller's to build: srv_chains_publish
                           * or srv_chains_abandon, then srv_chains_release */
+    SRV_CHAIN_TO_EXTEND, /* *out is a ready partial chain that does not answer the caller,
+                          * who extends a copy of it (srv_chain_owned): srv_chains_replace
+                          * or srv_chains_extend_abandon, then srv_chains_release */
     SRV_CHAIN_BUSY       /* another caller builds it and wait was 0: *out NULL */
 } srv_chain_acquired;
 
-/* The chain of spec: ready in the registry, else mapped from its file (a stale or corrupt
- * file is reported and removed), else the caller's to build. With wait, a chain another
- * caller builds is waited for (*source then SRV_CHAIN_WAITED); load_ms: the time spent
+/* The chain of spec for a caller that needs the levels answering `distance` (>= 0) or
+ * `triangles` (> 0), or (distance < 0, triangles 0) the whole chain: ready in the
+ * registry, else mapped from its file (a stale or corrupt file is reported and removed),
+ * else the caller's to build; a partial one that does not answer the caller is the
+ * caller's to extend. With wait, a chain another caller builds, or extends while it does
+ * not answer, is waited for (*source then SRV_CHAIN_WAITED); load_ms: the time spent
  * mapping. Returns the outcome; ISO_E_NOMEM is reported as SRV_CHAIN_BUSY with *out NULL. */
-srv_chain_acquired srv_chains_acquire(srv_chains *r, const srv_chain_spec *spec, int wait, srv_chain **out,
-                                      srv_chain_source *source, double *load_ms);
+srv_chain_acquired srv_chains_acquire(srv_chains *r, const srv_chain_spec *spec, double distance, size_t triangles,
+                                      int wait, srv_chain **out, srv_chain_source *source, double *load_ms);
+/* 1 when a ready entry holds a partial chain (in memory, levels still to make). */
+int srv_chain_partial(const srv_chain *c);
+/* A ready entry's chain when held in memory (partial ones are), else NULL. */
+const iso_mesh_chain *srv_chain_owned(const srv_chain *c);
 /* A ready entry's chain (read-only, shared). */
 const iso_mesh_chain *srv_chain_get(const srv_chain *c);
 /* Level k may be cut from it: checks a mapped chain's positions and level k once
@@ -104,8 +132,26 @@ int srv_chain_prepare_grid(srv_chains *r, srv_chain *c, double *ms, iso_error *e
  * to spec's file when there is one (a failure is reported and only costs a rebuild after
  * a restart), then mapped from it, else kept as built; waiters wake. */
 void srv_chains_publish(srv_chains *r, srv_chain *c, const srv_chain_spec *spec, iso_mesh_chain *built);
-/* The caller builds its BUILDING entry at the lowest priority (the background builder): a
- * request that waits for it raises the building thread to the normal policy. */
+/* The caller's extended copy (taken over) replaces TO_EXTEND entry c: written and mapped
+ * when complete (as srv_chains_publish), else kept in memory, as a new entry with the
+ * caller's reference (c keeps its readers until they release it; the caller still releases
+ * c); waiters wake. NULL when c was discarded meanwhile or no memory (the copy is dropped). */
+srv_chain *srv_chains_replace(srv_chains *r, srv_chain *c, const srv_chain_spec *spec, iso_mesh_chain *extended);
+/* The caller could not extend TO_EXTEND entry c: it stays as it was, waiters wake. */
+void srv_chains_extend_abandon(srv_chains *r, srv_chain *c);
+/* Work for the background completer, which runs it at the lowest priority: an opaque task
+ * that starts with this link (mesh_job.h's). */
+typedef struct srv_chain_deferred {
+    struct srv_chain_deferred *next;
+} srv_chain_deferred;
+/* Queues task when a completer takes work (1; the registry holds it), else 0 (the caller
+ * keeps it). */
+int srv_chains_defer(srv_chains *r, srv_chain_deferred *task);
+/* The next task, waiting up to timeout_ms for one; NULL when none came. */
+srv_chain_deferred *srv_chains_next_deferred(srv_chains *r, double timeout_ms);
+/* The caller builds its BUILDING entry, or extends its TO_EXTEND one, at the lowest
+ * priority (the background builder): a request that waits for it raises the building
+ * thread to the normal policy. */
 void srv_chains_building_idle(srv_chains *r, srv_chain *c);
 /* The caller could not build it: the entry goes, waiters wake (one of them builds). */
 void srv_chains_abandon(srv_chains *r, srv_chain *c);
@@ -115,8 +161,11 @@ void srv_chains_discard(srv_chains *r, srv_chain *c, const srv_chain_spec *spec,
 /* Gives back a reference; then evicts above the limit. NULL is a no-op. */
 void srv_chains_release(srv_chains *r, srv_chain *c);
 
+/* The partial chains the registry holds (in memory, to be completed). */
+size_t srv_chains_partial_count(srv_chains *r);
 /* What the registry knows of spec's chain without building anything: 2 ready (*out with a
- * reference, mapped from its file if need be), 1 building, 0 none. */
+ * reference, mapped from its file if need be), 1 building (*out, with a reference, the
+ * partial chain when there is one: its levels so far, else NULL), 0 none. */
 int srv_chains_peek(srv_chains *r, const srv_chain_spec *spec, srv_chain **out);
 
 #endif

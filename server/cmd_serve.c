@@ -149,7 +149,7 @@ static const srv_option serve_options_table[] = {
     {"--queue", "N", "requests waiting for a worker before 503 (default 64)"},
     {"--cache-mb", "N", "the mesh cache's size in MB (default 256)"},
     {"--chain-mb", "N", "simplification chains kept mapped, in MB (default 2048; files stay in --cache-dir)"},
-    {"--chain-background", "on|off", "build the suggested levels' chains after preloading (default on)"},
+    {"--chain-background", "on|off", "build the suggested levels' chains after preloading (default on; partial chains are completed either way)"},
     {"--cors-origin", "ORIGIN", "allow this browser origin (repeatable, at most 16)"},
     {"--drain-seconds", "S", "on SIGTERM, how long requests in flight may finish (default 10)"},
     {"--max-connections", "N", "open connections at most (default 256)"},
@@ -395,7 +395,7 @@ static int serve(const serve_options *o, srv_catalog *catalog)
         status = srv_fail("serve: cannot start the preloading thread");
         goto done;
     }
-    if (o->chain_background && srv_chain_background_start(&background, &collection, &chains))
+    if (srv_chain_background_start(&background, &collection, &chains, o->chain_background))
         fprintf(stderr, "isoserve: chains: no thread for the background builder; requests build them\n");
     sigset_t stop_signals;
     sigemptyset(&stop_signals);

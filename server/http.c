@@ -739,18 +739,20 @@ static enum MHD_Result route_status(srv_server *s, struct MHD_Connection *c, srv
         srv_chain_progress p = r->progress;
         size_t bytes = r->bytes, ready = r->ready, limit = r->limit;
         pthread_mutex_unlock(&r->lock);
+        size_t partial = srv_chains_partial_count(r);
         json_t *current = p.current[0] ? json_pack("{s:s, s:f}", "chain", p.current, "seconds",
                                                    (iso_clock_ms() - p.current_since_ms) / 1000)
                                        : json_null();
-        doc = json_pack("{s:{s:s, s:I, s:I, s:I, s:I, s:o}, s:{s:I, s:I, s:I, s:I, s:I, s:I, s:I}}",
+        doc = json_pack("{s:{s:s, s:I, s:I, s:I, s:I, s:o}, s:{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:I}}",
                         "background", "state", !p.enabled ? "off" : p.finished ? "done" : p.running ? "building"
                                                                                           : "waiting",
                         "planned", (json_int_t)p.planned, "built", (json_int_t)p.built, "there_already",
                         (json_int_t)p.loaded, "failed", (json_int_t)p.failed, "current", current,
-                        "chains", "ready", (json_int_t)ready, "bytes", (json_int_t)bytes, "limit_bytes",
+                        "chains", "ready", (json_int_t)ready, "partial", (json_int_t)partial, "bytes", (json_int_t)bytes, "limit_bytes",
                         (json_int_t)limit, "mapped", (json_int_t)atomic_load(&r->mapped), "built",
                         (json_int_t)atomic_load(&r->built), "evictions", (json_int_t)atomic_load(&r->evictions),
-                        "corrupt", (json_int_t)atomic_load(&r->corrupt));
+                        "corrupt", (json_int_t)atomic_load(&r->corrupt), "extended",
+                        (json_int_t)atomic_load(&r->extended), "completed", (json_int_t)atomic_load(&r->completed));
     } else {
         doc = json_pack("{s:{s:s}}", "background", "state", "off");
     }

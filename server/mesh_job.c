@@ -33,6 +33,7 @@ static void pipeline_request(const srv_mesh_job *job, proto_pipeline_request *re
     req->extract.cap = r->cap;
     req->budget = r->budget;
     req->budget_chain = 1;
+    req->chain_partial = 1; /* the rest of the chain is made in the background (chains.h) */
     req->distance = r->distance;
     req->min_component = r->min_component;
     req->max_triangles = job->max_triangles;
@@ -150,7 +151,99 @@ typedef struct chain_use {
     srv_chain_source source;
     int k;                 /* the level checked for the cut */
     double load_ms;        /* mapping and checking the levels it cuts */
+    double extend_ms;      /* extending a partial chain (SRV_CHAIN_EXTENDED) */
 } chain_use;
+
+/* A chain's extension (chains.h): TO_EXTEND entry *entry's chain copied, extended for
+ * `distance` or `triangles` (neither: completed) on req's threads, then in the registry in
+ * its place (written and mapped when complete); *entry becomes the new entry, with a
+ * reference. On failure *entry is given back and NULL. ms: the time it took. */
+static int extend_entry(const srv_volume *v, srv_chains *chains, const srv_chain_spec *spec,
+                        const proto_pipeline_request *req, double distance, size_t triangles, srv_chain **entry,
+                        double *ms, iso_error *err)
+{
+    double start = iso_clock_ms();
+    iso_mesh_chain *copy = NULL;
+    int rc = iso_mesh_chain_copy(srv_chain_owned(*entry), &copy, err);
+    if (!rc && (rc = proto_pipeline_chain_extend(v->vol, req, copy, distance, triangles, err)))
+        iso_mesh_chain_destroy(copy);
+    srv_chain *now = NULL;
+    if (!rc) {
+        atomic_fetch_add(&chains->extended, 1);
+        if (!(now = srv_chains_replace(chains, *entry, spec, copy)))
+            rc = iso_error_set(err, ISO_E_NOMEM, "%s: the extended chain could not be kept", spec->id);
+    } else {
+        srv_chains_extend_abandon(chains, *entry);
+    }
+    srv_chains_release(chains, *entry);
+    *entry = now;
+    *ms = iso_clock_ms() - start;
+    return rc;
+}
+
+/* A partial chain's completion, deferred to the background completer: the volume (held by
+ * a reference) and the request whose surface the chain is of. */
+struct srv_mesh_chain_task {
+    srv_chain_deferred link; /* first: the registry queues it by this */
+    srv_collection *collection;
+    const srv_volume *volume;
+    proto_pipeline_request req;
+    srv_chain_spec spec;
+};
+
+/* After this request made or extended a partial chain: its completion goes to the
+ * background completer when there is one (else later requests extend it as they need). */
+static void defer_completion(const srv_mesh_job *job, const proto_pipeline_request *req, const chain_use *use)
+{
+    if (!use->entry || !srv_chain_partial(use->entry) || !job->collection)
+        return;
+    srv_mesh_chain_task *task = malloc(sizeof *task);
+    if (!task)
+        return; /* left partial: extended by the requests that need more */
+    *task = (srv_mesh_chain_task){.collection = job->collection, .volume = job->volume, .req = *req,
+                                  .spec = use->spec};
+    task->req.chain = NULL;
+    srv_collection_retain(job->collection, job->volume);
+    if (!srv_chains_defer(job->chains, &task->link))
+        srv_mesh_chain_task_free(task);
+}
+
+void srv_mesh_chain_task_name(const srv_mesh_chain_task *task, char *out, size_t size)
+{
+    if (task->req.segmentation)
+        snprintf(out, size, "%s segment %u", task->spec.id, task->req.segmentation->segments[task->req.segment].number);
+    else
+        snprintf(out, size, "%s level %g", task->spec.id, task->req.extract.level);
+}
+
+void srv_mesh_chain_task_free(srv_mesh_chain_task *task)
+{
+    if (!task)
+        return;
+    srv_collection_release(task->collection, task->volume);
+    free(task);
+}
+
+int srv_mesh_chain_task_run(srv_mesh_chain_task *task, srv_chains *chains, double *ms, iso_error *err)
+{
+    srv_chain *entry;
+    srv_chain_source source;
+    double load_ms;
+    *ms = 0;
+    /* Waits for a request's extension in progress, then completes what is left. */
+    srv_chain_acquired got = srv_chains_acquire(chains, &task->spec, -1, 0, 1, &entry, &source, &load_ms);
+    if (got == SRV_CHAIN_TO_BUILD)
+        srv_chains_abandon(chains, entry); /* evicted meanwhile: the next request builds it */
+    if (got != SRV_CHAIN_TO_EXTEND) {
+        srv_chains_release(chains, entry);
+        return 1;
+    }
+    srv_chains_building_idle(chains, entry);
+    task->req.extract.threads = 1; /* on this thread alone, at its (lowest) priority */
+    int rc = extend_entry(task->volume, chains, &task->spec, &task->req, -1, 0, &entry, ms, err);
+    srv_chains_release(chains, entry);
+    return rc;
+}
 
 /* The levels a request cuts are checked before the pipeline reads them: the one it picks,
  * and for a budget level 0 with its grid (a budget measures against it). 0, or the check's
@@ -169,8 +262,10 @@ static int prepare_levels(const srv_mesh_job *job, const iso_mesh_chain *chain, 
 
 /* The registry's chain for the request, its levels checked; NULL when this request builds
  * it (use->source SRV_CHAIN_BUILT, use->entry the entry to publish to) or when no entry
- * can be had (built here, not kept). A chain found corrupt is discarded and built. */
-static const iso_mesh_chain *chain_for(const srv_mesh_job *job, chain_use *use)
+ * can be had (built here, not kept). A partial chain that falls short of the request is
+ * extended first (use->source SRV_CHAIN_EXTENDED). A chain found corrupt is discarded and
+ * built. */
+static const iso_mesh_chain *chain_for(const srv_mesh_job *job, const proto_pipeline_request *req, chain_use *use)
 {
     char params[160];
     chain_params(job, params, sizeof params);
@@ -179,12 +274,23 @@ static const iso_mesh_chain *chain_for(const srv_mesh_job *job, chain_use *use)
         return NULL;
     for (int attempt = 0; attempt < 2; attempt++) {
         double load_ms;
-        srv_chain_acquired got = srv_chains_acquire(job->chains, &use->spec, 1, &use->entry, &use->source, &load_ms);
+        double distance = req->budget ? -1 : req->distance;
+        srv_chain_acquired got = srv_chains_acquire(job->chains, &use->spec, distance, req->budget, 1, &use->entry,
+                                                    &use->source, &load_ms);
         use->load_ms += load_ms;
-        if (got != SRV_CHAIN_READY_NOW)
-            return NULL;
-        const iso_mesh_chain *chain = srv_chain_get(use->entry);
         iso_error err = {0};
+        if (got == SRV_CHAIN_TO_EXTEND) {
+            use->source = SRV_CHAIN_EXTENDED;
+            if (extend_entry(job->volume, job->chains, &use->spec, req, distance, req->budget, &use->entry,
+                             &use->extend_ms, &err))
+                fprintf(stderr, "isoserve: %s: chain not extended: %s\n", use->spec.id, err.message);
+            if (!use->entry)
+                return NULL; /* the request builds its own, not kept */
+            /* Its completion is queued already, since the build that made it partial. */
+        } else if (got != SRV_CHAIN_READY_NOW) {
+            return NULL;
+        }
+        const iso_mesh_chain *chain = srv_chain_get(use->entry);
         if (!prepare_levels(job, chain, use, &err))
             return chain;
         srv_chains_discard(job->chains, use->entry, &use->spec, err.message);
@@ -195,14 +301,18 @@ static const iso_mesh_chain *chain_for(const srv_mesh_job *job, chain_use *use)
 
 /* After the pipeline: a chain this request built goes to the registry (and its file);
  * the entry is given back. */
-static void chain_done(const srv_mesh_job *job, chain_use *use, proto_pipeline_result *res, int rc)
+static void chain_done(const srv_mesh_job *job, const proto_pipeline_request *req, chain_use *use,
+                       proto_pipeline_result *res, int rc)
 {
     if (!use->entry)
         return;
     if (use->source == SRV_CHAIN_BUILT) {
         if (!rc && res->chain_built) {
+            if (!iso_mesh_chain_complete(res->chain_built)) /* levels or maxima left */
+                use->source = SRV_CHAIN_PARTIAL;
             srv_chains_publish(job->chains, use->entry, &use->spec, res->chain_built);
             res->chain_built = NULL;
+            defer_completion(job, req, use);
         } else {
             srv_chains_abandon(job->chains, use->entry);
         }
@@ -263,9 +373,9 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     pipeline_request(job, &req);
     chain_use use = {.k = -1};
     if (job->chains && (req.distance >= 0 || req.budget))
-        req.chain = chain_for(job, &use);
+        req.chain = chain_for(job, &req, &use);
     int rc = proto_pipeline_run(job->volume->tree, job->volume->vol, &req, &res, &err);
-    chain_done(job, &use, &res, rc);
+    chain_done(job, &req, &use, &res, rc);
     if (rc)
         return failed(job, rc, &err, problem);
     srv_body *body = srv_body_create(res.bytes, res.size); /* takes the bytes, even failing */
@@ -298,11 +408,12 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem)
     body->distance_max_mm = res.distance.max;
     body->distance_voxels = res.distance.p99 / iso_vol_min_spacing(job->volume->vol);
     body->chain_level = res.chain_level;
-    if (use.entry || use.source == SRV_CHAIN_BUILT) {
+    if (use.entry || use.source == SRV_CHAIN_BUILT || use.source == SRV_CHAIN_PARTIAL) {
+        int built = use.source == SRV_CHAIN_BUILT || use.source == SRV_CHAIN_PARTIAL;
         body->chain_source = srv_chain_source_name(use.source);
         body->chain_load_ms = use.load_ms;
-        body->chain_cut_ms = use.source == SRV_CHAIN_BUILT ? 0 : res.simplify_ms;
-        body->chain_build_ms = use.source == SRV_CHAIN_BUILT ? res.simplify_ms : 0;
+        body->chain_cut_ms = built ? 0 : res.simplify_ms;
+        body->chain_build_ms = built ? res.simplify_ms : use.extend_ms;
     }
     body->exact_triangles = res.exact_triangles;
     body->edges = res.pinches.edges;
@@ -335,8 +446,8 @@ int srv_mesh_chain_ensure(const srv_volume *v, srv_collection *collection, srv_c
     srv_chain_source source;
     double load_ms;
     *ms = 0;
-    srv_chain_acquired got = srv_chains_acquire(chains, &spec, 0, &entry, &source, &load_ms);
-    if (got != SRV_CHAIN_TO_BUILD) {
+    srv_chain_acquired got = srv_chains_acquire(chains, &spec, -1, 0, 0, &entry, &source, &load_ms);
+    if (got != SRV_CHAIN_TO_BUILD && got != SRV_CHAIN_TO_EXTEND) {
         srv_chains_release(chains, entry);
         return got == SRV_CHAIN_READY_NOW ? 1 : 2;
     }
@@ -347,6 +458,11 @@ int srv_mesh_chain_ensure(const srv_volume *v, srv_collection *collection, srv_c
     proto_pipeline_request_init(&req);
     req.extract.level = level;
     req.extract.threads = threads;
+    if (got == SRV_CHAIN_TO_EXTEND) { /* a request's partial chain: completed here */
+        int rc = extend_entry(v, chains, &spec, &req, -1, 0, &entry, ms, err);
+        srv_chains_release(chains, entry);
+        return rc;
+    }
     req.distance = 0; /* level 0 answers: the chain is what is wanted */
     req.normals = 0;
     req.format = PROTO_FORMAT_NONE;

@@ -35,13 +35,24 @@ srv_body *srv_mesh_job_run(void *arg, proto_problem *problem);
  * this call (the body has grown: srv_cache_grew). */
 int srv_mesh_body_gzip(srv_body *body);
 /* The chain of v's surface at level (tolerance 0, no cap: what the viewer's Detail asks
- * first) built into the registry and its file, unless it is there (or in its file) already
- * or being built: 0 built, 1 there, 2 being built by another caller, else the error
+ * first) built into the registry and its file (a partial one a request made there is
+ * completed), unless it is there (or in its file) already or being built: 0 built, 1 there, 2 being built by another caller, else the error
  * (ISO_E_*). threads: for the build; 1 keeps it on the calling thread, whose (lowest)
  * priority it then has, and lets a request that waits for it raise that thread
  * (srv_chains_building_idle). ms: the build's time. */
 int srv_mesh_chain_ensure(const srv_volume *v, srv_collection *collection, srv_chains *chains, double level,
                           int threads, double *ms, iso_error *err);
+/* A partial chain's completion that a request deferred to the background completer
+ * (chains.h: srv_chains_next_deferred). */
+typedef struct srv_mesh_chain_task srv_mesh_chain_task;
+/* Completes the task's chain if it is still partial and in the registry (waiting for an
+ * extension in progress), on the calling thread alone, at its priority: 0 completed (and
+ * written when there is a cache dir), 1 nothing left to do, else the error. ms: its time. */
+int srv_mesh_chain_task_run(srv_mesh_chain_task *task, srv_chains *chains, double *ms, iso_error *err);
+/* "<id> level <L>" or "<id> segment <n>": what the task completes, for messages. */
+void srv_mesh_chain_task_name(const srv_mesh_chain_task *task, char *out, size_t size);
+/* Frees a task, releasing its volume; NULL is a no-op. */
+void srv_mesh_chain_task_free(srv_mesh_chain_task *task);
 /* Frees a srv_mesh_job made with malloc, releasing its volume. */
 void srv_mesh_job_free(void *arg);
 

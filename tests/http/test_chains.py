@@ -14,7 +14,18 @@ restarted between the steps. Checks:
   (X-Iso-Chain-Source: file, build 0 ms, nothing extracted); a budget= request then builds
   the surface's grid once, and the registry weighs it;
 - --chain-mb 0 keeps nothing once used: two levels asked, then the first again, which is
-  mapped from its file again; /v1/status counts the evictions and no chain kept.
+  mapped from its file again; /v1/status counts the evictions and no chain kept;
+- a level never asked, without the suggested levels' builder: the first distance= request
+  builds the chain only down to its level (X-Iso-Chain-Source: partial; /chain then says
+  "building" with the full chain's first levels, unless completed already), a coarser one is served
+  (extended by it, or waiting for the background completer) at the level the full chain's
+  JSON picks; the completed chain is written (one more file, /chain ready with every level
+  the full build has, measured alike), a restart maps it and serves the first request's
+  bytes, and they are the bytes of the same level cut from a chain the background builder
+  built whole (that level suggested, in another cache dir);
+- while the completer is busy with another volume's chain, a coarser request extends the
+  small torus's partial chain itself (X-Iso-Chain-Source: extended) and gets the level the
+  completed chain's JSON picks; both chains are then completed and written.
 Prints PASS/FAIL lines; exit status 1 on failure. Daemons are stopped by their PIDs."""
 
 import glob
@@ -144,6 +155,96 @@ def main():
         finally:
             d.stop()
     RESULTS.check("limit_evicts", limit_evicts)
+
+    def partial_then_completed():
+        fine, coarse = 0.05, 0.3  # mm: torus:48 has 1 mm voxels
+        d = Daemon(tmp, "--chain-background", "off")
+        try:
+            first = d.mesh(0.25, fine)
+            assert first.getheader("X-Iso-Chain-Source") == "partial", first.getheader("X-Iso-Chain-Source")
+            assert float(first.getheader("X-Iso-Chain-Build-Ms")) > 0
+            k_first = int(first.getheader("X-Iso-Chain-Level"))
+            early = d.json("/v1/volumes/torus/chain?level=0.25&tolerance=0")  # unless completed already
+            second = d.mesh(0.25, coarse)
+            assert second.getheader("X-Iso-Chain-Source") in ("extended", "waited", "memory"), \
+                second.getheader("X-Iso-Chain-Source")
+            deadline = time.time() + 60
+            while time.time() < deadline:
+                doc = d.json("/v1/volumes/torus/chain?level=0.25&tolerance=0")
+                if doc["state"] == "ready":
+                    break
+                time.sleep(0.1)
+            levels = doc["levels"]
+            assert doc["state"] == "ready" and len(levels) == 13, doc
+            assert all(0 < lv["distance_p99_mm"] <= lv["distance_max_mm"] for lv in levels[1:]), levels
+            assert picked(levels, fine) == k_first and picked(levels, coarse) == int(second.getheader("X-Iso-Chain-Level"))
+            assert int(second.getheader("X-Iso-Triangles")) == levels[picked(levels, coarse)]["triangles"]
+            assert len(files()) == 3, files()
+            if early["state"] == "building":  # its levels so far: the full chain's first ones
+                assert k_first < len(early["levels"]) < len(levels), early
+                assert [lv["triangles"] for lv in early["levels"]] == \
+                    [lv["triangles"] for lv in levels[:len(early["levels"])]], early
+            else:
+                assert early["state"] == "ready" and early["levels"] == levels, early
+            status = d.json("/v1/status")["chains"]
+            assert status["built"] == 1 and status["completed"] == 1, status
+        finally:
+            log = d.stop()
+        assert "chains: torus level 0.25 completed" in log, log[-800:]
+        d = Daemon(tmp, "--chain-background", "off")
+        try:
+            again = d.mesh(0.25, fine)
+            assert again.getheader("X-Iso-Chain-Source") == "file" and again.body == first.body
+        finally:
+            d.stop()
+        # The same level from a chain built whole: 0.25 suggested, in its own cache dir.
+        whole = tempfile.mkdtemp(prefix="iso-chains-whole-")
+        with open(os.path.join(whole, "catalog.json"), "w") as f:
+            json.dump({"volumes": [{"id": "torus", "path": "field:torus:48", "levels": [0.25]}]}, f)
+        d = Daemon(whole)
+        try:
+            deadline = time.time() + 60
+            while time.time() < deadline and d.json("/v1/status")["background"]["state"] != "done":
+                time.sleep(0.1)
+            full = d.mesh(0.25, fine)
+            assert full.getheader("X-Iso-Chain-Source") == "memory" and full.body == first.body
+            assert d.json("/v1/volumes/torus/chain?level=0.25&tolerance=0")["levels"] == levels
+        finally:
+            d.stop()
+            shutil.rmtree(whole, ignore_errors=True)
+        # Partial: the first response came from fewer levels than the whole chain has.
+        assert k_first < len(levels) - 1
+    RESULTS.check("partial_then_completed", partial_then_completed)
+
+    def extended_while_completer_busy():
+        # The completer busy with a larger torus's chain (0.6 s; starved while requests run):
+        # a coarser request on the small one extends its partial chain itself.
+        busy = tempfile.mkdtemp(prefix="iso-chains-busy-")
+        with open(os.path.join(busy, "catalog.json"), "w") as f:
+            json.dump({"volumes": [{"id": "torus", "path": "field:torus:48", "levels": [0.5]},
+                                   {"id": "big", "path": "field:torus:128", "levels": [0.5]}]}, f)
+        d = Daemon(busy, "--chain-background", "off")
+        try:
+            r = request(d.port, "/v1/volumes/big/mesh?level=0.25&distance=0.05&format=ply&normals=none")
+            assert r.status == 200 and r.getheader("X-Iso-Chain-Source") == "partial", r.status
+            assert d.mesh(0.25, 0.05).getheader("X-Iso-Chain-Source") == "partial"
+            coarse = d.mesh(0.25, 0.3)
+            assert coarse.getheader("X-Iso-Chain-Source") == "extended", coarse.getheader("X-Iso-Chain-Source")
+            assert float(coarse.getheader("X-Iso-Chain-Build-Ms")) > 0
+            deadline = time.time() + 60
+            while time.time() < deadline and d.json("/v1/status")["chains"]["completed"] < 2:
+                time.sleep(0.1)
+            status = d.json("/v1/status")["chains"]
+            assert status["completed"] == 2 and status["extended"] >= 3 and status["built"] == 2, status
+            levels = d.json("/v1/volumes/torus/chain?level=0.25&tolerance=0")["levels"]
+            k = picked(levels, 0.3)
+            assert int(coarse.getheader("X-Iso-Chain-Level")) == k and \
+                int(coarse.getheader("X-Iso-Triangles")) == levels[k]["triangles"], (coarse.getheader("X-Iso-Chain-Level"), levels)
+            assert len(glob.glob(os.path.join(busy, "cache", "*.isochain"))) == 2
+        finally:
+            d.stop()
+            shutil.rmtree(busy, ignore_errors=True)
+    RESULTS.check("extended_while_completer_busy", extended_while_completer_busy)
     shutil.rmtree(tmp, ignore_errors=True)
     return 1 if RESULTS.failures else 0
 

@@ -1,8 +1,10 @@
 """One isoserve daemon over a catalog in a temporary directory (tmp/catalog.json), with
 its cache dir tmp/cache, for the tests that restart it between steps (the chain files and
 the chains' registry). Started at construction (ready when /healthz says 200), stopped by
-its PID with SIGTERM; stop() asserts exit 0 and returns the log."""
+its PID with SIGTERM once the partial chains are completed; stop() asserts exit 0 and
+returns the log."""
 
+import json
 import os
 import signal
 import subprocess
@@ -34,7 +36,20 @@ class Daemon:
             time.sleep(0.1)
         raise AssertionError("the daemon did not start")
 
+    def settle(self, timeout=120):
+        """Waits until no partial chain is left in memory: the background thread has
+        completed and written the chains requests built only down to their level (a stop
+        drops the completions still queued)."""
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            r = request(self.port, "/v1/status", timeout=5)
+            if r.status != 200 or json.loads(r.body)["chains"]["partial"] == 0:
+                return
+            time.sleep(0.05)
+        raise AssertionError("partial chains were not completed")
+
     def stop(self):
+        self.settle()
         self.proc.send_signal(signal.SIGTERM)
         rc = self.proc.wait(timeout=60)
         with open(self.log_path) as f:
