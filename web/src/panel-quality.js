@@ -95,7 +95,9 @@ export function syncQuality(ctx) {
   if (at < 0) at = positions.reduce((best, p, k) => (Math.abs(p.distance - state.distance) < Math.abs(positions[best].distance - state.distance) ? k : best), 0);
   $('distance').value = String(at);
   const shown = state.distance > 0 && Math.abs(positions[at].distance - state.distance) > 1e-6 ? { distance: state.distance } : positions[at];
-  $('distance-value').textContent = detailText(ctx, shown) + (note ? ` · ${note}` : '');
+  const text = detailText(ctx, shown) + (note ? ` · ${note}` : '');
+  $('distance-value').textContent = text;
+  $('distance-value').title = text;
   $('normals').value = state.normals;
   $('codec').value = state.codec;
 }
