@@ -72,6 +72,16 @@ int iso_parallel_threads(int requested);
 typedef void (*iso_parallel_fn)(void *context, int t, int threads);
 void iso_parallel_run(int threads, iso_parallel_fn fn, void *context);
 
+#ifndef __cplusplus /* C11 atomics; the C++ shims (Draco, meshoptimizer) do not hand out work */
+#include <stdatomic.h>
+/* Work handed out `chunk` items at a time from a counter the shares have in common (each
+ * share loops until it returns 0; the caller sets *next to 0 before the run): sets
+ * [*begin, *end) to the next chunk of 0..count - 1 and returns 1, or returns 0 when none is
+ * left. Chunks rather than a fixed split let a free core take more when another process
+ * holds one. */
+int iso_parallel_next_chunk(atomic_size_t *next, size_t count, size_t chunk, size_t *begin, size_t *end);
+#endif
+
 /* Files written whole (hierarchies, chains): a reader sees the old bytes or the new. */
 
 /* One run of bytes of a file, written in order with the others. */

@@ -135,3 +135,13 @@ void iso_parallel_run(int threads, iso_parallel_fn fn, void *context)
         pthread_cond_wait(&done, &lock);
     pthread_mutex_unlock(&lock);
 }
+
+int iso_parallel_next_chunk(atomic_size_t *next, size_t count, size_t chunk, size_t *begin, size_t *end)
+{
+    size_t first = atomic_fetch_add_explicit(next, chunk, memory_order_relaxed);
+    if (first >= count)
+        return 0;
+    *begin = first;
+    *end = count - first < chunk ? count : first + chunk;
+    return 1;
+}

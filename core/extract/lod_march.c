@@ -702,12 +702,7 @@ typedef struct range {
 
 static int next_chunk(lod_job *job, range *r)
 {
-    size_t begin = atomic_fetch_add_explicit(&job->next, CHUNK, memory_order_relaxed);
-    if (begin >= job->work_count)
-        return 0;
-    r->begin = begin;
-    r->end = job->work_count - begin < CHUNK ? job->work_count : begin + CHUNK;
-    return 1;
+    return iso_parallel_next_chunk(&job->next, job->work_count, CHUNK, &r->begin, &r->end);
 }
 
 static void run_bricks(lod_job *job, int threads, iso_parallel_fn fn)

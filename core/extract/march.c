@@ -688,12 +688,7 @@ typedef struct range {
 
 static int next_chunk(march_job *job, range *r)
 {
-    size_t begin = atomic_fetch_add_explicit(&job->next_brick, CHUNK, memory_order_relaxed);
-    if (begin >= job->active_count)
-        return 0;
-    r->begin = begin;
-    r->end = job->active_count - begin < CHUNK ? job->active_count : begin + CHUNK;
-    return 1;
+    return iso_parallel_next_chunk(&job->next_brick, job->active_count, CHUNK, &r->begin, &r->end);
 }
 
 /* Bricks in chunks from the shared counter; the mesh does not depend on which thread took
